@@ -1,0 +1,35 @@
+# M3DP — the two commands a new machine needs:
+#   make demo   installs everything (Debian 12, as root or with sudo), builds, runs the default demo
+#   make test   installs and builds as needed, then runs every test
+BUILD_DIR ?= build
+BUILD_TYPE ?= Release
+JOBS ?= $(shell nproc)
+M3DP = $(BUILD_DIR)/apps/m3dp/m3dp
+
+.PHONY: all setup configure build test demo bench clean
+
+all: build
+
+setup:
+	@bash scripts/setup-debian.sh
+
+$(BUILD_DIR)/build.ninja:
+	cmake -S . -B $(BUILD_DIR) -G Ninja -DCMAKE_BUILD_TYPE=$(BUILD_TYPE)
+
+configure: setup $(BUILD_DIR)/build.ninja
+
+build: configure
+	cmake --build $(BUILD_DIR) -j $(JOBS)
+
+test: build
+	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
+
+demo: build
+	$(M3DP) run scenes/particle_drop.sdf -o out/particle_drop
+
+bench: build
+	$(M3DP) bench --particles 50000
+	$(BUILD_DIR)/bench/bench_sph
+
+clean:
+	rm -rf $(BUILD_DIR)

@@ -1,0 +1,19 @@
+#pragma once
+#include <CLI/CLI.hpp>
+
+namespace m3dp::app {
+
+struct BenchOptions {
+  std::size_t particles = 50000;
+  int steps = 100;
+  int warmup_steps = 20;
+  double density_tolerance = 0.0005;  // fraction: 0.05 %
+  double cfl_factor = 1.0;
+  int threads = 0;
+  std::string kernel = "cubic_spline";
+};
+
+void add_bench_options(CLI::App& command, BenchOptions& options);
+int bench_command(const BenchOptions& options);
+
+}  // namespace m3dp::app

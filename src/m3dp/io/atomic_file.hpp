@@ -1,0 +1,18 @@
+#pragma once
+// Files are written to a temporary name beside the target and renamed into place, so a run that
+// is interrupted never leaves a half-written file under the real name.
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <string>
+
+namespace m3dp::io {
+
+/// Calls write(stream) on a temporary file, then renames it to `target`. Throws m3dp::Error on failure.
+void write_file_atomically(const std::filesystem::path& target, const std::function<void(std::ostream&)>& write,
+                           bool binary = false);
+
+/// Same for a whole string.
+void write_text_atomically(const std::filesystem::path& target, const std::string& text);
+
+}  // namespace m3dp::io

@@ -1,0 +1,48 @@
+#pragma once
+// Particle frames as VTK XML UnstructuredGrid (.vtu, raw appended binary, one vertex cell per
+// particle) and a ParaView time-series collection (.pvd). Both open in ParaView as a time series.
+#include <cstdint>
+#include <filesystem>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+
+namespace m3dp::io {
+
+/// A named per-point array to write; `data` must stay valid during the write.
+struct PointArray {
+  std::string name;
+  std::string vtk_type;  // "Float32", "Float64", "UInt16", "UInt64", ...
+  int components = 1;
+  const void* data = nullptr;
+  std::size_t element_bytes = 0;  // bytes of one component
+
+  static PointArray of(std::string name, std::span<const Real> values);
+  static PointArray of(std::string name, std::span<const Vec3> values);
+  static PointArray of(std::string name, std::span<const std::uint16_t> values);
+  static PointArray of(std::string name, std::span<const std::uint64_t> values);
+};
+
+/// Writes `points` and `arrays` (each with points.size() tuples) to `file`, atomically.
+void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays);
+
+/// A .pvd collection that is rewritten (atomically) each time a frame is added.
+class PvdCollection {
+ public:
+  explicit PvdCollection(std::filesystem::path file) : file_(std::move(file)) {}
+  /// `dataset_file` is stored relative to the .pvd's folder.
+  void add(double time, const std::filesystem::path& dataset_file);
+  [[nodiscard]] std::size_t size() const { return entries_.size(); }
+
+ private:
+  struct Entry {
+    double time;
+    std::string relative_file;
+  };
+  std::filesystem::path file_;
+  std::vector<Entry> entries_;
+};
+
+}  // namespace m3dp::io

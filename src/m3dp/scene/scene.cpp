@@ -1,0 +1,1159 @@
+#include "m3dp/scene/scene.hpp"
+
+#include <fmt/format.h>
+#include <pugixml.hpp>
+
+#include <algorithm>
+#include <charconv>
+#include <cmath>
+#include <fstream>
+#include <initializer_list>
+#include <iterator>
+#include <span>
+#include <string_view>
+#include <utility>
+
+#include "m3dp/io/mesh_io.hpp"
+
+namespace m3dp::scene {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+// ---------------------------------------------------------------------------------------------
+// Units: every numeric element may say `unit="..."`; values are stored in SI.
+// ---------------------------------------------------------------------------------------------
+
+constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
+
+enum class Quantity { plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle };
+
+struct Unit {
+  std::string_view symbol;
+  double to_si;  // SI value = written value × to_si
+};
+
+struct QuantityInfo {
+  std::string_view name;       // "length", for messages
+  std::string_view si_symbol;  // shown with limits; empty for plain numbers and fractions
+  std::span<const Unit> units;
+};
+
+QuantityInfo quantity_info(Quantity quantity) {
+  static constexpr Unit kLength[] = {{"m", 1}, {"cm", 1e-2}, {"mm", 1e-3}};
+  static constexpr Unit kTime[] = {{"s", 1}, {"ms", 1e-3}};
+  static constexpr Unit kSpeed[] = {{"m/s", 1}, {"mm/s", 1e-3}};
+  static constexpr Unit kAcceleration[] = {{"m/s^2", 1}, {"m/s2", 1}};
+  static constexpr Unit kDensity[] = {{"kg/m^3", 1}, {"kg/m3", 1}, {"g/cm^3", 1e3}, {"g/cm3", 1e3}};
+  static constexpr Unit kDynamicViscosity[] = {{"Pa*s", 1},      {"Pa.s", 1},      {"Pa·s", 1},
+                                               {"mPa*s", 1e-3},  {"mPa.s", 1e-3},  {"mPa·s", 1e-3},
+                                               {"cP", 1e-3},     {"P", 0.1}};
+  static constexpr Unit kFraction[] = {{"1", 1}, {"%", 1e-2}};
+  static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegree}};
+  switch (quantity) {
+    case Quantity::length: return {"length", "m", kLength};
+    case Quantity::time: return {"time", "s", kTime};
+    case Quantity::speed: return {"speed", "m/s", kSpeed};
+    case Quantity::acceleration: return {"acceleration", "m/s^2", kAcceleration};
+    case Quantity::density: return {"density", "kg/m^3", kDensity};
+    case Quantity::dynamic_viscosity: return {"dynamic viscosity", "Pa*s", kDynamicViscosity};
+    case Quantity::fraction: return {"fraction", "", kFraction};
+    case Quantity::angle: return {"angle", "rad", kAngle};
+    case Quantity::plain_number: break;
+  }
+  return {"plain number", "", {}};
+}
+
+/// Users often have viscosities from tables in kinematic units; these get a message saying how to convert.
+bool is_kinematic_viscosity_unit(std::string_view symbol) {
+  constexpr std::string_view kKinematic[] = {"m^2/s", "m2/s", "mm^2/s", "mm2/s", "cSt", "St"};
+  return std::find(std::begin(kKinematic), std::end(kKinematic), symbol) != std::end(kKinematic);
+}
+
+/// Allowed range of a value, with the words to explain it.
+struct Limits {
+  std::optional<double> greater_than;
+  std::optional<double> at_least;
+  std::optional<double> at_most;
+
+  static Limits any() { return {}; }
+  static Limits positive() { return {0.0, std::nullopt, std::nullopt}; }
+  static Limits non_negative() { return {std::nullopt, 0.0, std::nullopt}; }
+  static Limits positive_up_to(double maximum) { return {0.0, std::nullopt, maximum}; }
+
+  [[nodiscard]] bool admits(double value) const {
+    return (!greater_than || value > *greater_than) && (!at_least || value >= *at_least) &&
+           (!at_most || value <= *at_most);
+  }
+  [[nodiscard]] std::string describe(std::string_view unit) const {
+    const std::string suffix = unit.empty() ? "" : fmt::format(" {}", unit);
+    const std::optional<double> lower = greater_than ? greater_than : at_least;
+    if (lower && at_most) {
+      return fmt::format("in {}{}, {}]{}", greater_than ? "(" : "[", *lower, *at_most, suffix);
+    }
+    if (greater_than) return fmt::format("> {}{}", *greater_than, suffix);
+    if (at_least) return fmt::format(">= {}{}", *at_least, suffix);
+    if (at_most) return fmt::format("<= {}{}", *at_most, suffix);
+    return "any number";
+  }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Small text helpers
+// ---------------------------------------------------------------------------------------------
+
+std::string_view trim(std::string_view text) {
+  constexpr std::string_view kBlank = " \t\r\n";
+  const auto first = text.find_first_not_of(kBlank);
+  if (first == std::string_view::npos) return {};
+  const auto last = text.find_last_not_of(kBlank);
+  return text.substr(first, last - first + 1);
+}
+
+std::vector<std::string_view> split_words(std::string_view text) {
+  std::vector<std::string_view> words;
+  constexpr std::string_view kBlank = " \t\r\n";
+  std::size_t position = text.find_first_not_of(kBlank);
+  while (position != std::string_view::npos) {
+    const std::size_t end = std::min(text.find_first_of(kBlank, position), text.size());
+    words.push_back(text.substr(position, end - position));
+    position = text.find_first_not_of(kBlank, end);
+  }
+  return words;
+}
+
+/// A finite number, the whole word (from_chars does not take a leading '+', SDF files sometimes have one).
+std::optional<double> parse_number(std::string_view word) {
+  if (!word.empty() && word.front() == '+') word.remove_prefix(1);
+  double value = 0;
+  const auto [end, error] = std::from_chars(word.data(), word.data() + word.size(), value);
+  if (error != std::errc() || end != word.data() + word.size() || !std::isfinite(value)) return std::nullopt;
+  return value;
+}
+
+std::optional<bool> parse_bool(std::string_view word) {
+  if (word == "true" || word == "1") return true;
+  if (word == "false" || word == "0") return false;
+  return std::nullopt;
+}
+
+std::string join(std::initializer_list<std::string_view> words) {
+  std::string text;
+  for (const auto word : words) {
+    if (!text.empty()) text += ", ";
+    text += word;
+  }
+  return text;
+}
+
+bool contains(std::initializer_list<std::string_view> words, std::string_view word) {
+  return std::find(words.begin(), words.end(), word) != words.end();
+}
+
+/// "<fluid_block name="column">" or "<solver>": how messages name an element.
+std::string describe(const pugi::xml_node& element) {
+  if (const auto name = element.attribute("name")) return fmt::format("<{} name=\"{}\">", element.name(), name.value());
+  return fmt::format("<{}>", element.name());
+}
+
+std::vector<pugi::xml_node> child_elements(const pugi::xml_node& parent, std::string_view name) {
+  std::vector<pugi::xml_node> children;
+  for (const auto& child : parent.children()) {
+    if (child.type() == pugi::node_element && name == child.name()) children.push_back(child);
+  }
+  return children;
+}
+
+bool is_m3dp_plugin(const pugi::xml_node& plugin) {
+  return std::string_view(plugin.attribute("name").value()) == "m3dp" ||
+         std::string_view(plugin.attribute("filename").value()) == "m3dp";
+}
+
+/// Maps byte offsets in the scene text to 1-based line numbers.
+class LineIndex {
+ public:
+  explicit LineIndex(std::string_view text) {
+    for (std::size_t offset = 0; offset < text.size(); ++offset) {
+      if (text[offset] == '\n') newline_offsets_.push_back(std::ptrdiff_t(offset));
+    }
+  }
+  [[nodiscard]] int line_at(std::ptrdiff_t offset) const {
+    if (offset < 0) return 0;
+    const auto newlines_before = std::lower_bound(newline_offsets_.begin(), newline_offsets_.end(), offset);
+    return int(newlines_before - newline_offsets_.begin()) + 1;
+  }
+
+ private:
+  std::vector<std::ptrdiff_t> newline_offsets_;
+};
+
+enum class Presence { required, optional };
+
+// ---------------------------------------------------------------------------------------------
+// The reader: walks the SDF world, fills a Scene, and collects every problem on the way.
+// ---------------------------------------------------------------------------------------------
+
+class SceneReader {
+ public:
+  SceneReader(const std::string& text, fs::path file) : text_(text), file_(std::move(file)), lines_(text) {}
+
+  Scene read();
+
+ private:
+  // A <material> as defined, for the checks that need all of them.
+  struct DefinedMaterial {
+    std::string name;
+    std::optional<double> density;  // empty when <density> itself was wrong
+    SourceLocation where;
+    bool used = false;
+  };
+  struct MaterialUse {
+    std::string material;
+    std::string user;  // "<fluid_block name="column">"
+    SourceLocation where;
+  };
+
+  // ---- where and what went wrong ----
+  [[nodiscard]] SourceLocation where(const pugi::xml_node& node) const {
+    return SourceLocation{file_.string(), lines_.line_at(node.offset_debug())};
+  }
+  void report(const SourceLocation& location, std::string message) {
+    diagnostics_.push_back(Diagnostic{location, std::move(message)});
+  }
+  void report(const pugi::xml_node& node, std::string message) { report(where(node), std::move(message)); }
+
+  // ---- structure checks ----
+  void check_children(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed,
+                      std::initializer_list<std::string_view> repeatable = {});
+  void check_attributes(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed);
+  pugi::xml_node find_child(const pugi::xml_node& parent, const char* name, Presence presence);
+  std::optional<std::string> read_attribute(const pugi::xml_node& element, const char* name, Presence presence);
+  void check_unique_name(const pugi::xml_node& element, const std::string& name,
+                         std::vector<std::pair<std::string, int>>& seen);
+
+  // ---- values of leaf elements (each returns nothing, having reported why, when the value is wrong) ----
+  std::string_view leaf_text(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed_attributes);
+  std::optional<double> unit_factor(const pugi::xml_node& element, Quantity quantity);
+  std::optional<std::vector<double>> parse_numbers(const pugi::xml_node& element, std::string_view text,
+                                                   std::size_t count, std::string_view format);
+  std::optional<std::vector<double>> read_numbers(const pugi::xml_node& element, std::size_t count,
+                                                  Quantity quantity, std::string_view format);
+  std::optional<double> read_scalar(const pugi::xml_node& parent, const char* name, Quantity quantity,
+                                    const Limits& limits, Presence presence);
+  std::optional<Vec3> read_vector(const pugi::xml_node& parent, const char* name, Quantity quantity,
+                                  Presence presence);
+  std::optional<Vec3> read_direction(const pugi::xml_node& parent, const char* name, Presence presence);
+  std::optional<bool> read_bool(const pugi::xml_node& parent, const char* name);
+  std::optional<int> read_int(const pugi::xml_node& parent, const char* name, int minimum);
+  std::optional<double> read_number_attribute(const pugi::xml_node& element, const char* name, Quantity quantity,
+                                              const Limits& limits);
+  std::optional<bool> read_bool_attribute(const pugi::xml_node& element, const char* name);
+  Pose read_pose(const pugi::xml_node& parent);
+  std::optional<Aabb> read_box(const pugi::xml_node& parent);
+
+  // ---- SDF world ----
+  void read_world(const pugi::xml_node& world);
+  void read_model(const pugi::xml_node& model);
+  void read_link(const pugi::xml_node& link, const Pose& model_pose, const std::string& model_name,
+                 StaticBody& body);
+  std::optional<Shape> read_geometry(const pugi::xml_node& geometry);
+  std::optional<MeshShape> read_mesh(const pugi::xml_node& mesh);
+
+  // ---- the m3dp plugin ----
+  void read_plugin(const pugi::xml_node& plugin);
+  void read_solver(const pugi::xml_node& solver);
+  void read_material(const pugi::xml_node& material);
+  void read_fluid_block(const pugi::xml_node& block);
+  void read_print_head(const pugi::xml_node& head);
+  std::optional<toolpath::Trajectory> read_path(const pugi::xml_node& path);
+  std::optional<toolpath::PathSegment> read_path_segment(const pugi::xml_node& element, Real path_speed);
+  std::optional<toolpath::Curve> read_curve(const pugi::xml_node& element);
+  pugi::xml_node find_centre(const pugi::xml_node& curve);
+  void read_output(const pugi::xml_node& output);
+  void check_materials();
+
+  const std::string& text_;
+  fs::path file_;
+  LineIndex lines_;
+  Scene scene_;
+  std::vector<Diagnostic> diagnostics_;
+
+  std::optional<Real> particle_radius_;  // set when <particle_radius> was valid
+  std::optional<Aabb> bounds_;           // set when <bounds> was valid
+  std::vector<DefinedMaterial> defined_materials_;
+  std::vector<MaterialUse> material_uses_;
+  std::vector<std::pair<std::string, int>> model_names_, fluid_block_names_, print_head_names_;
+};
+
+// ---- structure checks ----
+
+void SceneReader::check_children(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed,
+                                 std::initializer_list<std::string_view> repeatable) {
+  std::vector<std::pair<std::string_view, int>> first_line_of;
+  for (const auto& child : element.children()) {
+    if (child.type() != pugi::node_element) continue;
+    const std::string_view name = child.name();
+    if (!contains(allowed, name)) {
+      if (allowed.size() == 0) {
+        report(child, fmt::format("unknown element <{}> in <{}>; <{}> takes a value, not elements", name,
+                                  element.name(), element.name()));
+      } else {
+        report(child,
+               fmt::format("unknown element <{}> in <{}>; expected one of: {}", name, element.name(), join(allowed)));
+      }
+      continue;
+    }
+    if (contains(repeatable, name)) continue;
+    const auto first = std::find_if(first_line_of.begin(), first_line_of.end(),
+                                    [&](const auto& entry) { return entry.first == name; });
+    if (first != first_line_of.end()) {
+      report(child, fmt::format("<{}> appears more than once in {}; the first is at line {}", name,
+                                describe(element), first->second));
+    } else {
+      first_line_of.emplace_back(name, where(child).line);
+    }
+  }
+}
+
+void SceneReader::check_attributes(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed) {
+  for (const auto& attribute : element.attributes()) {
+    if (contains(allowed, attribute.name())) continue;
+    if (allowed.size() == 0) {
+      report(element, fmt::format("unknown attribute '{}' on <{}>; it takes none", attribute.name(), element.name()));
+    } else {
+      report(element, fmt::format("unknown attribute '{}' on <{}>; expected one of: {}", attribute.name(),
+                                  element.name(), join(allowed)));
+    }
+  }
+}
+
+pugi::xml_node SceneReader::find_child(const pugi::xml_node& parent, const char* name, Presence presence) {
+  const pugi::xml_node child = parent.child(name);
+  if (!child && presence == Presence::required) {
+    report(parent, fmt::format("missing required <{}> in {}", name, describe(parent)));
+  }
+  return child;
+}
+
+std::optional<std::string> SceneReader::read_attribute(const pugi::xml_node& element, const char* name,
+                                                       Presence presence) {
+  const auto attribute = element.attribute(name);
+  const std::string_view value = trim(attribute.value());
+  if (!attribute || value.empty()) {
+    if (presence == Presence::required) {
+      report(element, fmt::format("missing required attribute {}=\"...\" on {}", name, describe(element)));
+    }
+    return std::nullopt;
+  }
+  return std::string(value);
+}
+
+void SceneReader::check_unique_name(const pugi::xml_node& element, const std::string& name,
+                                    std::vector<std::pair<std::string, int>>& seen) {
+  const auto first = std::find_if(seen.begin(), seen.end(), [&](const auto& entry) { return entry.first == name; });
+  if (first != seen.end()) {
+    report(element, fmt::format("{} is defined twice; the first is at line {}", describe(element), first->second));
+  } else {
+    seen.emplace_back(name, where(element).line);
+  }
+}
+
+// ---- values ----
+
+/// The trimmed text of an element that holds a value, after checking it has no child elements.
+std::string_view SceneReader::leaf_text(const pugi::xml_node& element,
+                                        std::initializer_list<std::string_view> allowed_attributes) {
+  check_children(element, {});
+  check_attributes(element, allowed_attributes);
+  return trim(element.child_value());
+}
+
+std::optional<double> SceneReader::unit_factor(const pugi::xml_node& element, Quantity quantity) {
+  const auto unit_attribute = element.attribute("unit");
+  if (!unit_attribute) return 1.0;
+  const std::string_view symbol = trim(unit_attribute.value());
+  const QuantityInfo info = quantity_info(quantity);
+  if (quantity == Quantity::plain_number) {
+    report(element, fmt::format("<{}> is a plain number and takes no unit, got unit=\"{}\"", element.name(), symbol));
+    return std::nullopt;
+  }
+  for (const Unit& unit : info.units) {
+    if (unit.symbol == symbol) return unit.to_si;
+  }
+  if (quantity == Quantity::dynamic_viscosity && is_kinematic_viscosity_unit(symbol)) {
+    report(element, fmt::format("<{}> is dynamic viscosity in Pa*s; '{}' is a kinematic viscosity unit (multiply by "
+                                "density to convert)",
+                                element.name(), symbol));
+    return std::nullopt;
+  }
+  std::string expected;
+  for (const Unit& unit : info.units) expected += (expected.empty() ? "" : ", ") + std::string(unit.symbol);
+  report(element, fmt::format("unit '{}' on <{}> is not a {} unit; expected one of: {}", symbol, element.name(),
+                              info.name, expected));
+  return std::nullopt;
+}
+
+std::optional<std::vector<double>> SceneReader::parse_numbers(const pugi::xml_node& element, std::string_view text,
+                                                              std::size_t count, std::string_view format) {
+  const auto words = split_words(text);
+  std::vector<double> values;
+  for (const auto word : words) {
+    const auto value = parse_number(word);
+    if (!value) break;
+    values.push_back(*value);
+  }
+  if (values.size() != count || words.size() != count) {
+    report(element, fmt::format("expected {} numbers ({}) in <{}>, got '{}'", count, format, element.name(), text));
+    return std::nullopt;
+  }
+  return values;
+}
+
+std::optional<std::vector<double>> SceneReader::read_numbers(const pugi::xml_node& element, std::size_t count,
+                                                             Quantity quantity, std::string_view format) {
+  const auto text = leaf_text(element, {"unit"});
+  const auto factor = unit_factor(element, quantity);
+  auto values = parse_numbers(element, text, count, format);
+  if (!values || !factor) return std::nullopt;
+  for (double& value : *values) value *= *factor;
+  return values;
+}
+
+std::optional<double> SceneReader::read_scalar(const pugi::xml_node& parent, const char* name, Quantity quantity,
+                                               const Limits& limits, Presence presence) {
+  const pugi::xml_node element = find_child(parent, name, presence);
+  if (!element) return std::nullopt;
+  const auto text = leaf_text(element, {"unit"});
+  const auto factor = unit_factor(element, quantity);
+  const auto value = parse_number(text);
+  if (!value) {
+    report(element, fmt::format("expected a number in <{}>, got '{}'", name, text));
+    return std::nullopt;
+  }
+  if (!factor) return std::nullopt;
+  const double si_value = *value * *factor;
+  if (!limits.admits(si_value)) {
+    const auto unit = element.attribute("unit");
+    const std::string as_written = unit ? fmt::format("{} {}", text, trim(unit.value())) : std::string(text);
+    report(element, fmt::format("<{}> must be {}, got {}", name, limits.describe(quantity_info(quantity).si_symbol),
+                                as_written));
+    return std::nullopt;
+  }
+  return si_value;
+}
+
+std::optional<Vec3> SceneReader::read_vector(const pugi::xml_node& parent, const char* name, Quantity quantity,
+                                             Presence presence) {
+  const pugi::xml_node element = find_child(parent, name, presence);
+  if (!element) return std::nullopt;
+  const auto values = read_numbers(element, 3, quantity, "x y z");
+  if (!values) return std::nullopt;
+  return Vec3(Real((*values)[0]), Real((*values)[1]), Real((*values)[2]));
+}
+
+std::optional<Vec3> SceneReader::read_direction(const pugi::xml_node& parent, const char* name, Presence presence) {
+  const auto direction = read_vector(parent, name, Quantity::plain_number, presence);
+  if (!direction) return std::nullopt;
+  if (direction->norm() == 0) {
+    report(parent.child(name), fmt::format("<{}> must not be the zero vector", name));
+    return std::nullopt;
+  }
+  return direction->normalized();
+}
+
+std::optional<bool> SceneReader::read_bool(const pugi::xml_node& parent, const char* name) {
+  const pugi::xml_node element = parent.child(name);
+  if (!element) return std::nullopt;
+  const auto text = leaf_text(element, {});
+  const auto value = parse_bool(text);
+  if (!value) report(element, fmt::format("<{}> must be true or false (or 1 or 0), got '{}'", name, text));
+  return value;
+}
+
+std::optional<int> SceneReader::read_int(const pugi::xml_node& parent, const char* name, int minimum) {
+  const pugi::xml_node element = parent.child(name);
+  if (!element) return std::nullopt;
+  const auto text = leaf_text(element, {});
+  int value = 0;
+  const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+  if (error != std::errc() || end != text.data() + text.size() || value < minimum) {
+    report(element, fmt::format("<{}> must be a whole number >= {}, got '{}'", name, minimum, text));
+    return std::nullopt;
+  }
+  return value;
+}
+
+std::optional<double> SceneReader::read_number_attribute(const pugi::xml_node& element, const char* name,
+                                                         Quantity quantity, const Limits& limits) {
+  const auto attribute = element.attribute(name);
+  if (!attribute) return std::nullopt;
+  const std::string_view text = trim(attribute.value());
+  const auto value = parse_number(text);
+  const QuantityInfo info = quantity_info(quantity);
+  if (!value) {
+    report(element, fmt::format("attribute {}=\"{}\" on <{}> must be a number ({} in {})", name, text,
+                                element.name(), info.name, info.si_symbol));
+    return std::nullopt;
+  }
+  if (!limits.admits(*value)) {
+    report(element, fmt::format("attribute {} on <{}> must be {}, got {}", name, element.name(),
+                                limits.describe(info.si_symbol), text));
+    return std::nullopt;
+  }
+  return value;
+}
+
+std::optional<bool> SceneReader::read_bool_attribute(const pugi::xml_node& element, const char* name) {
+  const auto attribute = element.attribute(name);
+  if (!attribute) return std::nullopt;
+  const std::string_view text = trim(attribute.value());
+  const auto value = parse_bool(text);
+  if (!value) {
+    report(element, fmt::format("attribute {}=\"{}\" on <{}> must be true or false (or 1 or 0)", name, text,
+                                element.name()));
+  }
+  return value;
+}
+
+Pose SceneReader::read_pose(const pugi::xml_node& parent) {
+  const pugi::xml_node element = parent.child("pose");
+  if (!element) return Pose{};
+  // Pose values mix lengths and angles, so they take no unit attribute; SDF's own attributes say how to read them.
+  const std::string_view text = leaf_text(element, {"relative_to", "degrees", "rotation_format"});
+  // Frames named in relative_to need the SDF frame graph; only poses relative to the parent are supported.
+  if (!trim(element.attribute("relative_to").value()).empty()) {
+    report(element, "<pose relative_to=\"...\"> is not supported yet; give the pose relative to the parent element");
+  }
+  const bool degrees = read_bool_attribute(element, "degrees").value_or(false);
+  const std::string_view rotation_format = trim(element.attribute("rotation_format").value());
+  if (rotation_format == "quat_xyzw") {
+    const auto values = parse_numbers(element, text, 7, "x y z qx qy qz qw");
+    if (!values) return Pose{};
+    const auto& v = *values;
+    const Quat orientation{Real(v[6]), Real(v[3]), Real(v[4]), Real(v[5])};  // Eigen takes w first
+    if (orientation.norm() == 0) {
+      report(element, "<pose> quaternion must not be zero");
+      return Pose{};
+    }
+    return Pose{Vec3(Real(v[0]), Real(v[1]), Real(v[2])), orientation.normalized()};
+  }
+  if (!rotation_format.empty() && rotation_format != "euler_rpy") {
+    report(element, fmt::format("<pose rotation_format=\"{}\"> is not known; expected euler_rpy or quat_xyzw",
+                                rotation_format));
+    return Pose{};
+  }
+  const auto values = parse_numbers(element, text, 6, "x y z roll pitch yaw");
+  if (!values) return Pose{};
+  const auto& v = *values;
+  const double to_radians = degrees ? kRadiansPerDegree : 1.0;
+  return Pose::from_xyz_rpy(Real(v[0]), Real(v[1]), Real(v[2]), Real(v[3] * to_radians), Real(v[4] * to_radians),
+                            Real(v[5] * to_radians));
+}
+
+/// <min> and <max> children: a box with min < max on every axis.
+std::optional<Aabb> SceneReader::read_box(const pugi::xml_node& parent) {
+  const auto min = read_vector(parent, "min", Quantity::length, Presence::required);
+  const auto max = read_vector(parent, "max", Quantity::length, Presence::required);
+  if (!min || !max) return std::nullopt;
+  if (((*min).array() >= (*max).array()).any()) {
+    report(parent, fmt::format("<min> must be below <max> on every axis in {}, got min ({} {} {}) and max ({} {} {})",
+                               describe(parent), (*min).x(), (*min).y(), (*min).z(), (*max).x(), (*max).y(),
+                               (*max).z()));
+    return std::nullopt;
+  }
+  return Aabb{*min, *max};
+}
+
+// ---- SDF world ----
+
+Scene SceneReader::read() {
+  pugi::xml_document document;
+  const pugi::xml_parse_result parsed =
+      document.load_buffer(text_.data(), text_.size(), pugi::parse_default, pugi::encoding_utf8);
+  if (!parsed) {
+    throw InputError(SourceLocation{file_.string(), lines_.line_at(parsed.offset)},
+                     fmt::format("the file is not well-formed XML: {}", parsed.description()));
+  }
+  scene_.file = file_;
+
+  const pugi::xml_node sdf = document.document_element();
+  if (std::string_view(sdf.name()) != "sdf") {
+    throw InputError(where(sdf), fmt::format("expected the root element <sdf>, got <{}>", sdf.name()));
+  }
+  const auto worlds = child_elements(sdf, "world");
+  if (worlds.empty()) {
+    report(sdf, "missing <world> in <sdf>; a scene is an SDF world");
+  } else {
+    for (std::size_t extra = 1; extra < worlds.size(); ++extra) {
+      report(worlds[extra], fmt::format("only one <world> per scene file; the first is at line {}",
+                                        where(worlds.front()).line));
+    }
+    read_world(worlds.front());
+  }
+
+  if (!diagnostics_.empty()) {
+    std::stable_sort(diagnostics_.begin(), diagnostics_.end(),
+                     [](const Diagnostic& a, const Diagnostic& b) { return a.location.line < b.location.line; });
+    throw InputError(std::move(diagnostics_));
+  }
+  return std::move(scene_);
+}
+
+void SceneReader::read_world(const pugi::xml_node& world) {
+  scene_.world_name = world.attribute("name").value();
+  if (const auto gravity = read_vector(world, "gravity", Quantity::acceleration, Presence::optional)) {
+    scene_.solver.gravity = *gravity;
+  }
+
+  std::vector<pugi::xml_node> m3dp_plugins;
+  for (const auto& child : world.children()) {
+    if (child.type() != pugi::node_element) continue;
+    const std::string_view name = child.name();
+    if (name == "model") {
+      read_model(child);
+    } else if (name == "include") {
+      report(child, "<include> is not supported yet; copy the model into the world");
+    } else if (name == "plugin" && is_m3dp_plugin(child)) {
+      m3dp_plugins.push_back(child);
+    }
+    // Other SDF world elements (physics, scene, light, other plugins, ...) are valid SDF that M3DP does not use.
+  }
+
+  if (m3dp_plugins.empty()) {
+    report(world, fmt::format("missing <plugin name=\"m3dp\" filename=\"m3dp\"> in {}; it holds the solver, "
+                              "materials and fluid",
+                              describe(world)));
+    return;
+  }
+  for (std::size_t extra = 1; extra < m3dp_plugins.size(); ++extra) {
+    report(m3dp_plugins[extra], fmt::format("more than one m3dp <plugin> in the world; the first is at line {}",
+                                            where(m3dp_plugins.front()).line));
+  }
+  read_plugin(m3dp_plugins.front());
+}
+
+void SceneReader::read_model(const pugi::xml_node& model) {
+  StaticBody body;
+  body.name = read_attribute(model, "name", Presence::required).value_or("");
+  body.where = where(model);
+  if (!body.name.empty()) check_unique_name(model, body.name, model_names_);
+  if (!read_bool(model, "static").value_or(false)) {
+    report(model, fmt::format("{}: dynamic bodies are not supported yet (they need the world module); mark the model "
+                              "<static>true</static>",
+                              describe(model)));
+  }
+  const Pose model_pose = read_pose(model);
+  for (const auto& child : model.children()) {
+    if (child.type() != pugi::node_element) continue;
+    const std::string_view name = child.name();
+    if (name == "link") {
+      read_link(child, model_pose, body.name, body);
+    } else if (name == "model") {
+      report(child, "nested <model> is not supported yet; put each model directly in the <world>");
+    } else if (name == "include") {
+      report(child, "<include> is not supported yet; copy the model into the world");
+    }
+    // Joints, plugins and the like are valid SDF with no meaning for a static boundary.
+  }
+  scene_.bodies.push_back(std::move(body));
+}
+
+void SceneReader::read_link(const pugi::xml_node& link, const Pose& model_pose, const std::string& model_name,
+                            StaticBody& body) {
+  const std::string link_name = read_attribute(link, "name", Presence::required).value_or("");
+  const Pose link_pose = model_pose * read_pose(link);
+  for (const auto& collision : child_elements(link, "collision")) {
+    const std::string collision_name = read_attribute(collision, "name", Presence::required).value_or("");
+    const Pose collision_pose = link_pose * read_pose(collision);
+    const pugi::xml_node geometry = find_child(collision, "geometry", Presence::required);
+    if (!geometry) continue;
+    if (auto shape = read_geometry(geometry)) {
+      body.collisions.push_back(CollisionShape{fmt::format("{}/{}/{}", model_name, link_name, collision_name),
+                                               std::move(*shape), collision_pose, where(collision)});
+    }
+  }
+  // <visual>, <inertial>, <sensor> ... are valid SDF that the fluid does not see.
+}
+
+std::optional<Shape> SceneReader::read_geometry(const pugi::xml_node& geometry) {
+  constexpr std::string_view kSupported = "box, sphere, cylinder, plane, mesh";
+  const auto shapes = [&] {
+    std::vector<pugi::xml_node> elements;
+    for (const auto& child : geometry.children()) {
+      if (child.type() == pugi::node_element) elements.push_back(child);
+    }
+    return elements;
+  }();
+  if (shapes.empty()) {
+    report(geometry, fmt::format("<geometry> has no shape; expected one of: {}", kSupported));
+    return std::nullopt;
+  }
+  if (shapes.size() > 1) {
+    report(shapes[1], fmt::format("<geometry> must hold exactly one shape; found <{}> and <{}>", shapes[0].name(),
+                                  shapes[1].name()));
+    return std::nullopt;
+  }
+  const pugi::xml_node shape = shapes.front();
+  const std::string_view kind = shape.name();
+  if (kind == "box") {
+    const pugi::xml_node size_element = find_child(shape, "size", Presence::required);
+    if (!size_element) return std::nullopt;
+    const auto size = read_numbers(size_element, 3, Quantity::length, "x y z");
+    if (!size) return std::nullopt;
+    if (std::any_of(size->begin(), size->end(), [](double edge) { return edge <= 0; })) {
+      report(size_element, fmt::format("<size> of a <box> must be > 0 m on every axis, got '{}'",
+                                       trim(size_element.child_value())));
+      return std::nullopt;
+    }
+    return BoxShape{Vec3(Real((*size)[0]), Real((*size)[1]), Real((*size)[2]))};
+  }
+  if (kind == "sphere") {
+    const auto radius = read_scalar(shape, "radius", Quantity::length, Limits::positive(), Presence::required);
+    if (!radius) return std::nullopt;
+    return SphereShape{Real(*radius)};
+  }
+  if (kind == "cylinder") {
+    const auto radius = read_scalar(shape, "radius", Quantity::length, Limits::positive(), Presence::required);
+    const auto length = read_scalar(shape, "length", Quantity::length, Limits::positive(), Presence::required);
+    if (!radius || !length) return std::nullopt;
+    return CylinderShape{Real(*radius), Real(*length)};
+  }
+  if (kind == "plane") {
+    const auto normal = shape.child("normal") ? read_direction(shape, "normal", Presence::optional)
+                                              : std::optional<Vec3>(Vec3::UnitZ());
+    // SDF planes are infinite; boundary particles need a finite patch.
+    const pugi::xml_node size_element = shape.child("size");
+    if (!size_element) {
+      report(shape, "missing required <size> in <plane>; M3DP samples a finite patch, e.g. <size>2 2</size>");
+      return std::nullopt;
+    }
+    const auto size = read_numbers(size_element, 2, Quantity::length, "x y");
+    if (!normal || !size) return std::nullopt;
+    if ((*size)[0] <= 0 || (*size)[1] <= 0) {
+      report(size_element,
+             fmt::format("<size> of a <plane> must be > 0 m on both axes, got '{}'", trim(size_element.child_value())));
+      return std::nullopt;
+    }
+    return PlaneShape{*normal, Real((*size)[0]), Real((*size)[1])};
+  }
+  if (kind == "mesh") {
+    auto mesh = read_mesh(shape);
+    if (!mesh) return std::nullopt;
+    return std::move(*mesh);
+  }
+  report(shape, fmt::format("<{}> geometry is not supported yet; expected one of: {}", kind, kSupported));
+  return std::nullopt;
+}
+
+std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
+  const pugi::xml_node uri_element = find_child(mesh, "uri", Presence::required);
+  if (!uri_element) return std::nullopt;
+  const std::string_view uri = leaf_text(uri_element, {});
+
+  constexpr std::string_view kFileScheme = "file://";
+  fs::path mesh_path;
+  if (uri.starts_with("model://")) {
+    report(uri_element, fmt::format("'{}': model:// URIs need a Gazebo model path, which M3DP does not search; use a "
+                                    "path relative to the scene file's folder (e.g. meshes/part.stl)",
+                                    uri));
+    return std::nullopt;
+  }
+  if (uri.starts_with(kFileScheme)) {
+    mesh_path = fs::path(std::string(uri.substr(kFileScheme.size())));
+  } else if (uri.find("://") != std::string_view::npos) {
+    report(uri_element, fmt::format("'{}': unsupported URI scheme; use a path relative to the scene file's folder or "
+                                    "file:///absolute/path",
+                                    uri));
+    return std::nullopt;
+  } else if (uri.empty()) {
+    report(uri_element, "<uri> is empty; expected the path of an .obj or .stl file");
+    return std::nullopt;
+  } else {
+    mesh_path = fs::path(std::string(uri));
+  }
+  if (mesh_path.is_relative()) mesh_path = file_.parent_path() / mesh_path;
+
+  Vec3 scale = Vec3::Ones();
+  if (const pugi::xml_node scale_element = mesh.child("scale")) {
+    const auto values = read_numbers(scale_element, 3, Quantity::plain_number, "x y z");
+    if (!values) return std::nullopt;
+    scale = Vec3(Real((*values)[0]), Real((*values)[1]), Real((*values)[2]));
+    if ((scale.array() == 0).any()) {
+      report(scale_element, "<scale> must not be 0 on any axis (it would flatten the mesh)");
+      return std::nullopt;
+    }
+  }
+
+  MeshShape shape;
+  shape.file = mesh_path.string();
+  try {
+    shape.mesh = io::read_triangle_mesh(mesh_path);
+  } catch (const InputError& error) {
+    std::string details;
+    for (const auto& diagnostic : error.diagnostics()) {
+      details += (details.empty() ? "" : "; ") + diagnostic.str();
+    }
+    report(uri_element, fmt::format("cannot load mesh '{}': {}", shape.file, details));
+    return std::nullopt;
+  }
+  for (Vec3& vertex : shape.mesh.vertices) vertex = vertex.cwiseProduct(scale);
+  // A mirroring scale turns the triangles inside out; swap two corners to keep them counter-clockwise.
+  if (scale.prod() < 0) {
+    for (auto& triangle : shape.mesh.triangles) std::swap(triangle[1], triangle[2]);
+  }
+  return shape;
+}
+
+// ---- the m3dp plugin ----
+
+void SceneReader::read_plugin(const pugi::xml_node& plugin) {
+  check_children(plugin, {"solver", "material", "fluid_block", "print_head", "output"},
+                 {"material", "fluid_block", "print_head"});
+  // The solver comes first: other checks need the particle radius and the bounds.
+  if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
+  for (const auto& material : child_elements(plugin, "material")) read_material(material);
+  for (const auto& block : child_elements(plugin, "fluid_block")) read_fluid_block(block);
+  for (const auto& head : child_elements(plugin, "print_head")) read_print_head(head);
+  if (const pugi::xml_node output = plugin.child("output")) read_output(output);
+
+  if (!plugin.child("fluid_block") && !plugin.child("print_head")) {
+    report(plugin, "the scene has no fluid: add a <fluid_block> or a <print_head>");
+  }
+  check_materials();
+}
+
+void SceneReader::read_solver(const pugi::xml_node& solver) {
+  check_attributes(solver, {});
+  check_children(solver, {"particle_radius", "kernel", "cfl_factor", "min_time_step", "max_time_step",
+                          "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
+                          "warm_start", "end_time", "bounds"});
+  sph::SolverSettings& settings = scene_.solver;
+
+  if (const auto radius =
+          read_scalar(solver, "particle_radius", Quantity::length, Limits::positive(), Presence::required)) {
+    settings.particle_radius = Real(*radius);
+    particle_radius_ = settings.particle_radius;
+  }
+  if (const pugi::xml_node kernel = solver.child("kernel")) {
+    const std::string_view name = leaf_text(kernel, {});
+    if (name == "cubic_spline") {
+      settings.kernel = sph::KernelType::cubic_spline;
+    } else if (name == "wendland_c2") {
+      settings.kernel = sph::KernelType::wendland_c2;
+    } else {
+      report(kernel, fmt::format("<kernel> must be one of: cubic_spline, wendland_c2; got '{}'", name));
+    }
+  }
+  if (const auto cfl = read_scalar(solver, "cfl_factor", Quantity::plain_number, Limits::positive_up_to(2),
+                                   Presence::optional)) {
+    settings.cfl_factor = Real(*cfl);
+  }
+  const auto min_step = read_scalar(solver, "min_time_step", Quantity::time, Limits::positive(), Presence::optional);
+  const auto max_step = read_scalar(solver, "max_time_step", Quantity::time, Limits::positive(), Presence::optional);
+  if (min_step) settings.min_time_step = Real(*min_step);
+  if (max_step) settings.max_time_step = Real(*max_step);
+  if ((min_step || max_step) && settings.max_time_step < settings.min_time_step) {
+    const pugi::xml_node culprit = max_step ? solver.child("max_time_step") : solver.child("min_time_step");
+    report(culprit, fmt::format("<max_time_step> ({} s) must be >= <min_time_step> ({} s)", settings.max_time_step,
+                                settings.min_time_step));
+  }
+  if (const auto error = read_scalar(solver, "max_density_error", Quantity::fraction, Limits::positive_up_to(0.1),
+                                     Presence::optional)) {
+    settings.density_tolerance = Real(*error);
+  }
+  if (const auto error = read_scalar(solver, "max_divergence_error", Quantity::fraction, Limits::positive_up_to(1),
+                                     Presence::optional)) {
+    settings.divergence_tolerance = Real(*error);
+  }
+  if (const auto iterations = read_int(solver, "max_iterations", 1)) {
+    settings.max_density_iterations = *iterations;
+    settings.max_divergence_iterations = *iterations;
+    settings.min_density_iterations = std::min(settings.min_density_iterations, *iterations);
+  }
+  if (const auto enabled = read_bool(solver, "divergence_solver")) settings.divergence_solver = *enabled;
+  if (const auto enabled = read_bool(solver, "warm_start")) settings.warm_start = *enabled;
+  if (const auto end_time = read_scalar(solver, "end_time", Quantity::time, Limits::positive(), Presence::optional)) {
+    scene_.end_time = *end_time;
+  }
+  if (const pugi::xml_node bounds = find_child(solver, "bounds", Presence::required)) {
+    check_attributes(bounds, {});
+    check_children(bounds, {"min", "max"});
+    if (const auto box = read_box(bounds)) {
+      settings.bounds = *box;
+      bounds_ = *box;
+    }
+  }
+}
+
+void SceneReader::read_material(const pugi::xml_node& element) {
+  check_attributes(element, {"name"});
+  check_children(element, {"density", "viscosity", "boundary_viscosity"});
+  const auto name = read_attribute(element, "name", Presence::required);
+  const auto density = read_scalar(element, "density", Quantity::density, Limits::positive(), Presence::required);
+  const auto viscosity = read_scalar(element, "viscosity", Quantity::dynamic_viscosity, Limits::non_negative(),
+                                     Presence::required);
+  const auto boundary_viscosity = read_scalar(element, "boundary_viscosity", Quantity::dynamic_viscosity,
+                                              Limits::non_negative(), Presence::optional);
+  if (!name) return;
+
+  const auto earlier = std::find_if(defined_materials_.begin(), defined_materials_.end(),
+                                    [&](const DefinedMaterial& defined) { return defined.name == *name; });
+  if (earlier != defined_materials_.end()) {
+    report(element, fmt::format("material '{}' is defined twice; the first is at line {}", *name, earlier->where.line));
+    return;
+  }
+  defined_materials_.push_back(DefinedMaterial{*name, density, where(element)});
+
+  material::NewtonianMaterial material;
+  material.name = *name;
+  if (density) material.density = Real(*density);
+  if (viscosity) material.dynamic_viscosity = Real(*viscosity);
+  material.boundary_viscosity = Real(boundary_viscosity.value_or(0));
+  scene_.materials.push_back(MaterialEntry{std::move(material), where(element)});
+}
+
+void SceneReader::read_fluid_block(const pugi::xml_node& element) {
+  check_attributes(element, {"name", "material"});
+  check_children(element, {"min", "max", "velocity"});
+  FluidBlock block;
+  block.name = read_attribute(element, "name", Presence::required).value_or("");
+  block.material = read_attribute(element, "material", Presence::required).value_or("");
+  block.where = where(element);
+  if (!block.name.empty()) check_unique_name(element, block.name, fluid_block_names_);
+  if (!block.material.empty()) material_uses_.push_back(MaterialUse{block.material, describe(element), block.where});
+
+  const auto box = read_box(element);
+  if (box) block.box = *box;
+  // Particles outside the solver bounds are removed at once, so a block reaching out of them is a mistake.
+  if (box && bounds_ && !(bounds_->contains(box->min) && bounds_->contains(box->max))) {
+    report(element, fmt::format("{} reaches outside the solver <bounds>; particles there would be removed at once",
+                                describe(element)));
+  }
+  if (const auto velocity = read_vector(element, "velocity", Quantity::speed, Presence::optional)) {
+    block.initial_velocity = *velocity;
+  }
+  scene_.fluid_blocks.push_back(std::move(block));
+}
+
+void SceneReader::read_print_head(const pugi::xml_node& element) {
+  check_attributes(element, {"name", "material"});
+  check_children(element, {"nozzle", "path"});
+  PrintHead head;
+  head.name = read_attribute(element, "name", Presence::required).value_or("");
+  head.material = read_attribute(element, "material", Presence::required).value_or("");
+  head.where = where(element);
+  if (!head.name.empty()) check_unique_name(element, head.name, print_head_names_);
+  if (!head.material.empty()) material_uses_.push_back(MaterialUse{head.material, describe(element), head.where});
+
+  if (const pugi::xml_node nozzle = find_child(element, "nozzle", Presence::required)) {
+    check_attributes(nozzle, {});
+    check_children(nozzle, {"inner_diameter", "exit_speed", "direction"});
+    if (const auto diameter =
+            read_scalar(nozzle, "inner_diameter", Quantity::length, Limits::positive(), Presence::required)) {
+      head.inner_diameter = Real(*diameter);
+      if (particle_radius_ && head.inner_diameter < 2 * *particle_radius_) {
+        report(nozzle.child("inner_diameter"),
+               fmt::format("the nozzle is narrower than one particle: <inner_diameter> {} m is below the particle "
+                           "diameter 2*<particle_radius> = {} m; widen the nozzle or use smaller particles",
+                           head.inner_diameter, 2 * *particle_radius_));
+      }
+    }
+    if (const auto speed = read_scalar(nozzle, "exit_speed", Quantity::speed, Limits::positive(), Presence::required)) {
+      head.exit_speed = Real(*speed);
+    }
+    if (const auto direction = read_direction(nozzle, "direction", Presence::optional)) head.direction = *direction;
+  }
+  if (const pugi::xml_node path = find_child(element, "path", Presence::required)) {
+    if (auto trajectory = read_path(path)) head.trajectory = std::move(*trajectory);
+  }
+  scene_.print_heads.push_back(std::move(head));
+}
+
+std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node& path) {
+  check_attributes(path, {"start_time", "speed"});
+  check_children(path, {"line", "polyline", "circle", "helix"}, {"line", "polyline", "circle", "helix"});
+  const auto start_time = read_number_attribute(path, "start_time", Quantity::time, Limits::non_negative());
+  const auto speed = read_number_attribute(path, "speed", Quantity::speed, Limits::positive());
+  const bool attributes_valid = (start_time || !path.attribute("start_time")) && (speed || !path.attribute("speed"));
+
+  std::vector<toolpath::PathSegment> segments;
+  bool segments_valid = true;
+  for (const auto& child : path.children()) {
+    if (child.type() != pugi::node_element) continue;
+    const std::string_view kind = child.name();
+    if (kind != "line" && kind != "polyline" && kind != "circle" && kind != "helix") continue;  // reported above
+    if (auto segment = read_path_segment(child, Real(speed.value_or(toolpath::PathSegment{}.speed)))) {
+      segments.push_back(std::move(*segment));
+    } else {
+      segments_valid = false;
+    }
+  }
+  if (segments.empty() && segments_valid) {
+    report(path, "<path> has no segments; expected one or more of: line, polyline, circle, helix");
+    return std::nullopt;
+  }
+  if (!segments_valid || !attributes_valid) return std::nullopt;
+  return toolpath::Trajectory(std::move(segments), start_time.value_or(0));
+}
+
+std::optional<toolpath::PathSegment> SceneReader::read_path_segment(const pugi::xml_node& element, Real path_speed) {
+  check_attributes(element, {"speed", "extrude"});
+  const auto speed = read_number_attribute(element, "speed", Quantity::speed, Limits::positive());
+  const auto extrude = read_bool_attribute(element, "extrude");
+  auto curve = read_curve(element);
+  if (!curve || (element.attribute("speed") && !speed) || (element.attribute("extrude") && !extrude)) {
+    return std::nullopt;
+  }
+  return toolpath::PathSegment{std::move(*curve), speed ? Real(*speed) : path_speed, extrude.value_or(true)};
+}
+
+/// <centre> or its American spelling <center>: exactly one of them.
+pugi::xml_node SceneReader::find_centre(const pugi::xml_node& curve) {
+  const pugi::xml_node centre = curve.child("centre");
+  const pugi::xml_node center = curve.child("center");
+  if (centre && center) {
+    report(center, fmt::format("<{}> has both <centre> and <center>; give one", curve.name()));
+    return {};
+  }
+  if (!centre && !center) report(curve, fmt::format("missing required <centre> in <{}>", curve.name()));
+  return centre ? centre : center;
+}
+
+std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& element) {
+  const std::string_view kind = element.name();
+  if (kind == "line") {
+    check_children(element, {"start", "end"});
+    const auto start = read_vector(element, "start", Quantity::length, Presence::required);
+    const auto end = read_vector(element, "end", Quantity::length, Presence::required);
+    if (!start || !end) return std::nullopt;
+    return toolpath::LineCurve{*start, *end};
+  }
+  if (kind == "polyline") {
+    check_children(element, {"point"}, {"point"});
+    toolpath::PolylineCurve polyline;
+    bool points_valid = true;
+    for (const auto& point_element : child_elements(element, "point")) {
+      const auto point = read_numbers(point_element, 3, Quantity::length, "x y z");
+      if (point) {
+        polyline.points.emplace_back(Real((*point)[0]), Real((*point)[1]), Real((*point)[2]));
+      } else {
+        points_valid = false;
+      }
+    }
+    if (!points_valid) return std::nullopt;
+    if (polyline.points.size() < 2) {
+      report(element, fmt::format("<polyline> needs at least 2 <point>s, got {}", polyline.points.size()));
+      return std::nullopt;
+    }
+    return polyline;
+  }
+
+  // Circles and helices share centre, radius, turns and start angle; a helix also rises.
+  const bool is_helix = kind == "helix";
+  if (is_helix) {
+    check_children(element, {"centre", "center", "radius", "turns", "rise_per_turn", "start_angle"});
+  } else {
+    check_children(element, {"centre", "center", "radius", "turns", "start_angle"});
+  }
+  std::optional<Vec3> centre;
+  if (const pugi::xml_node centre_element = find_centre(element)) {
+    if (const auto values = read_numbers(centre_element, 3, Quantity::length, "x y z")) {
+      centre = Vec3(Real((*values)[0]), Real((*values)[1]), Real((*values)[2]));
+    }
+  }
+  const auto radius = read_scalar(element, "radius", Quantity::length, Limits::positive(), Presence::required);
+  auto turns = read_scalar(element, "turns", Quantity::plain_number, Limits::any(), Presence::optional);
+  if (turns && *turns == 0) {
+    report(element.child("turns"), "<turns> must not be 0 (negative turns go clockwise)");
+    turns.reset();
+  }
+  const bool turns_valid = turns || !element.child("turns");
+  const auto start_angle =
+      read_scalar(element, "start_angle", Quantity::angle, Limits::any(), Presence::optional);
+  const bool start_angle_valid = start_angle || !element.child("start_angle");
+  const auto rise = is_helix ? read_scalar(element, "rise_per_turn", Quantity::length, Limits::any(),
+                                           Presence::required)
+                             : std::optional<double>(0.0);
+  if (!centre || !radius || !turns_valid || !start_angle_valid || !rise) return std::nullopt;
+
+  const Real turn_count = Real(turns.value_or(1));
+  const Real angle = Real(start_angle.value_or(0));
+  if (is_helix) return toolpath::HelixCurve{*centre, Real(*radius), angle, turn_count, Real(*rise)};
+  return toolpath::CircleCurve{*centre, Real(*radius), angle, turn_count};
+}
+
+void SceneReader::read_output(const pugi::xml_node& output) {
+  check_attributes(output, {});
+  check_children(output, {"particles_period", "particles"});
+  if (const auto period =
+          read_scalar(output, "particles_period", Quantity::time, Limits::non_negative(), Presence::optional)) {
+    scene_.output.particles_period = Real(*period);
+  }
+  if (const auto write = read_bool(output, "particles")) scene_.output.write_particles = *write;
+}
+
+void SceneReader::check_materials() {
+  std::string defined_names;
+  for (const auto& defined : defined_materials_) defined_names += (defined_names.empty() ? "" : ", ") + defined.name;
+  if (defined_names.empty()) defined_names = "none (add a <material name=\"...\">)";
+
+  for (const MaterialUse& use : material_uses_) {
+    const auto defined = std::find_if(defined_materials_.begin(), defined_materials_.end(),
+                                      [&](const DefinedMaterial& material) { return material.name == use.material; });
+    if (defined == defined_materials_.end()) {
+      report(use.where, fmt::format("material '{}' used by {} is not defined; defined: {}", use.material, use.user,
+                                    defined_names));
+    } else {
+      defined->used = true;
+    }
+  }
+  for (const DefinedMaterial& defined : defined_materials_) {
+    if (!defined.used) {
+      report(defined.where, fmt::format("material '{}' is not used by any <fluid_block> or <print_head>; remove it "
+                                        "or use it",
+                                        defined.name));
+    }
+  }
+  // One rest density per scene for now: the solver's pressure solve assumes it.
+  const DefinedMaterial* reference = nullptr;
+  for (const DefinedMaterial& defined : defined_materials_) {
+    if (!defined.density) continue;
+    if (!reference) {
+      reference = &defined;
+    } else if (std::abs(*defined.density - *reference->density) > 1e-9 * *reference->density) {
+      report(defined.where,
+             fmt::format("material '{}' has density {} kg/m^3 but material '{}' (line {}) has {} kg/m^3; all "
+                         "materials of a scene must have the same density for now (one rest density per scene)",
+                         defined.name, *defined.density, reference->name, reference->where.line,
+                         *reference->density));
+    }
+  }
+}
+
+std::string read_text_file(const fs::path& file) {
+  std::error_code error;
+  if (!fs::is_regular_file(file, error)) {
+    throw InputError(SourceLocation{file.string(), 0},
+                     "cannot read the scene: no such file (expected an SDF world file, e.g. scenes/dam_break.sdf)");
+  }
+  std::ifstream stream(file, std::ios::binary);
+  if (!stream) throw InputError(SourceLocation{file.string(), 0}, "cannot open the scene file for reading");
+  return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+}
+
+}  // namespace
+
+const MaterialEntry* Scene::find_material(const std::string& name) const {
+  const auto entry = std::find_if(materials.begin(), materials.end(),
+                                  [&](const MaterialEntry& candidate) { return candidate.material.name == name; });
+  return entry == materials.end() ? nullptr : &*entry;
+}
+
+Scene load_scene(const std::filesystem::path& file) { return load_scene_from_string(read_text_file(file), file); }
+
+Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name) {
+  return SceneReader(text, file_name).read();
+}
+
+}  // namespace m3dp::scene

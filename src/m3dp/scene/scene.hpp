@@ -1,0 +1,81 @@
+#pragma once
+// A scene as loaded from an SDF world file: validated, immutable parameters and nothing else.
+// Every entry remembers where in the file it came from, for later messages.
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/core/geometry.hpp"
+#include "m3dp/material/newtonian.hpp"
+#include "m3dp/sph/solver.hpp"
+#include "m3dp/toolpath/parametric.hpp"
+
+namespace m3dp::scene {
+
+/// One collision shape of a static SDF model, placed in the world.
+struct CollisionShape {
+  std::string name;  // "model/link/collision"
+  Shape shape;
+  Pose pose;  // world pose of the shape frame (model ∘ link ∘ collision)
+  SourceLocation where;
+};
+
+/// A static SDF <model>: the fluid sees each of its collision shapes as boundary particles.
+struct StaticBody {
+  std::string name;
+  std::vector<CollisionShape> collisions;
+  SourceLocation where;
+};
+
+struct MaterialEntry {
+  material::NewtonianMaterial material;
+  SourceLocation where;
+};
+
+/// A box of fluid particles on a lattice of spacing 2·particle_radius filling [min, max].
+struct FluidBlock {
+  std::string name;
+  std::string material;
+  Aabb box;                            // m
+  Vec3 initial_velocity = Vec3::Zero();  // m/s
+  SourceLocation where;
+};
+
+/// A print head: a nozzle moved along a path, extruding where the path says so.
+struct PrintHead {
+  std::string name;
+  std::string material;
+  Real inner_diameter = Real(0.01);  // m
+  Real exit_speed = Real(0.1);       // m/s
+  Vec3 direction = Vec3(0, 0, -1);   // unit vector the material leaves along
+  toolpath::Trajectory trajectory;
+  SourceLocation where;
+};
+
+struct OutputSettings {
+  Real particles_period = Real(0.02);  // s of simulated time between particle frames; 0 = none
+  bool write_particles = true;
+};
+
+struct Scene {
+  std::filesystem::path file;   // the scene file as given
+  std::string world_name;
+  double end_time = 1;          // s of simulated time
+  sph::SolverSettings solver;   // includes gravity (from the world's <gravity>) and bounds
+  std::vector<MaterialEntry> materials;
+  std::vector<StaticBody> bodies;
+  std::vector<FluidBlock> fluid_blocks;
+  std::vector<PrintHead> print_heads;
+  OutputSettings output;
+
+  [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
+};
+
+/// Loads and validates a scene. Throws InputError listing every problem found, each with file:line.
+Scene load_scene(const std::filesystem::path& file);
+/// Same, from text in memory; `file_name` is used in messages and to resolve relative mesh paths.
+Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name);
+
+}  // namespace m3dp::scene

@@ -1,0 +1,90 @@
+#include "m3dp/sim/presets.hpp"
+
+#include <cmath>
+
+namespace m3dp::sim {
+
+namespace {
+scene::CollisionShape box_between(const std::string& name, const Vec3& min, const Vec3& max) {
+  scene::CollisionShape collision;
+  collision.name = name;
+  collision.shape = BoxShape{max - min};
+  collision.pose.position = (min + max) / 2;
+  collision.where = SourceLocation{"<built in code>", 0};
+  return collision;
+}
+
+scene::MaterialEntry water(Real viscosity) {
+  scene::MaterialEntry entry;
+  entry.material = material::NewtonianMaterial{"water", 1000, viscosity, 0};
+  entry.where = SourceLocation{"<built in code>", 0};
+  return entry;
+}
+
+/// Open-top tank [0, length] × [0, depth] × [0, height] made of walls of thickness one particle diameter.
+/// Floor and walls are separate bodies so the force on the floor can be read alone.
+void add_tank(scene::Scene& scene, Real length, Real depth, Real height, Real thickness) {
+  const Real t = thickness;
+  scene.bodies.push_back({"floor", {box_between("floor", Vec3(-t, -t, -t), Vec3(length + t, depth + t, 0))}, {}});
+  scene.bodies.push_back({"walls",
+                          {box_between("left", Vec3(-t, -t, 0), Vec3(0, depth + t, height)),
+                           box_between("right", Vec3(length, -t, 0), Vec3(length + t, depth + t, height)),
+                           box_between("front", Vec3(0, -t, 0), Vec3(length, 0, height)),
+                           box_between("back", Vec3(0, depth, 0), Vec3(length, depth + t, height))},
+                          {}});
+}
+}  // namespace
+
+Real dam_break_radius_for_count(std::size_t particle_count, Real column_width, Real depth) {
+  const double volume = 2.0 * column_width * column_width * depth;
+  const double diameter = std::cbrt(volume / static_cast<double>(particle_count));
+  return static_cast<Real>(diameter / 2);
+}
+
+scene::Scene dam_break_scene(const DamBreakSetup& setup) {
+  scene::Scene scene;
+  scene.file = "dam_break (built in)";
+  scene.world_name = "dam_break";
+  scene.end_time = setup.end_time;
+  const Real a = setup.column_width;
+  const Real length = setup.tank_length_factor * a;
+  const Real height = 3 * a;
+  const Real diameter = 2 * setup.particle_radius;
+  scene.solver.particle_radius = setup.particle_radius;
+  scene.solver.kernel = setup.kernel;
+  scene.solver.bounds.min = Vec3(-a, -a, -a);
+  scene.solver.bounds.max = Vec3(length + a, setup.depth + a, 2 * height);
+  scene.materials.push_back(water(setup.viscosity));
+  add_tank(scene, length, setup.depth, height, diameter);
+  scene::FluidBlock column;
+  column.name = "column";
+  column.material = "water";
+  column.box.min = Vec3(0, 0, 0);
+  column.box.max = Vec3(a, setup.depth, 2 * a);
+  scene.fluid_blocks.push_back(column);
+  scene.output.particles_period = Real(0.02);
+  return scene;
+}
+
+scene::Scene hydrostatic_scene(const HydrostaticSetup& setup) {
+  scene::Scene scene;
+  scene.file = "hydrostatic (built in)";
+  scene.world_name = "hydrostatic";
+  scene.end_time = setup.end_time;
+  const Real diameter = 2 * setup.particle_radius;
+  scene.solver.particle_radius = setup.particle_radius;
+  scene.solver.bounds.min = Vec3::Constant(-setup.width);
+  scene.solver.bounds.max = Vec3(2 * setup.width, 2 * setup.width, 3 * setup.height);
+  scene.materials.push_back(water(Real(1e-3)));
+  add_tank(scene, setup.width, setup.width, Real(1.5) * setup.height, diameter);
+  scene::FluidBlock block;
+  block.name = "water";
+  block.material = "water";
+  block.box.min = Vec3::Zero();
+  block.box.max = Vec3(setup.width, setup.width, setup.height);
+  scene.fluid_blocks.push_back(block);
+  scene.output.particles_period = Real(0.05);
+  return scene;
+}
+
+}  // namespace m3dp::sim

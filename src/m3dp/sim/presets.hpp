@@ -1,0 +1,34 @@
+#pragma once
+// Reference set-ups built in code (no file): used by tests, benchmarks and `m3dp bench`.
+#include "m3dp/scene/scene.hpp"
+
+namespace m3dp::sim {
+
+/// Martin & Moyce 1952 dam break: a water column of width a and height 2a at the left wall of a
+/// tank 5a long, released at t = 0. Depth (y) spans the tank between two side walls.
+struct DamBreakSetup {
+  Real column_width = Real(0.1);  // a (m)
+  Real depth = Real(0.05);        // tank depth (m)
+  Real particle_radius = Real(0.004);
+  Real tank_length_factor = 5;    // tank length / a
+  double end_time = 0.25;         // s
+  Real viscosity = Real(1e-3);    // Pa·s
+  sph::KernelType kernel = sph::KernelType::cubic_spline;
+};
+
+/// Particle radius that gives about `particle_count` fluid particles for a column with depth = depth_ratio · a.
+Real dam_break_radius_for_count(std::size_t particle_count, Real column_width, Real depth);
+
+scene::Scene dam_break_scene(const DamBreakSetup& setup);
+
+/// A tank of water at rest: width × width footprint, fluid height `height`; the floor is its own body.
+struct HydrostaticSetup {
+  Real width = Real(0.1);
+  Real height = Real(0.1);
+  Real particle_radius = Real(0.005);
+  double end_time = 1.0;
+};
+
+scene::Scene hydrostatic_scene(const HydrostaticSetup& setup);
+
+}  // namespace m3dp::sim

@@ -1,0 +1,203 @@
+// The run loop: steps to the end time, writes particle frames on schedule, timing per step,
+// and a summary — also when interrupted (Ctrl-C) or when the state blows up.
+#include <fmt/format.h>
+#include <fmt/os.h>
+
+#include <chrono>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/core/progress.hpp"
+#include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/vtk_writer.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+namespace m3dp::sim {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+class ParticleFrameWriter {
+ public:
+  explicit ParticleFrameWriter(const std::filesystem::path& output_directory)
+      : folder_(output_directory / "particles"), collection_(output_directory / "particles.pvd") {
+    std::filesystem::create_directories(folder_);
+  }
+
+  void write(const sph::Solver& solver) {
+    const auto& fluid = solver.fluid();
+    pressure_.resize(fluid.size());
+    for (std::size_t i = 0; i < fluid.size(); ++i) pressure_[i] = solver.pressure(i);
+    const auto file = folder_ / fmt::format("particles_{:06}.vtu", collection_.size());
+    io::write_vtu(file, fluid.position,
+                  {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", fluid.density),
+                   io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
+                   io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time)});
+    collection_.add(solver.time(), file);
+  }
+  [[nodiscard]] std::size_t frames() const { return collection_.size(); }
+
+ private:
+  std::filesystem::path folder_;
+  io::PvdCollection collection_;
+  std::vector<Real> pressure_;
+};
+
+nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulation) {
+  nlohmann::json bodies = nlohmann::json::array();
+  for (const auto& body : simulation.solver().bodies())
+    bodies.push_back({{"name", body.name},
+                      {"fluid_force_N", {body.fluid_force.x(), body.fluid_force.y(), body.fluid_force.z()}},
+                      {"fluid_torque_Nm", {body.fluid_torque.x(), body.fluid_torque.y(), body.fluid_torque.z()}}});
+  return {
+      {"scene", simulation.scene().file.string()},
+      {"status", summary.status},
+      {"error", summary.error},
+      {"simulated_time_s", summary.simulated_time},
+      {"end_time_s", summary.end_time},
+      {"steps", summary.steps},
+      {"wall_time_s", summary.wall_time},
+      {"real_time_factor", summary.real_time_factor},
+      {"particle_steps_per_second", summary.particle_steps_per_second},
+      {"particles", summary.particles},
+      {"particles_emitted", summary.particles_emitted},
+      {"particles_removed", summary.particles_removed},
+      {"mass_initial_kg", summary.mass_initial},
+      {"mass_emitted_kg", summary.mass_emitted},
+      {"mass_lost_kg", summary.mass_lost},
+      {"mass_final_kg", summary.mass_final},
+      {"max_density_error", summary.max_density_error},
+      {"mean_density_iterations", summary.mean_density_iterations},
+      {"mean_divergence_iterations", summary.mean_divergence_iterations},
+      {"frames_written", summary.frames_written},
+      {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
+      {"bodies", bodies},
+  };
+}
+
+constexpr const char* kTimingHeader =
+    "step,time_s,dt_s,particles,density_iterations,divergence_iterations,density_error,ms_bodies,ms_remove,ms_emit,"
+    "ms_reorder,ms_neighbors,ms_density,ms_divergence,ms_forces,ms_pressure,ms_advect,ms_output,ms_total\n";
+
+}  // namespace
+
+RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
+  RunSummary summary;
+  const double end_time = options.until.value_or(simulation.scene().end_time);
+  summary.end_time = end_time;
+  summary.mass_initial = simulation.initial_fluid_mass();
+  const bool writing = !options.output_directory.empty();
+  const auto& output = simulation.scene().output;
+
+  std::optional<ParticleFrameWriter> frames;
+  std::FILE* timing = nullptr;
+  std::filesystem::path timing_partial, timing_final;
+  if (writing) {
+    std::filesystem::create_directories(options.output_directory);
+    if (output.write_particles) frames.emplace(options.output_directory);
+    // The timing table grows during the run; it gets its real name only when complete.
+    timing_final = options.output_directory / "timing.csv";
+    timing_partial = options.output_directory / "timing.csv.partial";
+    timing = std::fopen(timing_partial.c_str(), "w");
+    if (!timing) throw Error("cannot write " + timing_partial.string());
+    std::fputs(kTimingHeader, timing);
+    std::error_code ignored;
+    if (std::filesystem::exists(simulation.scene().file))
+      std::filesystem::copy_file(simulation.scene().file, options.output_directory / "scene.sdf",
+                                 std::filesystem::copy_options::overwrite_existing, ignored);
+  }
+
+  ProgressBar progress(stderr, options.show_progress);
+  const auto wall_start = Clock::now();
+  auto wall_seconds = [&] { return std::chrono::duration<double>(Clock::now() - wall_start).count(); };
+  double next_frame_time = 0;
+  double density_iterations_sum = 0, divergence_iterations_sum = 0, particle_steps = 0;
+  auto& solver = simulation.solver();
+
+  auto write_frame_if_due = [&]() -> double {
+    if (!frames || output.particles_period <= 0 || solver.time() + 1e-12 < next_frame_time) return 0;
+    const auto start = Clock::now();
+    frames->write(solver);
+    next_frame_time += output.particles_period;
+    while (next_frame_time <= solver.time()) next_frame_time += output.particles_period;
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+  };
+
+  summary.status = "completed";
+  try {
+    write_frame_if_due();
+    while (solver.time() < end_time - 1e-12) {
+      if (options.stop_requested && options.stop_requested->load()) {
+        summary.status = "interrupted";
+        break;
+      }
+      const sph::StepStats& stats = simulation.step();
+      const double output_ms = write_frame_if_due();
+      const std::size_t particles = solver.fluid().size();
+      particle_steps += static_cast<double>(particles);
+      density_iterations_sum += stats.density_iterations;
+      divergence_iterations_sum += stats.divergence_iterations;
+      summary.max_density_error = std::max(summary.max_density_error, static_cast<double>(stats.density_error));
+      if (timing) {
+        const auto& ms = stats.stage_ms;
+        fmt::print(timing, "{},{:.8g},{:.6g},{},{},{},{:.4g},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n",
+                   solver.state().step, solver.time(), stats.time_step, particles, stats.density_iterations,
+                   stats.divergence_iterations, stats.density_error, ms.bodies, ms.remove, ms.emit, ms.reorder, ms.neighbors,
+                   ms.density, ms.divergence, ms.forces, ms.pressure, ms.advect, output_ms, ms.total() + output_ms);
+      }
+      progress.update({solver.time(), end_time, solver.state().step, static_cast<long long>(particles), wall_seconds()});
+    }
+  } catch (const SimulationError& error) {
+    summary.status = "failed";
+    summary.error = error.what();
+  }
+
+  summary.wall_time = wall_seconds();
+  summary.simulated_time = solver.time();
+  summary.steps = solver.state().step;
+  summary.real_time_factor = summary.wall_time > 0 ? summary.simulated_time / summary.wall_time : 0;
+  summary.particle_steps_per_second = summary.wall_time > 0 ? particle_steps / summary.wall_time : 0;
+  summary.particles = solver.fluid().size();
+  summary.particles_removed = solver.state().particles_removed_total;
+  summary.mass_emitted = solver.state().mass_emitted_total;
+  summary.mass_lost = solver.state().mass_removed_total;
+  summary.mass_final = solver.total_fluid_mass();
+  summary.frames_written = frames ? frames->frames() : 0;
+  for (const auto& nozzle : solver.state().nozzles) summary.particles_emitted += nozzle.particles_emitted;
+  if (summary.steps > 0) {
+    summary.mean_density_iterations = density_iterations_sum / static_cast<double>(summary.steps);
+    summary.mean_divergence_iterations = divergence_iterations_sum / static_cast<double>(summary.steps);
+  }
+  progress.finish({solver.time(), end_time, solver.state().step, static_cast<long long>(summary.particles), summary.wall_time});
+
+  if (writing) {
+    std::fclose(timing);
+    std::filesystem::rename(timing_partial, timing_final);
+    io::write_text_atomically(options.output_directory / "summary.json", summary_json(summary, simulation).dump(2) + "\n");
+  }
+  return summary;
+}
+
+std::string format_summary(const RunSummary& summary, const std::filesystem::path& output_directory) {
+  std::string text;
+  text += fmt::format("Run {}: simulated {:.4f} of {:.4f} s in {} steps, {:.2f} s wall time\n", summary.status,
+                      summary.simulated_time, summary.end_time, summary.steps, summary.wall_time);
+  if (!summary.error.empty()) text += fmt::format("  error: {}\n", summary.error);
+  text += fmt::format("  speed       {:.3g} x real time, {:.3g} particle-steps/s\n", summary.real_time_factor,
+                      summary.particle_steps_per_second);
+  text += fmt::format("  particles   {} now, {} emitted, {} left the bounds\n", summary.particles, summary.particles_emitted,
+                      summary.particles_removed);
+  text += fmt::format("  mass        {:.6g} kg initial + {:.6g} emitted - {:.6g} lost = {:.6g} kg\n", summary.mass_initial,
+                      summary.mass_emitted, summary.mass_lost, summary.mass_final);
+  text += fmt::format("  solver      {:.2f} density + {:.2f} divergence iterations per step, max mean density error {:.3f} %\n",
+                      summary.mean_density_iterations, summary.mean_divergence_iterations, 100 * summary.max_density_error);
+  if (!output_directory.empty())
+    text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
+                        summary.frames_written);
+  return text;
+}
+
+}  // namespace m3dp::sim

@@ -1,0 +1,71 @@
+#pragma once
+// Simulation: owns one of each module for a scene and runs the step of the architecture.
+// run_simulation adds the loop around it: output schedule, progress bar, timing and summary.
+#include <atomic>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "m3dp/scene/scene.hpp"
+#include "m3dp/sph/solver.hpp"
+
+namespace m3dp::sim {
+
+/// Builds solver parameters from a scene (materials → phases, print heads → nozzles).
+sph::Parameters make_solver_parameters(const scene::Scene& scene);
+
+class Simulation {
+ public:
+  explicit Simulation(const scene::Scene& scene);
+
+  /// One step: print heads follow their paths, then the fluid advances (adaptive dt).
+  const sph::StepStats& step();
+
+  [[nodiscard]] const scene::Scene& scene() const { return scene_; }
+  [[nodiscard]] sph::Solver& solver() { return solver_; }
+  [[nodiscard]] const sph::Solver& solver() const { return solver_; }
+  [[nodiscard]] double time() const { return solver_.time(); }
+  [[nodiscard]] double initial_fluid_mass() const { return initial_fluid_mass_; }
+
+ private:
+  void update_print_heads();
+
+  scene::Scene scene_;
+  sph::Solver solver_;
+  double initial_fluid_mass_ = 0;
+};
+
+struct RunOptions {
+  std::filesystem::path output_directory;       // empty: no files
+  std::optional<double> until;                  // s; default the scene's end_time
+  bool show_progress = true;
+  const std::atomic<bool>* stop_requested = nullptr;  // set by a signal handler: stop cleanly
+};
+
+struct RunSummary {
+  std::string status;           // "completed", "interrupted" or "failed"
+  std::string error;            // what failed, if status == "failed"
+  double simulated_time = 0;    // s
+  double end_time = 0;          // s
+  std::int64_t steps = 0;
+  double wall_time = 0;         // s
+  double real_time_factor = 0;  // simulated s per wall s
+  std::size_t particles = 0;
+  std::uint64_t particles_emitted = 0;
+  std::uint64_t particles_removed = 0;
+  double mass_initial = 0, mass_emitted = 0, mass_lost = 0, mass_final = 0;  // kg
+  double max_density_error = 0;      // largest mean relative density error after a density solve
+  double mean_density_iterations = 0;
+  double mean_divergence_iterations = 0;
+  std::size_t frames_written = 0;
+  double particle_steps_per_second = 0;
+};
+
+/// Runs `simulation` to the end time (or until a stop request / failure), writing the run folder.
+RunSummary run_simulation(Simulation& simulation, const RunOptions& options);
+
+/// The one-screen text summary printed at the end of `m3dp run`.
+std::string format_summary(const RunSummary& summary, const std::filesystem::path& output_directory);
+
+}  // namespace m3dp::sim

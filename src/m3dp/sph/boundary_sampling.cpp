@@ -1,0 +1,180 @@
+#include "m3dp/sph/boundary_sampling.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+#include "m3dp/sph/neighbor_search.hpp"
+
+namespace m3dp::sph {
+
+namespace {
+int segments_for(Real length, Real spacing) { return std::max(1, static_cast<int>(std::ceil(length / spacing - Real(1e-4)))); }
+
+// Points on a rectangle [−a/2, a/2] × [−b/2, b/2] (z = 0), including its edges.
+void add_rectangle(SurfaceSamples& samples, Real size_a, Real size_b, Real spacing, const Mat3& rotation,
+                   const Vec3& offset, const Vec3& normal) {
+  const int count_a = segments_for(size_a, spacing);
+  const int count_b = segments_for(size_b, spacing);
+  for (int i = 0; i <= count_a; ++i)
+    for (int j = 0; j <= count_b; ++j) {
+      const Vec3 local(size_a * (Real(i) / count_a - Real(0.5)), size_b * (Real(j) / count_b - Real(0.5)), 0);
+      samples.add(rotation * local + offset, normal);
+    }
+}
+
+// Concentric rings on a disc of radius r in the z = 0 plane.
+void add_disc(SurfaceSamples& samples, Real radius, Real spacing, Real z) {
+  const Vec3 normal(0, 0, z >= 0 ? 1 : -1);
+  samples.add(Vec3(0, 0, z), normal);
+  const int rings = segments_for(radius, spacing);
+  for (int ring = 1; ring <= rings; ++ring) {
+    const Real ring_radius = radius * ring / rings;
+    const int around = std::max(3, static_cast<int>(std::ceil(2 * kPi * ring_radius / spacing)));
+    for (int k = 0; k < around; ++k) {
+      const Real angle = 2 * kPi * k / around;
+      samples.add(Vec3(ring_radius * std::cos(angle), ring_radius * std::sin(angle), z), normal);
+    }
+  }
+}
+}  // namespace
+
+SurfaceSamples sample_box_surface(const BoxShape& inner_box, Real spacing, Real offset) {
+  SurfaceSamples samples;
+  const BoxShape box{(inner_box.size + Vec3::Constant(2 * offset)).cwiseMax(Real(0))};
+  const Vec3 half = box.size / 2;
+  const Mat3 identity = Mat3::Identity();
+  Mat3 to_x;  // maps local (a, b, 0) to (0, a, b): faces normal to x
+  to_x << 0, 0, 1, 1, 0, 0, 0, 1, 0;
+  Mat3 to_y;  // maps (a, b, 0) to (a, 0, b): faces normal to y
+  to_y << 1, 0, 0, 0, 0, 1, 0, 1, 0;
+  for (int sign = -1; sign <= 1; sign += 2) {
+    add_rectangle(samples, box.size.x(), box.size.y(), spacing, identity, Vec3(0, 0, sign * half.z()), Vec3(0, 0, sign));
+    add_rectangle(samples, box.size.y(), box.size.z(), spacing, to_x, Vec3(sign * half.x(), 0, 0), Vec3(sign, 0, 0));
+    add_rectangle(samples, box.size.x(), box.size.z(), spacing, to_y, Vec3(0, sign * half.y(), 0), Vec3(0, sign, 0));
+  }
+  remove_close_points(samples, spacing * Real(0.25));
+  return samples;
+}
+
+SurfaceSamples sample_sphere_surface(const SphereShape& inner_sphere, Real spacing, Real offset) {
+  const SphereShape sphere{std::max(Real(0), inner_sphere.radius + offset)};
+  if (sphere.radius < spacing / 4) return SurfaceSamples{{Vec3::Zero()}, {Vec3::UnitZ()}};
+  // Fibonacci lattice: near-uniform points, count from the area each should cover.
+  const Real area = 4 * kPi * sphere.radius * sphere.radius;
+  const int count = std::max(12, static_cast<int>(std::ceil(area / (spacing * spacing))));
+  SurfaceSamples samples;
+  const Real golden_angle = kPi * (Real(3) - std::sqrt(Real(5)));
+  for (int i = 0; i < count; ++i) {
+    const Real z = Real(1) - Real(2) * (Real(i) + Real(0.5)) / count;
+    const Real ring = std::sqrt(std::max(Real(0), Real(1) - z * z));
+    const Real angle = golden_angle * i;
+    const Vec3 direction(ring * std::cos(angle), ring * std::sin(angle), z);
+    samples.add(sphere.radius * direction, direction);
+  }
+  return samples;
+}
+
+SurfaceSamples sample_cylinder_surface(const CylinderShape& inner_cylinder, Real spacing, Real offset) {
+  const CylinderShape cylinder{std::max(Real(0), inner_cylinder.radius + offset),
+                               std::max(Real(0), inner_cylinder.length + 2 * offset)};
+  SurfaceSamples samples;
+  const int around = std::max(6, static_cast<int>(std::ceil(2 * kPi * cylinder.radius / spacing)));
+  const int along = segments_for(cylinder.length, spacing);
+  for (int i = 0; i <= along; ++i) {
+    const Real z = cylinder.length * (Real(i) / along - Real(0.5));
+    for (int k = 0; k < around; ++k) {
+      const Real angle = 2 * kPi * k / around;
+      const Vec3 direction(std::cos(angle), std::sin(angle), 0);
+      samples.add(cylinder.radius * direction + Vec3(0, 0, z), direction);
+    }
+  }
+  add_disc(samples, cylinder.radius, spacing, -cylinder.length / 2);
+  add_disc(samples, cylinder.radius, spacing, cylinder.length / 2);
+  remove_close_points(samples, spacing * Real(0.25));
+  return samples;
+}
+
+SurfaceSamples sample_plane(const PlaneShape& plane, Real spacing, Real offset) {
+  SurfaceSamples samples;
+  const Vec3 normal = plane.normal.normalized();
+  const Mat3 rotation = Quat::FromTwoVectors(Vec3::UnitZ(), normal).toRotationMatrix();
+  add_rectangle(samples, plane.size_x, plane.size_y, spacing, rotation, offset * normal, normal);
+  return samples;
+}
+
+SurfaceSamples sample_mesh_surface(const TriangleMesh& input_mesh, Real spacing, Real offset) {
+  TriangleMesh mesh = input_mesh;
+  if (offset != 0) {
+    std::vector<Vec3> normals(mesh.vertices.size(), Vec3::Zero());
+    for (const auto& triangle : mesh.triangles) {
+      const Vec3 area_normal = (input_mesh.vertices[triangle[1]] - input_mesh.vertices[triangle[0]])
+                                   .cross(input_mesh.vertices[triangle[2]] - input_mesh.vertices[triangle[0]]);
+      for (const Index vertex : triangle) normals[vertex] += area_normal;
+    }
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v)
+      if (normals[v].squaredNorm() > 0) mesh.vertices[v] += offset * normals[v].normalized();
+  }
+  SurfaceSamples samples;
+  std::vector<Vec3> vertex_normals(mesh.vertices.size(), Vec3::Zero());
+  for (const auto& triangle : mesh.triangles) {
+    const Vec3 area_normal = (mesh.vertices[triangle[1]] - mesh.vertices[triangle[0]]).cross(mesh.vertices[triangle[2]] - mesh.vertices[triangle[0]]);
+    for (const Index vertex : triangle) vertex_normals[vertex] += area_normal;
+  }
+  for (std::size_t v = 0; v < mesh.vertices.size(); ++v) samples.add(mesh.vertices[v], vertex_normals[v].normalized());
+  for (const auto& triangle : mesh.triangles) {
+    const Vec3& a = mesh.vertices[triangle[0]];
+    const Vec3& b = mesh.vertices[triangle[1]];
+    const Vec3& c = mesh.vertices[triangle[2]];
+    // A barycentric grid fine enough for the longest edge; duplicates on shared edges are removed below.
+    const Real longest = std::max({(b - a).norm(), (c - b).norm(), (a - c).norm()});
+    const Vec3 face_normal = (b - a).cross(c - a).normalized();
+    const int divisions = segments_for(longest, spacing);
+    for (int i = 0; i <= divisions; ++i)
+      for (int j = 0; j <= divisions - i; ++j) {
+        const Real u = Real(i) / divisions;
+        const Real v = Real(j) / divisions;
+        samples.add(a + u * (b - a) + v * (c - a), face_normal);
+      }
+  }
+  remove_close_points(samples, spacing * Real(0.6));
+  return samples;
+}
+
+SurfaceSamples sample_shape_surface(const Shape& shape, Real spacing, Real offset) {
+  return std::visit(
+      [&](const auto& concrete) -> SurfaceSamples {
+        using T = std::decay_t<decltype(concrete)>;
+        if constexpr (std::is_same_v<T, BoxShape>) return sample_box_surface(concrete, spacing, offset);
+        if constexpr (std::is_same_v<T, SphereShape>) return sample_sphere_surface(concrete, spacing, offset);
+        if constexpr (std::is_same_v<T, CylinderShape>) return sample_cylinder_surface(concrete, spacing, offset);
+        if constexpr (std::is_same_v<T, PlaneShape>) return sample_plane(concrete, spacing, offset);
+        if constexpr (std::is_same_v<T, MeshShape>) return sample_mesh_surface(concrete.mesh, spacing, offset);
+      },
+      shape);
+}
+
+void remove_close_points(SurfaceSamples& samples, Real min_distance) {
+  auto& points = samples.points;
+  if (points.empty()) return;
+  SpatialHashGrid grid;
+  grid.build(points, min_distance);
+  std::vector<char> keep(points.size(), 1);
+  const Real min_distance_squared = min_distance * min_distance;
+  // Sequential on purpose: whether a point stays depends on the earlier points kept.
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    grid.for_each_candidate(points[i], [&](Index j, const Vec3& position_j) {
+      if (j < i && keep[j] && (points[i] - position_j).squaredNorm() < min_distance_squared) keep[i] = 0;
+    });
+  }
+  std::size_t kept = 0;
+  for (std::size_t i = 0; i < points.size(); ++i)
+    if (keep[i]) {
+      points[kept] = points[i];
+      samples.normals[kept] = samples.normals[i];
+      ++kept;
+    }
+  points.resize(kept);
+  samples.normals.resize(kept);
+}
+
+}  // namespace m3dp::sph

@@ -1,0 +1,38 @@
+#pragma once
+// Samples collision shapes into boundary particles (one layer, spacing ≈ `spacing`), as Akinci et al.
+// 2012 boundaries need. Points are in the shape's own frame.
+//
+// `offset` moves the layer along the outward normal; the solver passes minus one particle radius,
+// putting the layer a radius *inside* the solid. Fluid particles then rest with their centres a radius
+// in front of the surface, one full spacing from the layer — the spacing at which the SPH density sums
+// to the rest density. A layer on the surface itself starts every fluid particle at a wall ~50 %
+// over-dense. Sizes shrink to zero at most (a wall thinner than 2 radii becomes one mid-plane layer).
+#include <vector>
+
+#include "m3dp/core/geometry.hpp"
+
+namespace m3dp::sph {
+
+/// Points on a surface and the outward unit normal of the surface at each.
+struct SurfaceSamples {
+  std::vector<Vec3> points;
+  std::vector<Vec3> normals;
+  void add(const Vec3& point, const Vec3& normal) {
+    points.push_back(point);
+    normals.push_back(normal);
+  }
+};
+
+SurfaceSamples sample_shape_surface(const Shape& shape, Real spacing, Real offset = 0);
+SurfaceSamples sample_box_surface(const BoxShape& box, Real spacing, Real offset = 0);
+SurfaceSamples sample_sphere_surface(const SphereShape& sphere, Real spacing, Real offset = 0);
+SurfaceSamples sample_cylinder_surface(const CylinderShape& cylinder, Real spacing, Real offset = 0);
+/// The plane's solid side is behind its normal: a negative offset moves the layer behind the plane.
+SurfaceSamples sample_plane(const PlaneShape& plane, Real spacing, Real offset = 0);
+/// Offsets along area-weighted vertex normals (outward for a closed, counter-clockwise wound mesh).
+SurfaceSamples sample_mesh_surface(const TriangleMesh& mesh, Real spacing, Real offset = 0);
+
+/// Removes points closer than `min_distance` to an earlier point (edges shared by faces, mesh seams).
+void remove_close_points(SurfaceSamples& samples, Real min_distance);
+
+}  // namespace m3dp::sph

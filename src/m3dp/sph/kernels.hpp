@@ -1,0 +1,85 @@
+#pragma once
+// SPH smoothing kernels in 3D. `support_radius` is the radius where W falls to zero
+// (SPlisHSPlasH convention h = 4 × particle radius), q = r / support_radius.
+#include <cmath>
+
+#include "m3dp/core/types.hpp"
+
+namespace m3dp::sph {
+
+enum class KernelType { cubic_spline, wendland_c2 };
+
+/// Cubic B-spline (Monaghan 1992) on compact support [0, h].
+struct CubicSplineKernel {
+  Real support_radius;
+  Real value_coefficient;     // 8 / (π h³)
+  Real gradient_coefficient;  // 48 / (π h³)
+
+  explicit CubicSplineKernel(Real h)
+      : support_radius(h), value_coefficient(Real(8) / (kPi * h * h * h)), gradient_coefficient(Real(48) / (kPi * h * h * h)) {}
+
+  [[nodiscard]] Real W(Real distance) const {
+    const Real q = distance / support_radius;
+    if (q <= Real(0.5)) return value_coefficient * (Real(6) * q * q * q - Real(6) * q * q + Real(1));
+    if (q <= Real(1)) {
+      const Real one_minus_q = Real(1) - q;
+      return value_coefficient * Real(2) * one_minus_q * one_minus_q * one_minus_q;
+    }
+    return 0;
+  }
+  [[nodiscard]] Real W_zero() const { return value_coefficient; }
+
+  /// ∇_i W(x_i − x_j) for r = x_i − x_j.
+  [[nodiscard]] Vec3 gradW(const Vec3& r) const {
+    const Real distance = r.norm();
+    const Real q = distance / support_radius;
+    if (distance <= Real(1e-9) * support_radius || q > Real(1)) return Vec3::Zero();
+    const Vec3 grad_q = r / (distance * support_radius);
+    if (q <= Real(0.5)) return gradient_coefficient * q * (Real(3) * q - Real(2)) * grad_q;
+    const Real one_minus_q = Real(1) - q;
+    return -gradient_coefficient * one_minus_q * one_minus_q * grad_q;
+  }
+};
+
+/// Wendland C2 (Wendland 1995; Dehnen & Aly 2012): smoother, no pairing instability.
+struct WendlandC2Kernel {
+  Real support_radius;
+  Real value_coefficient;  // 21 / (2π h³)
+  Real gradient_coefficient;  // -20 · 21 / (2π h⁵)
+
+  explicit WendlandC2Kernel(Real h)
+      : support_radius(h),
+        value_coefficient(Real(21) / (Real(2) * kPi * h * h * h)),
+        gradient_coefficient(Real(-20) * Real(21) / (Real(2) * kPi * h * h * h * h * h)) {}
+
+  [[nodiscard]] Real W(Real distance) const {
+    const Real q = distance / support_radius;
+    if (q >= Real(1)) return 0;
+    const Real one_minus_q = Real(1) - q;
+    const Real squared = one_minus_q * one_minus_q;
+    return value_coefficient * squared * squared * (Real(1) + Real(4) * q);
+  }
+  [[nodiscard]] Real W_zero() const { return value_coefficient; }
+
+  [[nodiscard]] Vec3 gradW(const Vec3& r) const {
+    const Real distance = r.norm();
+    const Real q = distance / support_radius;
+    if (q >= Real(1)) return Vec3::Zero();
+    const Real one_minus_q = Real(1) - q;
+    return gradient_coefficient * one_minus_q * one_minus_q * one_minus_q * r;
+  }
+};
+
+/// Calls `body(kernel)` with the concrete kernel type, so per-pair code is inlined (no per-pair dispatch).
+template <class Body>
+decltype(auto) with_kernel(KernelType type, Real support_radius, Body&& body) {
+  switch (type) {
+    case KernelType::wendland_c2:
+      return body(WendlandC2Kernel(support_radius));
+    case KernelType::cubic_spline:
+    default:
+      return body(CubicSplineKernel(support_radius));
+  }
+}
+
+}  // namespace m3dp::sph

@@ -1,0 +1,108 @@
+#include "m3dp/sph/neighbor_search.hpp"
+
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <atomic>
+#include <bit>
+
+#include "m3dp/core/parallel.hpp"
+
+namespace m3dp::sph {
+
+std::size_t NeighborLists::total() const {
+  std::size_t sum = 0;
+  for (const Index count : counts) sum += count;
+  return sum;
+}
+
+void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
+  cell_size_ = cell_size;
+  inverse_cell_size_ = Real(1) / cell_size;
+  const std::size_t point_count = positions.size();
+  // About two buckets per point keeps collisions rare; power of two so the hash is a mask.
+  const std::size_t bucket_count = std::bit_ceil(std::max<std::size_t>(2 * point_count, 64));
+  bucket_mask_ = static_cast<std::uint32_t>(bucket_count - 1);
+
+  bucket_start_.assign(bucket_count + 1, 0);
+  point_bucket_.resize(point_count);
+  sorted_index_.resize(point_count);
+  sorted_position_.resize(point_count);
+
+  parallel_for_each_index(point_count, [&](std::size_t i) {
+    const auto cell = cell_of(positions[i]);
+    point_bucket_[i] = bucket_of_cell(cell[0], cell[1], cell[2]);
+  }, 1024);
+  // Counting sort: histogram, exclusive prefix sum, scatter. Sequential passes are memory-bound
+  // and cheap next to the neighbour queries.
+  for (std::size_t i = 0; i < point_count; ++i) ++bucket_start_[point_bucket_[i] + 1];
+  for (std::size_t b = 0; b < bucket_count; ++b) bucket_start_[b + 1] += bucket_start_[b];
+  // Scatter using bucket_start_ as cursors, then shift back.
+  for (std::size_t i = 0; i < point_count; ++i) {
+    const std::uint32_t slot = bucket_start_[point_bucket_[i]]++;
+    sorted_index_[slot] = static_cast<Index>(i);
+  }
+  for (std::size_t b = bucket_count; b > 0; --b) bucket_start_[b] = bucket_start_[b - 1];
+  bucket_start_[0] = 0;
+  parallel_for_each_index(point_count, [&](std::size_t slot) { sorted_position_[slot] = positions[sorted_index_[slot]]; },
+                          2048);
+}
+
+void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
+                    bool exclude_same_index, NeighborLists& out) {
+  const std::size_t query_count = query_positions.size();
+  const Real radius_squared = radius * radius;
+  out.counts.resize(query_count);
+  for (;;) {
+    const std::size_t needed = query_count * out.stride;
+    if (out.indices.size() < needed) out.indices.resize(needed);
+    std::atomic<Index> most_needed{0};
+    const Index stride = out.stride;
+    parallel_for_each_index(query_count, [&](std::size_t i) {
+      const Vec3 query = query_positions[i];
+      Index* slots = out.indices.data() + i * stride;
+      Index count = 0;
+      grid.for_each_candidate(query, [&](Index j, const Vec3& position_j) {
+        if (exclude_same_index && j == i) return;
+        if ((query - position_j).squaredNorm() < radius_squared) {
+          if (count < stride) slots[count] = j;
+          ++count;
+        }
+      });
+      out.counts[i] = std::min(count, stride);
+      if (count > stride) {
+        Index previous = most_needed.load(std::memory_order_relaxed);
+        while (count > previous && !most_needed.compare_exchange_weak(previous, count)) {
+        }
+      }
+    }, 64);
+    if (most_needed.load() == 0) break;
+    // Rare: a denser region than ever before. Grow and redo this search.
+    out.stride = most_needed.load() + 16;
+  }
+  // Keep each list sorted by index: neighbours then sit in memory order (after Z-order reordering).
+  parallel_for_each_index(query_count, [&](std::size_t i) {
+    Index* begin = out.indices.data() + i * out.stride;
+    std::sort(begin, begin + out.counts[i]);
+  }, 64);
+}
+
+namespace {
+std::uint64_t spread_bits_21(std::uint64_t value) {
+  value &= 0x1fffff;
+  value = (value | value << 32) & 0x1f00000000ffffULL;
+  value = (value | value << 16) & 0x1f0000ff0000ffULL;
+  value = (value | value << 8) & 0x100f00f00f00f00fULL;
+  value = (value | value << 4) & 0x10c30c30c30c30c3ULL;
+  value = (value | value << 2) & 0x1249249249249249ULL;
+  return value;
+}
+}  // namespace
+
+std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z) {
+  constexpr std::int64_t offset = 1 << 20;  // cells from −2^20 to 2^20 map to positive 21-bit ints
+  return spread_bits_21(static_cast<std::uint64_t>(x + offset)) | spread_bits_21(static_cast<std::uint64_t>(y + offset)) << 1 |
+         spread_bits_21(static_cast<std::uint64_t>(z + offset)) << 2;
+}
+
+}  // namespace m3dp::sph

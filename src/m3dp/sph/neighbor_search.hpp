@@ -1,0 +1,90 @@
+#pragma once
+// Neighbour search on a uniform grid (cell = support radius) stored as a spatial hash:
+// points are counting-sorted by hashed cell, so memory grows with the points, not with the
+// scene's size. Lists are compact per particle and reused by every solver sweep of a step.
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+
+namespace m3dp::sph {
+
+/// Fixed-stride neighbour lists: particle i's neighbours are indices[i*stride, i*stride + counts[i]).
+/// The stride grows (outside the hot loop) when a particle has more neighbours than fit.
+struct NeighborLists {
+  Index stride = 48;
+  std::vector<Index> counts;
+  std::vector<Index> indices;
+
+  [[nodiscard]] std::span<const Index> of(std::size_t particle) const {
+    return {indices.data() + particle * stride, counts[particle]};
+  }
+  [[nodiscard]] std::size_t total() const;
+};
+
+class SpatialHashGrid {
+ public:
+  /// Sorts `positions` into cells of size `cell_size` (m). Reuses its buffers between calls.
+  void build(std::span<const Vec3> positions, Real cell_size);
+
+  /// Calls visit(point_index, point_position) for every point in the 27 cells around `query`
+  /// (each point once, even where hashed cells collide).
+  template <class Visit>
+  void for_each_candidate(const Vec3& query, Visit&& visit) const;
+
+  [[nodiscard]] Real cell_size() const { return cell_size_; }
+  [[nodiscard]] std::size_t point_count() const { return sorted_index_.size(); }
+  [[nodiscard]] std::array<std::int32_t, 3> cell_of(const Vec3& point) const {
+    return {static_cast<std::int32_t>(std::floor(point.x() * inverse_cell_size_)),
+            static_cast<std::int32_t>(std::floor(point.y() * inverse_cell_size_)),
+            static_cast<std::int32_t>(std::floor(point.z() * inverse_cell_size_))};
+  }
+
+ private:
+  [[nodiscard]] std::uint32_t bucket_of_cell(std::int32_t x, std::int32_t y, std::int32_t z) const {
+    const auto hash = (static_cast<std::uint32_t>(x) * 73856093u) ^ (static_cast<std::uint32_t>(y) * 19349663u) ^
+                      (static_cast<std::uint32_t>(z) * 83492791u);
+    return hash & bucket_mask_;
+  }
+
+  Real cell_size_ = 1;
+  Real inverse_cell_size_ = 1;
+  std::uint32_t bucket_mask_ = 0;
+  std::vector<std::uint32_t> bucket_start_;  // bucket_count + 1
+  std::vector<std::uint32_t> point_bucket_;  // per input point
+  std::vector<Index> sorted_index_;          // input indices ordered by bucket
+  std::vector<Vec3> sorted_position_;        // positions in the same order, for cache-friendly queries
+};
+
+/// Fills `out` with, for each query point, the grid points within `radius` (strictly closer).
+/// With `exclude_same_index` the point with the query's own index is skipped (fluid–fluid lists).
+void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
+                    bool exclude_same_index, NeighborLists& out);
+
+/// 63-bit Morton (Z-order) code of a grid cell; used to reorder particles so neighbours sit near in memory.
+std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z);
+
+// ---- template implementation ----
+template <class Visit>
+void SpatialHashGrid::for_each_candidate(const Vec3& query, Visit&& visit) const {
+  if (sorted_index_.empty()) return;
+  const auto cell = cell_of(query);
+  std::uint32_t visited[27];
+  int visited_count = 0;
+  for (int dz = -1; dz <= 1; ++dz)
+    for (int dy = -1; dy <= 1; ++dy)
+      for (int dx = -1; dx <= 1; ++dx) {
+        const std::uint32_t bucket = bucket_of_cell(cell[0] + dx, cell[1] + dy, cell[2] + dz);
+        bool seen = false;
+        for (int k = 0; k < visited_count; ++k) seen |= (visited[k] == bucket);
+        if (seen) continue;
+        visited[visited_count++] = bucket;
+        const std::uint32_t end = bucket_start_[bucket + 1];
+        for (std::uint32_t slot = bucket_start_[bucket]; slot < end; ++slot) visit(sorted_index_[slot], sorted_position_[slot]);
+      }
+}
+
+}  // namespace m3dp::sph

@@ -1,0 +1,82 @@
+#pragma once
+// Particle state as structure-of-arrays. Every per-particle field is declared once, in
+// for_each_field, so resizing, reordering and removal can never forget one.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+
+namespace m3dp::sph {
+
+/// Mutable state of the fluid particles (n = size()).
+struct FluidParticles {
+  std::vector<Vec3> position;            // (n) m
+  std::vector<Vec3> velocity;            // (n) m/s
+  std::vector<Vec3> acceleration;        // (n) m/s², non-pressure forces of this step
+  std::vector<Real> mass;                // (n) kg
+  std::vector<Real> density;             // (n) kg/m³, SPH sum incl. boundary
+  std::vector<Real> dfsph_factor;        // (n) α_i (m²), Bender & Koschier 2017 eq. 11
+  std::vector<Real> density_advected;    // (n) predicted ρ*/ρ0 (density solve) or divergence (1/s)
+  std::vector<Real> kappa_density;       // (n) Σκ of the density solve (m²/s², κ = ρ0 p/ρ²): warm start, pressure
+  std::vector<Real> kappa_divergence;    // (n) Σκ of the divergence solve (m²/s²)
+  std::vector<std::uint16_t> phase;      // (n) index into Parameters::phases
+  std::vector<std::uint16_t> neighbor_count;  // (n) fluid + boundary neighbours this step
+  std::vector<std::uint64_t> id;         // (n) stable id for tracking across reorders
+  std::vector<Real> birth_time;          // (n) s, simulated time the particle appeared
+
+  [[nodiscard]] std::size_t size() const { return position.size(); }
+
+  template <class Visit>
+  void for_each_field(Visit&& visit) {
+    visit(position);
+    visit(velocity);
+    visit(acceleration);
+    visit(mass);
+    visit(density);
+    visit(dfsph_factor);
+    visit(density_advected);
+    visit(kappa_density);
+    visit(kappa_divergence);
+    visit(phase);
+    visit(neighbor_count);
+    visit(id);
+    visit(birth_time);
+  }
+  void reserve(std::size_t capacity) {
+    for_each_field([&](auto& field) { field.reserve(capacity); });
+  }
+  void resize(std::size_t count) {
+    for_each_field([&](auto& field) { field.resize(count); });
+  }
+  /// Moves particle `from` into slot `to` (used by swap-removal).
+  void move(std::size_t from, std::size_t to) {
+    for_each_field([&](auto& field) { field[to] = field[from]; });
+  }
+};
+
+/// Akinci et al. 2012 boundary particles of every rigid body, in one set.
+struct BoundaryParticles {
+  std::vector<Vec3> local_position;  // (nb) m, in the body frame
+  std::vector<Vec3> position;        // (nb) m, world
+  std::vector<Vec3> velocity;        // (nb) m/s, world
+  std::vector<Real> volume;          // (nb) m³, Ψ/ρ0 = 1 / Σ_k W_bk over the same body
+  std::vector<Index> body;           // (nb) owning body
+
+  [[nodiscard]] std::size_t size() const { return position.size(); }
+};
+
+/// A rigid body seen by the fluid: its boundary particles and its motion, set by the caller.
+struct BoundaryBody {
+  std::string name;
+  bool is_static = true;
+  Index first_particle = 0;
+  Index particle_count = 0;
+  Pose pose;                                  // body frame in world
+  Vec3 linear_velocity = Vec3::Zero();        // m/s of the body-frame origin
+  Vec3 angular_velocity = Vec3::Zero();       // rad/s, world frame
+  Vec3 fluid_force = Vec3::Zero();            // N, fluid on body during the last step (world)
+  Vec3 fluid_torque = Vec3::Zero();           // N·m, about pose.position (world)
+};
+
+}  // namespace m3dp::sph

@@ -1,0 +1,520 @@
+#include "m3dp/sph/solver.hpp"
+
+#include <fmt/format.h>
+#include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <numeric>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/core/parallel.hpp"
+
+namespace m3dp::sph {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double elapsed_ms(Clock::time_point since) {
+  return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
+}
+
+/// Disc samples on a square lattice of spacing `spacing` inside radius D/2 (at least the centre).
+NozzleGeometry make_nozzle_geometry(const NozzleSettings& nozzle, Real spacing) {
+  NozzleGeometry geometry;
+  const Real radius = nozzle.inner_diameter / 2;
+  const int half_count = static_cast<int>(std::ceil(radius / spacing)) + 1;
+  // Offset the lattice by half a spacing when that packs more points (even counts across).
+  for (const Real shift : {Real(0), Real(0.5)}) {
+    std::vector<Vec3> offsets;
+    for (int i = -half_count; i <= half_count; ++i)
+      for (int j = -half_count; j <= half_count; ++j) {
+        const Vec3 point((i + shift) * spacing, (j + shift) * spacing, 0);
+        if (point.head<2>().norm() <= radius + Real(1e-6) * spacing) offsets.push_back(point);
+      }
+    if (offsets.size() > geometry.disc_offsets.size()) geometry.disc_offsets = std::move(offsets);
+  }
+  if (geometry.disc_offsets.empty()) geometry.disc_offsets.push_back(Vec3::Zero());
+  const double particle_volume = std::pow(static_cast<double>(spacing), 3);
+  const double flux = kPi * nozzle.inner_diameter * nozzle.inner_diameter / 4 * nozzle.exit_speed;  // m³/s
+  geometry.layer_period = flux > 0 ? geometry.disc_offsets.size() * particle_volume / flux : 0;
+  return geometry;
+}
+
+/// Akinci 2012 volumes (V_b = 1/Σ W) make a one-layer wall contribute more density than the fluid
+/// it replaces: a particle resting one spacing in front of a flat wall would sit ~6 % over rest
+/// density (cubic spline, h = 4r), so every fluid block starts compressed where it touches a wall and
+/// the first pressure solves push violently. This factor scales the boundary volumes so that a
+/// cubic-lattice fluid at one spacing from a square-lattice wall is exactly at rest density.
+/// Computed once from the kernel, with the same sums the solver uses.
+/// Boundary share Σ_b V_b W at a distance of half a spacing from a flat one-layer wall with scaled
+/// volumes: the value a particle centre has on the geometric surface (the layer lies a radius behind it).
+Real boundary_share_at_surface(KernelType type, Real support_radius, Real spacing, Real volume_scale) {
+  return with_kernel(type, support_radius, [&](const auto& kernel) {
+    const int reach = static_cast<int>(std::ceil(support_radius / spacing)) + 1;
+    double in_plane = 0, share = 0;
+    for (int i = -reach; i <= reach; ++i)
+      for (int j = -reach; j <= reach; ++j) {
+        in_plane += kernel.W(Vec3(i * spacing, j * spacing, 0).norm());
+        share += kernel.W(Vec3(i * spacing, j * spacing, spacing / 2).norm());
+      }
+    return static_cast<Real>(volume_scale * share / in_plane);
+  });
+}
+
+Real calibrated_boundary_volume_scale(KernelType type, Real support_radius, Real spacing) {
+  return with_kernel(type, support_radius, [&](const auto& kernel) {
+    const int reach = static_cast<int>(std::ceil(support_radius / spacing)) + 1;
+    double in_plane = 0, wall = 0, fluid = 0;
+    for (int i = -reach; i <= reach; ++i)
+      for (int j = -reach; j <= reach; ++j) {
+        in_plane += kernel.W(Vec3(i * spacing, j * spacing, 0).norm());
+        wall += kernel.W(Vec3(i * spacing, j * spacing, spacing).norm());
+        for (int k = 0; k <= reach; ++k) fluid += kernel.W(Vec3(i * spacing, j * spacing, k * spacing).norm());
+      }
+    const double particle_volume = std::pow(static_cast<double>(spacing), 3);
+    const double wall_share = wall / in_plane;          // Σ_b V_b W with V_b = 1 / Σ_in-plane W
+    const double fluid_share = fluid * particle_volume;  // the half-lattice on the particle's side
+    return static_cast<Real>((1.0 - fluid_share) / wall_share);
+  });
+}
+
+}  // namespace
+
+Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
+  const auto& settings = parameters_.settings;
+  if (!(settings.particle_radius > 0)) throw Error("sph::Solver: particle_radius must be > 0");
+  if (parameters_.phases.empty()) throw Error("sph::Solver: at least one fluid phase is needed");
+  for (const auto& phase : parameters_.phases)
+    if (phase.rest_density != parameters_.phases.front().rest_density)
+      throw Error(fmt::format("sph::Solver: phase '{}' has rest density {} kg/m³ but '{}' has {}; one scene uses one "
+                              "rest density for now",
+                              phase.name, phase.rest_density, parameters_.phases.front().name,
+                              parameters_.phases.front().rest_density));
+  for (const auto& nozzle : parameters_.nozzles) {
+    if (nozzle.phase >= parameters_.phases.size()) throw Error("sph::Solver: nozzle '" + nozzle.name + "' has no phase");
+    nozzle_geometry_.push_back(make_nozzle_geometry(nozzle, particle_diameter()));
+  }
+  state_.nozzles.resize(parameters_.nozzles.size());
+  boundary_volume_scale_ = calibrated_boundary_volume_scale(settings.kernel, support_radius(), particle_diameter());
+  boundary_share_at_surface_ =
+      boundary_share_at_surface(settings.kernel, support_radius(), particle_diameter(), boundary_volume_scale_);
+  state_.time_step = settings.max_time_step;
+}
+
+Real Solver::particle_mass(std::uint16_t phase) const {
+  const Real diameter = particle_diameter();
+  return parameters_.phases[phase].rest_density * diameter * diameter * diameter;
+}
+
+Index Solver::add_body(const std::string& name, std::span<const Vec3> local_points, const Pose& pose, bool is_static) {
+  const Index body_index = static_cast<Index>(state_.bodies.size());
+  BoundaryBody body;
+  body.name = name;
+  body.is_static = is_static;
+  body.first_particle = static_cast<Index>(state_.boundary.size());
+  body.particle_count = static_cast<Index>(local_points.size());
+  body.pose = pose;
+  state_.bodies.push_back(body);
+
+  auto& boundary = state_.boundary;
+  for (const Vec3& local : local_points) {
+    boundary.local_position.push_back(local);
+    boundary.position.push_back(pose.apply(local));
+    boundary.velocity.push_back(Vec3::Zero());
+    boundary.body.push_back(body_index);
+  }
+  // Akinci 2012, eq. 4: V_b = 1 / Σ_k W_bk (times the calibration above). Static bodies are summed together, so where walls meet or
+  // overlap (a tank built from boxes) the shared region is not counted twice; a moving body on its own
+  // (its volumes then do not change with its pose).
+  const Real support = support_radius();
+  std::vector<Index> members;
+  for (Index k = 0; k < boundary.size(); ++k)
+    if (is_static ? state_.bodies[boundary.body[k]].is_static : boundary.body[k] == body_index) members.push_back(k);
+  std::vector<Vec3> points;
+  points.reserve(members.size());
+  for (const Index k : members) points.push_back(boundary.position[k]);
+  boundary.volume.resize(boundary.size());
+  SpatialHashGrid grid;
+  grid.build(points, support);
+  with_kernel(parameters_.settings.kernel, support, [&](const auto& kernel) {
+    for (std::size_t m = 0; m < members.size(); ++m) {
+      Real sum = 0;
+      grid.for_each_candidate(points[m], [&](Index, const Vec3& other) { sum += kernel.W((points[m] - other).norm()); });
+      boundary.volume[members[m]] = boundary_volume_scale_ / sum;
+    }
+  });
+  state_.boundary_grid_dirty = true;
+  return body_index;
+}
+
+std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& velocity, std::uint16_t phase) {
+  // Skip points closer than one spacing to the boundary layer, i.e. less than a radius in front of a
+  // surface (the layer lies a radius behind it; see boundary_sampling.hpp).
+  const Real min_distance = particle_diameter() * Real(0.999);
+  SpatialHashGrid grid;
+  grid.build(state_.boundary.position, support_radius());
+  auto& fluid = state_.fluid;
+  std::size_t added = 0;
+  for (const Vec3& point : positions) {
+    bool blocked = false;
+    grid.for_each_candidate(point, [&](Index, const Vec3& b) { blocked |= (point - b).squaredNorm() < min_distance * min_distance; });
+    if (blocked) continue;
+    const std::size_t i = fluid.size();
+    fluid.resize(i + 1);
+    fluid.position[i] = point;
+    fluid.velocity[i] = velocity;
+    fluid.acceleration[i] = Vec3::Zero();
+    fluid.mass[i] = particle_mass(phase);
+    fluid.density[i] = parameters_.phases[phase].rest_density;
+    fluid.phase[i] = phase;
+    fluid.id[i] = state_.next_particle_id++;
+    fluid.birth_time[i] = static_cast<Real>(state_.time);
+    ++added;
+  }
+  return added;
+}
+
+void Solver::reserve(std::size_t capacity) {
+  state_.fluid.reserve(capacity);
+  state_.kappa.reserve(capacity);
+  state_.sort_keys.reserve(capacity);
+  state_.permutation.reserve(capacity);
+  state_.scratch_vec3.reserve(capacity);
+  state_.scratch_real.reserve(capacity);
+  state_.scratch_u16.reserve(capacity);
+  state_.scratch_u64.reserve(capacity);
+  state_.fluid_neighbors.counts.reserve(capacity);
+  state_.fluid_neighbors.indices.reserve(capacity * state_.fluid_neighbors.stride);
+  state_.boundary_neighbors.counts.reserve(capacity);
+  state_.boundary_neighbors.indices.reserve(capacity * state_.boundary_neighbors.stride);
+}
+
+void Solver::set_body_motion(Index body, const Pose& pose, const Vec3& linear_velocity, const Vec3& angular_velocity) {
+  auto& target = state_.bodies.at(body);
+  target.pose = pose;
+  target.linear_velocity = linear_velocity;
+  target.angular_velocity = angular_velocity;
+  target.is_static = false;
+}
+
+void Solver::set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding) {
+  auto& target = state_.nozzles.at(nozzle);
+  target.pose = pose;
+  target.velocity = nozzle_velocity;
+  target.extruding = extruding;
+}
+
+const StepStats& Solver::step() {
+  StepStats stats;
+  const auto& settings = parameters_.settings;
+  auto start = Clock::now();
+
+  update_bodies();
+  stats.stage_ms.bodies = elapsed_ms(start);
+
+  start = Clock::now();
+  remove_out_of_bounds(stats);
+  stats.stage_ms.remove = elapsed_ms(start);
+
+  start = Clock::now();
+  emit(stats);
+  stats.stage_ms.emit = elapsed_ms(start);
+
+  start = Clock::now();
+  if (settings.reorder_interval > 0 && state_.step % settings.reorder_interval == 0) reorder();
+  stats.stage_ms.reorder = elapsed_ms(start);
+
+  const std::size_t count = state_.fluid.size();
+  state_.kappa.resize(count);
+
+  start = Clock::now();
+  search_neighbors();
+  stats.stage_ms.neighbors = elapsed_ms(start);
+
+  start = Clock::now();
+  stages::reset_body_wrenches(state_);
+  stats.max_density_error = stages::compute_density_and_factor(parameters_, state_);
+  stats.stage_ms.density = elapsed_ms(start);
+
+  start = Clock::now();
+  if (settings.divergence_solver) {
+    stats.divergence_iterations = stages::solve_divergence(parameters_, state_, state_.time_step);
+  }
+  stats.stage_ms.divergence = elapsed_ms(start);
+
+  start = Clock::now();
+  stages::compute_non_pressure_accelerations(parameters_, state_);
+  // CFL (Courant) condition on the velocity after the non-pressure forces, plus the explicit viscosity limit.
+  const Real previous_step = state_.time_step;
+  const Real max_speed_squared = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 1024), Real(0),
+      [&](const tbb::blocked_range<std::size_t>& range, Real value) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i)
+          value = std::max(value, (state_.fluid.velocity[i] + previous_step * state_.fluid.acceleration[i]).squaredNorm());
+        return value;
+      },
+      [](Real a, Real b) { return std::max(a, b); });
+  const Real diameter = particle_diameter();
+  Real time_step = settings.max_time_step;
+  if (max_speed_squared > Real(1e-18))
+    time_step = std::min(time_step, settings.cfl_factor * Real(0.4) * diameter / std::sqrt(max_speed_squared));
+  Real max_viscosity = 0;
+  for (const auto& phase : parameters_.phases)
+    max_viscosity = std::max({max_viscosity, phase.kinematic_viscosity, phase.boundary_kinematic_viscosity});
+  if (max_viscosity > 0) time_step = std::min(time_step, Real(0.1) * diameter * diameter / max_viscosity);
+  time_step = std::max(time_step, settings.min_time_step);
+  state_.time_step = time_step;
+  parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.velocity[i] += time_step * state_.fluid.acceleration[i]; }, 1024);
+  stats.stage_ms.forces = elapsed_ms(start);
+
+  start = Clock::now();
+  stats.density_iterations = stages::solve_density(parameters_, state_, time_step, stats.density_error);
+  stats.stage_ms.pressure = elapsed_ms(start);
+
+  start = Clock::now();
+  parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.position[i] += time_step * state_.fluid.velocity[i]; }, 1024);
+  keep_out_of_boundaries();
+  stages::collect_body_wrenches(state_);
+  // Impulses were summed as forces of velocity updates applied over one step each; see the update.
+  state_.time += time_step;
+  ++state_.step;
+  check_state();
+  stats.stage_ms.advect = elapsed_ms(start);
+
+  stats.time_step = time_step;
+  state_.last_step = stats;
+  return state_.last_step;
+}
+
+void Solver::update_bodies() {
+  auto& boundary = state_.boundary;
+  for (const auto& body : state_.bodies) {
+    if (body.is_static) continue;
+    const Index end = body.first_particle + body.particle_count;
+    parallel_for_each_index(body.particle_count, [&](std::size_t k) {
+      const Index b = body.first_particle + static_cast<Index>(k);
+      boundary.position[b] = body.pose.apply(boundary.local_position[b]);
+      boundary.velocity[b] = body.linear_velocity + body.angular_velocity.cross(boundary.position[b] - body.pose.position);
+    }, 1024);
+    (void)end;
+    state_.boundary_grid_dirty = true;
+  }
+}
+
+void Solver::remove_out_of_bounds(StepStats& stats) {
+  const Aabb& bounds = parameters_.settings.bounds;
+  if (bounds.empty()) return;
+  auto& fluid = state_.fluid;
+  const std::size_t outside = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, fluid.size(), 2048), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) found += bounds.contains(fluid.position[i]) ? 0 : 1;
+        return found;
+      },
+      std::plus<std::size_t>());
+  if (outside == 0) return;
+  std::size_t count = fluid.size();
+  for (std::size_t i = 0; i < count;) {
+    if (bounds.contains(fluid.position[i])) {
+      ++i;
+      continue;
+    }
+    state_.mass_removed_total += fluid.mass[i];
+    --count;
+    if (i != count) fluid.move(count, i);
+  }
+  fluid.resize(count);
+  state_.particles_removed_total += outside;
+  stats.particles_removed = outside;
+}
+
+void Solver::emit(StepStats& stats) {
+  auto& fluid = state_.fluid;
+  const Real diameter = particle_diameter();
+  // A new particle keeps half a spacing from other particles and a full spacing from the boundary
+  // layer (its centre at least a radius in front of the surface).
+  const Real fluid_clearance_squared = Real(0.25) * diameter * diameter;
+  const Real boundary_clearance_squared = Real(0.998) * diameter * diameter;
+  const double step = state_.time_step;
+  for (std::size_t n = 0; n < state_.nozzles.size(); ++n) {
+    NozzleState& nozzle = state_.nozzles[n];
+    const NozzleSettings& settings = parameters_.nozzles[n];
+    const NozzleGeometry& geometry = nozzle_geometry_[n];
+    if (!nozzle.extruding || geometry.layer_period <= 0) continue;
+    nozzle.pending_time += step;
+    const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
+    const Vec3 exit_velocity = settings.exit_speed * axis + nozzle.velocity;
+    while (nozzle.pending_time >= geometry.layer_period) {
+      // The layer was due (pending − period) seconds ago: place it that far along the axis.
+      const Real travelled = static_cast<Real>((nozzle.pending_time - geometry.layer_period) * settings.exit_speed);
+      const Vec3 centre = nozzle.pose.position + travelled * axis;
+      const Real reach = settings.inner_diameter / 2 + diameter;
+      auto blocked_by = [&](const std::vector<Vec3>& points, Real clearance_squared) {
+        return tbb::parallel_reduce(
+            tbb::blocked_range<std::size_t>(0, points.size(), 4096), false,
+            [&](const tbb::blocked_range<std::size_t>& range, bool blocked) {
+              for (std::size_t i = range.begin(); i != range.end() && !blocked; ++i) {
+                if ((points[i] - centre).squaredNorm() > reach * reach) continue;
+                for (const Vec3& offset : geometry.disc_offsets)
+                  if ((points[i] - (centre + nozzle.pose.rotate(offset))).squaredNorm() < clearance_squared) {
+                    blocked = true;
+                    break;
+                  }
+              }
+              return blocked;
+            },
+            std::logical_or<bool>());
+      };
+      if (blocked_by(fluid.position, fluid_clearance_squared) || blocked_by(state_.boundary.position, boundary_clearance_squared)) {
+        ++nozzle.blocked_layers;
+        // Keep at most one layer pending so a blocked nozzle does not burst when it clears.
+        nozzle.pending_time = std::min(nozzle.pending_time, geometry.layer_period);
+        break;
+      }
+      const std::size_t first = fluid.size();
+      fluid.resize(first + geometry.disc_offsets.size());
+      const Real mass = particle_mass(settings.phase);
+      for (std::size_t k = 0; k < geometry.disc_offsets.size(); ++k) {
+        const std::size_t i = first + k;
+        fluid.position[i] = centre + nozzle.pose.rotate(geometry.disc_offsets[k]);
+        fluid.velocity[i] = exit_velocity;
+        fluid.acceleration[i] = Vec3::Zero();
+        fluid.mass[i] = mass;
+        fluid.density[i] = parameters_.phases[settings.phase].rest_density;
+        fluid.dfsph_factor[i] = 0;
+        fluid.density_advected[i] = 1;
+        fluid.kappa_density[i] = 0;
+        fluid.kappa_divergence[i] = 0;
+        fluid.phase[i] = settings.phase;
+        fluid.neighbor_count[i] = 0;
+        fluid.id[i] = state_.next_particle_id++;
+        fluid.birth_time[i] = static_cast<Real>(state_.time);
+        state_.mass_emitted_total += mass;
+      }
+      nozzle.pending_time -= geometry.layer_period;
+      ++nozzle.layers_emitted;
+      nozzle.particles_emitted += geometry.disc_offsets.size();
+      stats.particles_emitted += geometry.disc_offsets.size();
+    }
+  }
+}
+
+void Solver::reorder() {
+  auto& fluid = state_.fluid;
+  const std::size_t count = fluid.size();
+  if (count < 2) return;
+  const Real inverse_cell = Real(1) / support_radius();
+  state_.sort_keys.resize(count);
+  state_.permutation.resize(count);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const Vec3& p = fluid.position[i];
+    state_.sort_keys[i] = morton_code(static_cast<std::int32_t>(std::floor(p.x() * inverse_cell)),
+                                      static_cast<std::int32_t>(std::floor(p.y() * inverse_cell)),
+                                      static_cast<std::int32_t>(std::floor(p.z() * inverse_cell)));
+    state_.permutation[i] = static_cast<Index>(i);
+  }, 2048);
+  tbb::parallel_sort(state_.permutation.begin(), state_.permutation.end(),
+                     [&](Index a, Index b) {
+                       // Ties broken by index: the order (and so every later sum) is the same on every run.
+                       return state_.sort_keys[a] < state_.sort_keys[b] || (state_.sort_keys[a] == state_.sort_keys[b] && a < b);
+                     });
+  auto gather = [&](auto& field, auto& scratch) {
+    scratch.resize(count);
+    parallel_for_each_index(count, [&](std::size_t i) { scratch[i] = field[state_.permutation[i]]; }, 2048);
+    field.swap(scratch);
+  };
+  fluid.for_each_field([&](auto& field) {
+    using Element = typename std::decay_t<decltype(field)>::value_type;
+    if constexpr (std::is_same_v<Element, Vec3>) gather(field, state_.scratch_vec3);
+    else if constexpr (std::is_same_v<Element, Real>) gather(field, state_.scratch_real);
+    else if constexpr (std::is_same_v<Element, std::uint16_t>) gather(field, state_.scratch_u16);
+    else if constexpr (std::is_same_v<Element, std::uint64_t>) gather(field, state_.scratch_u64);
+    else static_assert(sizeof(Element) == 0, "add a scratch buffer for this field type");
+  });
+}
+
+void Solver::search_neighbors() {
+  const Real support = support_radius();
+  state_.fluid_grid.build(state_.fluid.position, support);
+  find_neighbors(state_.fluid_grid, state_.fluid.position, support, true, state_.fluid_neighbors);
+  if (state_.boundary_grid_dirty) {
+    state_.boundary_grid.build(state_.boundary.position, support);
+    state_.boundary_grid_dirty = false;
+  }
+  find_neighbors(state_.boundary_grid, state_.fluid.position, support, false, state_.boundary_neighbors);
+}
+
+void Solver::keep_out_of_boundaries() {
+  // Pressure alone does not stop a lone, fast particle (a splash has too few fluid neighbours to
+  // be over-dense at a wall), so a particle whose centre has crossed a geometric surface is moved
+  // back onto it and loses its velocity into the wall. The crossing is read from the boundary share
+  // Σ_b V_b W, which grows monotonically towards a wall: one Newton step along its gradient, which
+  // works the same for any shape, edge or corner.
+  auto& fluid = state_.fluid;
+  const auto& boundary = state_.boundary;
+  const Real surface_share = boundary_share_at_surface_;
+  with_kernel(parameters_.settings.kernel, support_radius(), [&](const auto& kernel) {
+    parallel_for_each_index(fluid.size(), [&](std::size_t i) {
+      const Vec3 position = fluid.position[i];
+      Real share = 0, weight_sum = 0;
+      Vec3 gradient = Vec3::Zero(), wall_velocity = Vec3::Zero();
+      for (const Index b : state_.boundary_neighbors.of(i)) {
+        const Vec3 r = position - boundary.position[b];
+        const Real weight = boundary.volume[b] * kernel.W(r.norm());
+        share += weight;
+        gradient += boundary.volume[b] * kernel.gradW(r);
+        wall_velocity += weight * boundary.velocity[b];
+        weight_sum += weight;
+      }
+      const Real gradient_squared = gradient.squaredNorm();
+      if (share <= surface_share || gradient_squared <= 0) return;
+      fluid.position[i] = position - ((share - surface_share) / gradient_squared) * gradient;
+      const Vec3 away = -gradient / std::sqrt(gradient_squared);
+      const Vec3 relative = fluid.velocity[i] - wall_velocity / weight_sum;
+      const Real into_wall = relative.dot(away);
+      if (into_wall < 0) fluid.velocity[i] -= into_wall * away;
+    }, 256);
+  });
+}
+
+void Solver::check_state() const {
+  const auto& fluid = state_.fluid;
+  const Real max_speed_squared = parameters_.settings.max_speed * parameters_.settings.max_speed;
+  // Lowest index of a bad particle, or size() if none.
+  const std::size_t bad = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, fluid.size(), 2048), fluid.size(),
+      [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
+        for (std::size_t i = range.begin(); i != range.end() && i < found; ++i) {
+          const Real speed_squared = fluid.velocity[i].squaredNorm();
+          if (!fluid.position[i].allFinite() || !std::isfinite(speed_squared) || speed_squared > max_speed_squared) return i;
+        }
+        return found;
+      },
+      [](std::size_t a, std::size_t b) { return std::min(a, b); });
+  if (bad == fluid.size()) return;
+  const Vec3& p = fluid.position[bad];
+  const Vec3& v = fluid.velocity[bad];
+  throw SimulationError(fmt::format(
+      "simulation became unstable at t = {:.6f} s (step {}, dt = {:.3g} s): particle {} at ({:.4g}, {:.4g}, {:.4g}) m "
+      "has velocity ({:.4g}, {:.4g}, {:.4g}) m/s (limit {} m/s). Try a smaller max_time_step or cfl_factor.",
+      state_.time, state_.step, static_cast<double>(state_.time_step), fluid.id[bad], p.x(), p.y(), p.z(), v.x(), v.y(),
+      v.z(), parameters_.settings.max_speed));
+}
+
+Real Solver::pressure(std::size_t i) const {
+  const auto& fluid = state_.fluid;
+  const Real rest_density = parameters_.phases.front().rest_density;
+  // κ = ρ0 p / ρ² summed over both solvers' updates of the last step.
+  return (fluid.kappa_density[i] + fluid.kappa_divergence[i]) * fluid.density[i] * fluid.density[i] / rest_density;
+}
+
+double Solver::total_fluid_mass() const {
+  double total = 0;
+  for (const Real mass : state_.fluid.mass) total += mass;
+  return total;
+}
+
+}  // namespace m3dp::sph

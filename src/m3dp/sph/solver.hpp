@@ -1,0 +1,216 @@
+#pragma once
+// The SPH particle engine: parameters (immutable after construction) apart from state, and
+// one step as a list of named, timed stages:
+//   bodies → remove → emit → reorder → neighbours → density/α → divergence solve
+//   → non-pressure forces → CFL time step → density solve → advect → check.
+#include <tbb/enumerable_thread_specific.h>
+
+#include <array>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+#include "m3dp/sph/kernels.hpp"
+#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/particles.hpp"
+
+namespace m3dp::sph {
+
+/// A fluid as the solver sees it. All phases of one scene share the rest density (for now).
+struct FluidPhase {
+  std::string name;
+  Real rest_density = 1000;                  // kg/m³
+  Real kinematic_viscosity = 1e-6;           // m²/s (= dynamic viscosity / density)
+  Real boundary_kinematic_viscosity = 0;     // m²/s, friction against walls and bodies; 0 = free slip
+};
+
+struct SolverSettings {
+  Real particle_radius = Real(0.01);          // m; rest spacing is 2 × radius
+  KernelType kernel = KernelType::cubic_spline;
+  Real support_radius_factor = 4;             // support radius = factor × particle radius
+  Vec3 gravity = Vec3(0, 0, Real(-9.81));     // m/s²
+  Real cfl_factor = Real(0.5);                // dt = cfl · 0.4 · diameter / v_max
+  Real min_time_step = Real(1e-5);            // s
+  Real max_time_step = Real(5e-3);            // s
+  Real density_tolerance = Real(0.0005);      // mean relative density error of the density solve
+  Real divergence_tolerance = Real(0.001);    // mean relative density change per step of the divergence solve
+  int min_density_iterations = 2;
+  int max_density_iterations = 100;
+  int max_divergence_iterations = 100;
+  bool divergence_solver = true;
+  bool warm_start = true;
+  Aabb bounds;                                // particles leaving it are removed (m)
+  Real max_speed = 100;                       // m/s; faster means the state exploded
+  int reorder_interval = 32;                  // steps between Z-order reorderings
+};
+
+/// A circular nozzle that emits whole disc layers of particles (Issue: volume flux π D²/4 · U).
+struct NozzleSettings {
+  std::string name;
+  Real inner_diameter = Real(0.01);   // m
+  Real exit_speed = Real(0.1);        // m/s, mean speed of material leaving the nozzle
+  std::uint16_t phase = 0;
+};
+
+struct Parameters {
+  SolverSettings settings;
+  std::vector<FluidPhase> phases;
+  std::vector<NozzleSettings> nozzles;
+};
+
+struct NozzleState {
+  Pose pose;                          // emission axis = pose · (0, 0, −1): pointing down by default
+  Vec3 velocity = Vec3::Zero();       // m/s of the nozzle itself (added to the exit velocity)
+  bool extruding = false;
+  double pending_time = 0;            // s of extrusion not yet emitted as a layer
+  std::uint64_t layers_emitted = 0;
+  std::uint64_t particles_emitted = 0;
+  std::uint64_t blocked_layers = 0;   // layers delayed because the space in front was occupied
+};
+
+/// Wall-clock time per stage of the last step (ms).
+struct StageTimes {
+  double bodies = 0, remove = 0, emit = 0, reorder = 0, neighbors = 0, density = 0, divergence = 0, forces = 0,
+         pressure = 0, advect = 0;
+  [[nodiscard]] double total() const {
+    return bodies + remove + emit + reorder + neighbors + density + divergence + forces + pressure + advect;
+  }
+};
+
+struct StepStats {
+  double time_step = 0;                 // s
+  int density_iterations = 0;
+  int divergence_iterations = 0;
+  Real density_error = 0;               // mean relative density error after the density solve
+  Real max_density_error = 0;           // max over particles of (ρ/ρ0 − 1) at the start of the step
+  std::size_t particles_emitted = 0;
+  std::size_t particles_removed = 0;
+  StageTimes stage_ms;
+};
+
+struct Wrench {
+  Vec3 force = Vec3::Zero();
+  Vec3 torque = Vec3::Zero();
+};
+
+/// Everything that changes during a run.
+struct State {
+  FluidParticles fluid;
+  BoundaryParticles boundary;
+  std::vector<BoundaryBody> bodies;
+  std::vector<NozzleState> nozzles;
+
+  SpatialHashGrid fluid_grid;
+  SpatialHashGrid boundary_grid;
+  bool boundary_grid_dirty = true;
+  NeighborLists fluid_neighbors;     // fluid → fluid
+  NeighborLists boundary_neighbors;  // fluid → boundary
+
+  double time = 0;                   // s
+  std::int64_t step = 0;
+  Real time_step;                    // s, last step's
+  std::uint64_t next_particle_id = 0;
+  std::uint64_t particles_removed_total = 0;
+  double mass_removed_total = 0;     // kg
+  double mass_emitted_total = 0;     // kg
+  StepStats last_step;
+
+  // Scratch reused every step (no allocation in the step once sized).
+  std::vector<Real> kappa;           // (n) κ of the current solver iteration
+  tbb::enumerable_thread_specific<std::vector<Wrench>> body_wrench_per_thread;
+  std::vector<std::uint64_t> sort_keys;
+  std::vector<Index> permutation;
+  std::vector<Vec3> scratch_vec3;
+  std::vector<Real> scratch_real;
+  std::vector<std::uint16_t> scratch_u16;
+  std::vector<std::uint64_t> scratch_u64;
+};
+
+/// Derived, immutable data of a nozzle: disc sample offsets and layer period.
+struct NozzleGeometry {
+  std::vector<Vec3> disc_offsets;  // in the nozzle frame, z = 0
+  double layer_period = 0;         // s between layers at the set exit speed
+};
+
+class Solver {
+ public:
+  explicit Solver(Parameters parameters);
+
+  // ---- set-up ----
+  /// Adds a rigid body whose surface is sampled as `local_points` (body frame). Returns its index.
+  Index add_body(const std::string& name, std::span<const Vec3> local_points, const Pose& pose, bool is_static);
+  /// Adds fluid particles at rest spacing (positions in m); points closer than a radius to a boundary are skipped.
+  std::size_t add_particles(std::span<const Vec3> positions, const Vec3& velocity, std::uint16_t phase);
+  /// Pre-sizes every array for `capacity` fluid particles, so steps do not allocate.
+  void reserve(std::size_t capacity);
+
+  // ---- inputs set between steps ----
+  void set_body_motion(Index body, const Pose& pose, const Vec3& linear_velocity, const Vec3& angular_velocity);
+  void set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding);
+
+  /// Replaces the whole mutable state with a saved copy (checkpoints; benchmarks that time the same step).
+  void restore(const State& saved) { state_ = saved; }
+
+  /// Advances by one adaptive (CFL) time step. Throws SimulationError on NaN or explosion.
+  const StepStats& step();
+
+  // ---- read-out ----
+  [[nodiscard]] const Parameters& parameters() const { return parameters_; }
+  [[nodiscard]] const State& state() const { return state_; }
+  [[nodiscard]] const FluidParticles& fluid() const { return state_.fluid; }
+  [[nodiscard]] const BoundaryParticles& boundary() const { return state_.boundary; }
+  [[nodiscard]] const std::vector<BoundaryBody>& bodies() const { return state_.bodies; }
+  [[nodiscard]] const NozzleGeometry& nozzle_geometry(Index nozzle) const { return nozzle_geometry_[nozzle]; }
+  [[nodiscard]] double time() const { return state_.time; }
+  [[nodiscard]] Real particle_diameter() const { return 2 * parameters_.settings.particle_radius; }
+  [[nodiscard]] Real support_radius() const {
+    return parameters_.settings.support_radius_factor * parameters_.settings.particle_radius;
+  }
+  /// Mass of one particle of `phase` (kg): rest density × diameter³.
+  [[nodiscard]] Real particle_mass(std::uint16_t phase) const;
+  /// Pressure of particle i (Pa) from the last step's κ values (Bender & Koschier: κ = ρ0 p / ρ²).
+  [[nodiscard]] Real pressure(std::size_t particle) const;
+  [[nodiscard]] double total_fluid_mass() const;
+  [[nodiscard]] Real boundary_volume_scale() const { return boundary_volume_scale_; }
+
+ private:
+  void update_bodies();
+  void remove_out_of_bounds(StepStats& stats);
+  void emit(StepStats& stats);
+  void reorder();
+  void search_neighbors();
+  void keep_out_of_boundaries();
+  void check_state() const;
+
+  Parameters parameters_;
+  Real boundary_volume_scale_ = 1;      // see calibrated_boundary_volume_scale() in solver.cpp
+  Real boundary_share_at_surface_ = 1;  // Σ V_b W on a geometric surface; see keep_out_of_boundaries()
+  std::vector<NozzleGeometry> nozzle_geometry_;
+  State state_;
+};
+
+// ---- stages over (parameters, state), in dfsph_bender2017.cpp and viscosity_morris1997.cpp ----
+namespace stages {
+/// ρ_i and the DFSPH factor α_i (Bender & Koschier 2017, eq. 11); returns max relative density error.
+Real compute_density_and_factor(const Parameters& parameters, State& state);
+/// Divergence-free solver (Bender & Koschier 2017, Algorithm 2). Returns iterations.
+int solve_divergence(const Parameters& parameters, State& state, Real time_step);
+/// Constant-density solver (Bender & Koschier 2017, Algorithm 3). Returns iterations; sets mean error.
+int solve_density(const Parameters& parameters, State& state, Real time_step, Real& mean_density_error);
+/// Gravity plus laminar viscosity (Morris et al. 1997 form, as in Monaghan 2005) into state.fluid.acceleration.
+void compute_non_pressure_accelerations(const Parameters& parameters, State& state);
+/// Clears the per-thread wrench accumulators (sized to the bodies).
+void reset_body_wrenches(State& state);
+/// This thread's wrench accumulator, one entry per body (sized on a thread's first use only).
+inline std::vector<Wrench>& thread_body_wrenches(State& state) {
+  std::vector<Wrench>& wrenches = state.body_wrench_per_thread.local();
+  if (wrenches.size() != state.bodies.size()) wrenches.assign(state.bodies.size(), Wrench{});
+  return wrenches;
+}
+/// Sums the per-thread wrenches into each body's fluid_force / fluid_torque.
+void collect_body_wrenches(State& state);
+}  // namespace stages
+
+}  // namespace m3dp::sph

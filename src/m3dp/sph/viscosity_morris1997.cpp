@@ -1,0 +1,60 @@
+// Non-pressure accelerations: gravity and laminar viscosity.
+// Viscosity: J. P. Morris, P. J. Fox, Y. Zhu, "Modeling Low Reynolds Number Incompressible Flows
+// Using SPH", J. Comput. Phys. 136, 1997, in the form of Monaghan 2005 (eq. 6.19) used by SPlisHSPlasH:
+//   a_i += 2(d+2) ν Σ_j (m_j/ρ_j) (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij
+// ν is the kinematic viscosity (m²/s) = dynamic viscosity (Pa·s) / density. Explicit: the time
+// step is bounded by the viscous limit in Solver::step. Implicit viscosity comes with the materials issue.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include "m3dp/sph/solver.hpp"
+
+namespace m3dp::sph::stages {
+
+void compute_non_pressure_accelerations(const Parameters& parameters, State& state) {
+  const auto& settings = parameters.settings;
+  auto& fluid = state.fluid;
+  const auto& boundary = state.boundary;
+  const Real support_radius = settings.support_radius_factor * settings.particle_radius;
+  const Real regularisation = Real(0.01) * support_radius * support_radius;
+  constexpr Real kDimensionFactor = 2 * (3 + 2);
+  const Real rest_density = parameters.phases.front().rest_density;
+
+  with_kernel(settings.kernel, support_radius, [&](const auto& kernel) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 128), [&](const tbb::blocked_range<std::size_t>& range) {
+      std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+        const Vec3 position_i = fluid.position[i];
+        const Vec3 velocity_i = fluid.velocity[i];
+        Vec3 acceleration = settings.gravity;
+        if (phase.kinematic_viscosity > 0) {
+          Vec3 viscous = Vec3::Zero();
+          for (const Index j : state.fluid_neighbors.of(i)) {
+            const Vec3 r = position_i - fluid.position[j];
+            viscous += (fluid.mass[j] / fluid.density[j]) * (velocity_i - fluid.velocity[j]).dot(r) /
+                       (r.squaredNorm() + regularisation) * kernel.gradW(r);
+          }
+          acceleration += kDimensionFactor * phase.kinematic_viscosity * viscous;
+        }
+        if (phase.boundary_kinematic_viscosity > 0) {
+          const Real mass_i = fluid.mass[i];
+          for (const Index b : state.boundary_neighbors.of(i)) {
+            const Vec3 r = position_i - boundary.position[b];
+            const Vec3 a = kDimensionFactor * phase.boundary_kinematic_viscosity *
+                           (rest_density * boundary.volume[b] / fluid.density[i]) *
+                           (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * kernel.gradW(r);
+            acceleration += a;
+            const Vec3 force = -mass_i * a;
+            Wrench& wrench = wrenches[boundary.body[b]];
+            wrench.force += force;
+            wrench.torque += (boundary.position[b] - state.bodies[boundary.body[b]].pose.position).cross(force);
+          }
+        }
+        fluid.acceleration[i] = acceleration;
+      }
+    });
+  });
+}
+
+}  // namespace m3dp::sph::stages

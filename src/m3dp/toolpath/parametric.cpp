@@ -1,0 +1,111 @@
+#include "m3dp/toolpath/parametric.hpp"
+
+#include <algorithm>
+#include <cmath>
+
+namespace m3dp::toolpath {
+
+namespace {
+Vec3 first_point(const Curve& curve) { return curve_point(curve, 0); }
+Vec3 last_point(const Curve& curve) { return curve_point(curve, curve_length(curve)); }
+}  // namespace
+
+Real curve_length(const Curve& curve) {
+  return std::visit(
+      [](const auto& c) -> Real {
+        using T = std::decay_t<decltype(c)>;
+        if constexpr (std::is_same_v<T, LineCurve>) {
+          return (c.end - c.start).norm();
+        } else if constexpr (std::is_same_v<T, PolylineCurve>) {
+          Real length = 0;
+          for (std::size_t i = 1; i < c.points.size(); ++i) length += (c.points[i] - c.points[i - 1]).norm();
+          return length;
+        } else if constexpr (std::is_same_v<T, CircleCurve>) {
+          return 2 * kPi * c.radius * std::abs(c.turns);
+        } else {
+          const Real per_turn = std::hypot(2 * kPi * c.radius, c.rise_per_turn);
+          return per_turn * std::abs(c.turns);
+        }
+      },
+      curve);
+}
+
+Vec3 curve_point(const Curve& curve, Real arc_length) {
+  const Real length = curve_length(curve);
+  const Real s = std::clamp(arc_length, Real(0), length);
+  return std::visit(
+      [&](const auto& c) -> Vec3 {
+        using T = std::decay_t<decltype(c)>;
+        if constexpr (std::is_same_v<T, LineCurve>) {
+          return length > 0 ? Vec3(c.start + (c.end - c.start) * (s / length)) : c.start;
+        } else if constexpr (std::is_same_v<T, PolylineCurve>) {
+          Real remaining = s;
+          for (std::size_t i = 1; i < c.points.size(); ++i) {
+            const Real piece = (c.points[i] - c.points[i - 1]).norm();
+            if (remaining <= piece && piece > 0) return c.points[i - 1] + (c.points[i] - c.points[i - 1]) * (remaining / piece);
+            remaining -= piece;
+          }
+          return c.points.back();
+        } else if constexpr (std::is_same_v<T, CircleCurve>) {
+          const Real fraction = length > 0 ? s / length : 0;
+          const Real angle = c.start_angle + 2 * kPi * c.turns * fraction;
+          return c.centre + c.radius * Vec3(std::cos(angle), std::sin(angle), 0);
+        } else {
+          const Real fraction = length > 0 ? s / length : 0;
+          const Real angle = c.start_angle + 2 * kPi * c.turns * fraction;
+          return c.centre + Vec3(c.radius * std::cos(angle), c.radius * std::sin(angle), c.rise_per_turn * std::abs(c.turns) * fraction);
+        }
+      },
+      curve);
+}
+
+Trajectory::Trajectory(std::vector<PathSegment> segments, double start_time) : start_time_(start_time) {
+  double time = start_time;
+  bool have_previous = false;
+  Vec3 previous_end = Vec3::Zero();
+  Real previous_speed = 0;
+  for (auto& segment : segments) {
+    const Vec3 start = first_point(segment.curve);
+    // Travel (no extrusion) where a segment does not start where the last one ended.
+    if (have_previous && (start - previous_end).norm() > Real(1e-9)) {
+      const Real length = (start - previous_end).norm();
+      const Real speed = std::max(previous_speed, segment.speed);
+      pieces_.push_back(Piece{LineCurve{previous_end, start}, length, speed, false, time, length / speed});
+      time += length / speed;
+    }
+    const Real length = curve_length(segment.curve);
+    const double duration = segment.speed > 0 ? length / segment.speed : 0.0;
+    previous_end = last_point(segment.curve);
+    previous_speed = segment.speed;
+    have_previous = true;
+    pieces_.push_back(Piece{std::move(segment.curve), length, segment.speed, segment.extrude, time, duration});
+    time += duration;
+  }
+}
+
+double Trajectory::end_time() const { return pieces_.empty() ? start_time_ : pieces_.back().begin_time + pieces_.back().duration; }
+
+TrajectorySample Trajectory::sample(double time) const {
+  TrajectorySample sample;
+  if (pieces_.empty()) return sample;
+  if (time < start_time_) {
+    sample.position = first_point(pieces_.front().curve);
+    return sample;
+  }
+  // Few pieces per path: a linear scan is clearer than a search and costs nothing here.
+  for (const Piece& piece : pieces_) {
+    if (time > piece.begin_time + piece.duration) continue;
+    const Real arc = static_cast<Real>((time - piece.begin_time) * piece.speed);
+    sample.position = curve_point(piece.curve, arc);
+    // Velocity by a central difference along the curve: exact for lines, O(ds²) for arcs.
+    const Real ds = std::max(piece.length * Real(1e-4), Real(1e-7));
+    const Real a = std::max(Real(0), arc - ds), b = std::min(piece.length, arc + ds);
+    if (b > a) sample.velocity = (curve_point(piece.curve, b) - curve_point(piece.curve, a)) / (b - a) * piece.speed;
+    sample.extruding = piece.extrude;
+    return sample;
+  }
+  sample.position = last_point(pieces_.back().curve);
+  return sample;
+}
+
+}  // namespace m3dp::toolpath

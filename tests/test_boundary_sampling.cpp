@@ -1,0 +1,80 @@
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "m3dp/sph/boundary_sampling.hpp"
+#include "m3dp/sph/neighbor_search.hpp"
+
+using namespace m3dp;
+using namespace m3dp::sph;
+
+namespace {
+Real nearest_neighbor_distance(const std::vector<Vec3>& points, std::size_t i) {
+  Real best = 1e9f;
+  for (std::size_t j = 0; j < points.size(); ++j)
+    if (j != i) best = std::min(best, (points[i] - points[j]).norm());
+  return best;
+}
+}  // namespace
+
+TEST(BoundarySampling, BoxPointsLieOnTheSurfaceAtAboutTheSpacing) {
+  const Real spacing = Real(0.01);
+  const BoxShape box{Vec3(0.1f, 0.06f, 0.04f)};
+  const auto samples = sample_box_surface(box, spacing);
+  const auto& points = samples.points;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const Vec3 distance_to_face = (box.size / 2 - points[i].cwiseAbs());
+    EXPECT_NEAR(distance_to_face.minCoeff(), 0, 1e-6) << "point " << i << " is not on a face";
+    // The normal is the outward normal of a face the point lies on.
+    const Vec3& normal = samples.normals[i];
+    EXPECT_NEAR(normal.norm(), 1, 1e-6);
+    EXPECT_NEAR(points[i].dot(normal), (box.size / 2).cwiseProduct(normal.cwiseAbs()).sum(), 1e-6);
+    EXPECT_LE(nearest_neighbor_distance(points, i), spacing * Real(1.001));
+    EXPECT_GE(nearest_neighbor_distance(points, i), spacing * Real(0.25));
+  }
+  const double area = 2 * (0.1 * 0.06 + 0.1 * 0.04 + 0.06 * 0.04);
+  EXPECT_NEAR(points.size(), area / (spacing * spacing), 0.4 * area / (spacing * spacing));
+}
+
+TEST(BoundarySampling, SphereAndCylinderPointsLieOnTheSurface) {
+  const auto sphere = sample_sphere_surface(SphereShape{0.05f}, 0.005f);
+  for (std::size_t i = 0; i < sphere.points.size(); ++i) {
+    EXPECT_NEAR(sphere.points[i].norm(), 0.05f, 1e-6);
+    EXPECT_NEAR((sphere.normals[i] - sphere.points[i] / 0.05f).norm(), 0, 1e-5);
+  }
+  EXPECT_NEAR(sphere.points.size(), 4 * kPi * 0.05 * 0.05 / (0.005 * 0.005), 2);
+  // Sampled a radius inside: the layer a fluid particle rests a full spacing from.
+  for (const auto& p : sample_sphere_surface(SphereShape{0.05f}, 0.005f, -0.0025f).points) EXPECT_NEAR(p.norm(), 0.0475f, 1e-6);
+  const CylinderShape cylinder{0.02f, 0.1f};
+  for (const auto& p : sample_cylinder_surface(cylinder, 0.004f).points) {
+    const bool on_side = std::abs(p.head<2>().norm() - cylinder.radius) < 1e-6 && std::abs(p.z()) <= cylinder.length / 2 + 1e-6;
+    const bool on_cap = std::abs(std::abs(p.z()) - cylinder.length / 2) < 1e-6 && p.head<2>().norm() <= cylinder.radius + 1e-6;
+    EXPECT_TRUE(on_side || on_cap);
+  }
+}
+
+TEST(BoundarySampling, MeshSamplesCoverTrianglesWithoutDuplicates) {
+  TriangleMesh square;
+  square.vertices = {Vec3(0, 0, 0), Vec3(0.1f, 0, 0), Vec3(0.1f, 0.1f, 0), Vec3(0, 0.1f, 0)};
+  square.triangles = {{0, 1, 2}, {0, 2, 3}};
+  const auto points = sample_mesh_surface(square, 0.01f).points;
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    EXPECT_NEAR(points[i].z(), 0, 1e-7);
+    EXPECT_GE(nearest_neighbor_distance(points, i), 0.006f);
+  }
+  // Every point of the square is within a spacing of a sample.
+  for (int i = 0; i <= 10; ++i)
+    for (int j = 0; j <= 10; ++j) {
+      const Vec3 q(i * 0.01f, j * 0.01f, 0);
+      Real best = 1;
+      for (const auto& p : points) best = std::min(best, (p - q).norm());
+      EXPECT_LT(best, 0.01f);
+    }
+}
+
+TEST(BoundarySampling, PlaneFollowsItsNormal) {
+  const auto points = sample_plane(PlaneShape{Vec3(1, 0, 0), 0.2f, 0.1f}, 0.01f).points;
+  for (const auto& p : points) EXPECT_NEAR(p.x(), 0, 1e-6);
+  EXPECT_EQ(points.size(), 21u * 11u);
+  for (const auto& p : sample_plane(PlaneShape{Vec3(1, 0, 0), 0.2f, 0.1f}, 0.01f, -0.005f).points) EXPECT_NEAR(p.x(), -0.005f, 1e-6);
+}

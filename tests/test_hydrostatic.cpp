@@ -1,0 +1,108 @@
+// Hydrostatic column (../shared/VALIDATION.md): after settling, mean density error ≤ 1 %,
+// floor force = weight within 2 %, pressure p = ρ g (H − z) within 5 %, no particle below the floor.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "m3dp/sim/presets.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+using namespace m3dp;
+
+class Hydrostatic : public ::testing::Test {
+ protected:
+  static void SetUpTestSuite() {
+    sim::HydrostaticSetup setup;
+    setup.width = Real(0.1);
+    setup.height = Real(0.15);
+    setup.particle_radius = Real(0.0025);
+    scene_ = new scene::Scene(sim::hydrostatic_scene(setup));
+    simulation_ = new sim::Simulation(*scene_);
+    auto& solver = simulation_->solver();
+    // Settle for 1 s, then average the floor force over the next 0.25 s (it oscillates slightly).
+    while (solver.time() < 1.0) simulation_->step();
+    double impulse = 0, duration = 0;
+    while (solver.time() < 1.25) {
+      const auto& stats = simulation_->step();
+      impulse += solver.bodies()[0].fluid_force.z() * stats.time_step;
+      duration += stats.time_step;
+    }
+    mean_floor_force_ = impulse / duration;
+  }
+  static void TearDownTestSuite() {
+    delete simulation_;
+    delete scene_;
+  }
+  static inline scene::Scene* scene_ = nullptr;
+  static inline sim::Simulation* simulation_ = nullptr;
+  static inline double mean_floor_force_ = 0;
+};
+
+TEST_F(Hydrostatic, FloorForceEqualsWeight) {
+  const double weight = simulation_->solver().total_fluid_mass() * 9.81;
+  const double error = (mean_floor_force_ - weight) / weight;
+  std::printf("floor force %.4f N, weight %.4f N: error %+.2f %% (tolerance 2 %%)\n", mean_floor_force_, weight, 100 * error);
+  EXPECT_LT(std::abs(error), 0.02);
+}
+
+TEST_F(Hydrostatic, DensityErrorIsSmall) {
+  const auto& solver = simulation_->solver();
+  const auto& fluid = solver.fluid();
+  // Interior particles only: at the free surface the SPH sum lacks neighbours by construction.
+  Real top = 0;
+  for (const auto& p : fluid.position) top = std::max(top, p.z());
+  double sum = 0;
+  int count = 0;
+  for (std::size_t i = 0; i < fluid.size(); ++i)
+    if (fluid.position[i].z() < top - solver.support_radius()) {
+      sum += std::abs(fluid.density[i] / 1000.0 - 1.0);
+      ++count;
+    }
+  const double mean_error = sum / count;
+  std::printf("mean |density error| of %d interior particles: %.3f %% (tolerance 1 %%); solver's last mean error %.4f %%\n",
+              count, 100 * mean_error, 100 * solver.state().last_step.density_error);
+  EXPECT_LT(mean_error, 0.01);
+  EXPECT_LT(solver.state().last_step.density_error, 0.001);
+}
+
+TEST_F(Hydrostatic, PressureProfileIsHydrostatic) {
+  const auto& solver = simulation_->solver();
+  const auto& fluid = solver.fluid();
+  const Real width = Real(0.1);
+  // Height of the free surface from the volume the particles occupy at rest spacing.
+  const double diameter = solver.particle_diameter();
+  const double surface = fluid.size() * diameter * diameter * diameter / (width * width);
+  const double rho_g = 1000.0 * 9.81;
+  // Bins of one particle diameter, below the surface layer (one support radius) where SPH smooths the pressure.
+  const int bins = static_cast<int>((surface - solver.support_radius()) / diameter);
+  int checked = 0;
+  for (int bin = 0; bin < bins; ++bin) {
+    const double low = bin * diameter, high = low + diameter;
+    double pressure_sum = 0;
+    int count = 0;
+    for (std::size_t i = 0; i < fluid.size(); ++i)
+      if (fluid.position[i].z() >= low && fluid.position[i].z() < high) {
+        pressure_sum += solver.pressure(i);
+        ++count;
+      }
+    if (count == 0) continue;
+    const double z = (low + high) / 2;
+    const double reference = rho_g * (surface - z);
+    const double measured = pressure_sum / count;
+    const double error = (measured - reference) / (rho_g * surface);
+    std::printf("z = %.4f m: p = %8.2f Pa, reference %8.2f Pa, error %+.2f %% of rho g H\n", z, measured, reference, 100 * error);
+    EXPECT_LT(std::abs(error), 0.05) << "at z = " << z;
+    ++checked;
+  }
+  EXPECT_GE(checked, 10);
+}
+
+TEST_F(Hydrostatic, NoParticleBelowTheFloorOrLost) {
+  const auto& fluid = simulation_->solver().fluid();
+  Real lowest = 1;
+  for (const auto& p : fluid.position) lowest = std::min(lowest, p.z());
+  std::printf("lowest particle centre at z = %.5f m (floor at 0)\n", lowest);
+  EXPECT_GT(lowest, 0);
+  EXPECT_EQ(simulation_->solver().state().particles_removed_total, 0u);
+}

@@ -1,0 +1,121 @@
+// The run folder: particle frames (.vtu + .pvd), timing.csv and summary.json, no leftovers.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "m3dp/core/progress.hpp"
+#include "m3dp/io/vtk_writer.hpp"
+#include "m3dp/sim/presets.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+using namespace m3dp;
+namespace fs = std::filesystem;
+
+namespace {
+std::string read_text(const fs::path& file) {
+  std::ifstream stream(file, std::ios::binary);
+  std::stringstream buffer;
+  buffer << stream.rdbuf();
+  return buffer.str();
+}
+fs::path fresh_directory(const std::string& name) {
+  const fs::path directory = fs::temp_directory_path() / ("m3dp_test_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(directory);
+  return directory;
+}
+}  // namespace
+
+TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  setup.end_time = 0.1;
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.output.particles_period = Real(0.025);
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("outputs");
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  const auto summary = sim::run_simulation(simulation, options);
+  EXPECT_EQ(summary.status, "completed");
+
+  // Frames at t = 0, 0.025, ..., 0.1.
+  const std::string pvd = read_text(directory / "particles.pvd");
+  std::size_t datasets = 0;
+  for (std::size_t at = pvd.find("<DataSet"); at != std::string::npos; at = pvd.find("<DataSet", at + 1)) ++datasets;
+  EXPECT_EQ(datasets, 5u);
+  EXPECT_EQ(summary.frames_written, 5u);
+  EXPECT_NE(pvd.find("file=\"particles/particles_000004.vtu\""), std::string::npos);
+  const std::string vtu = read_text(directory / "particles" / "particles_000004.vtu");
+  EXPECT_NE(vtu.find("NumberOfPoints=\"" + std::to_string(summary.particles) + "\""), std::string::npos);
+  EXPECT_NE(vtu.find("Name=\"velocity\""), std::string::npos);
+  EXPECT_EQ(vtu.substr(vtu.size() - 11), "</VTKFile>\n");
+
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  EXPECT_EQ(json["status"], "completed");
+  EXPECT_EQ(json["particles"].get<std::size_t>(), summary.particles);
+  EXPECT_EQ(json["steps"].get<std::int64_t>(), summary.steps);
+  EXPECT_NEAR(json["simulated_time_s"].get<double>(), 0.1, 0.01);
+  EXPECT_GT(json["real_time_factor"].get<double>(), 0);
+  EXPECT_NEAR(json["mass_final_kg"].get<double>(), json["mass_initial_kg"].get<double>(), 1e-9);
+
+  const std::string timing = read_text(directory / "timing.csv");
+  EXPECT_EQ(timing.rfind("step,time_s,dt_s,particles", 0), 0u);
+  EXPECT_EQ(static_cast<std::int64_t>(std::count(timing.begin(), timing.end(), '\n')), summary.steps + 1);
+
+  for (const auto& entry : fs::recursive_directory_iterator(directory)) {
+    const std::string name = entry.path().filename().string();
+    EXPECT_EQ(name.find(".tmp"), std::string::npos) << name;
+    EXPECT_EQ(name.find(".partial"), std::string::npos) << name;
+  }
+  fs::remove_all(directory);
+}
+
+TEST(Outputs, StopRequestEndsCleanlyWithSummary) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("stop");
+  std::atomic<bool> stop{true};
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  options.stop_requested = &stop;
+  const auto summary = sim::run_simulation(simulation, options);
+  EXPECT_EQ(summary.status, "interrupted");
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  EXPECT_EQ(json["status"], "interrupted");
+  EXPECT_TRUE(fs::exists(directory / "timing.csv"));
+  fs::remove_all(directory);
+}
+
+TEST(Outputs, ExplodingStateStopsWithAReport) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.solver.max_speed = Real(0.05);  // gravity alone exceeds this within a few steps once the block drops
+  scene.fluid_blocks[0].box.min.z() += Real(0.05);
+  scene.fluid_blocks[0].box.max.z() += Real(0.05);
+  sim::Simulation simulation(scene);
+  const auto summary = sim::run_simulation(simulation, {});
+  EXPECT_EQ(summary.status, "failed");
+  EXPECT_NE(summary.error.find("unstable at t = "), std::string::npos) << summary.error;
+  EXPECT_NE(summary.error.find("particle"), std::string::npos);
+  EXPECT_LT(summary.simulated_time, 0.1);
+}
+
+TEST(Outputs, ProgressLineShowsTimeSpeedParticlesAndEta) {
+  const std::string line = ProgressBar::format_line({0.5, 2.0, 100, 1234, 10.0}, 20);
+  EXPECT_NE(line.find("25.0%"), std::string::npos) << line;
+  EXPECT_NE(line.find("t=0.500/2.000 s"), std::string::npos) << line;
+  EXPECT_NE(line.find("10 steps/s"), std::string::npos) << line;
+  EXPECT_NE(line.find("RTF 0.05"), std::string::npos) << line;
+  EXPECT_NE(line.find("1234 particles"), std::string::npos) << line;
+  EXPECT_NE(line.find("ETA 00:30"), std::string::npos) << line;
+}

@@ -1,0 +1,360 @@
+// Loading SDF scene files: values land in the right fields in SI units, and every mistake is reported
+// with file:line and what was expected.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <variant>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/scene/scene.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using m3dp::InputError;
+using m3dp::Real;
+using m3dp::Vec3;
+using m3dp::scene::load_scene_from_string;
+
+std::string valid_scene() {
+  return R"(<?xml version="1.0"?>
+<sdf version="1.9">
+  <world name="dam_break">
+    <gravity>0 0 -9.8</gravity>
+    <physics type="ode"><max_step_size>0.001</max_step_size></physics>
+    <light name="sun" type="directional"/>
+    <model name="tank">
+      <static>true</static>
+      <pose degrees="true">1 0 0 0 0 90</pose>
+      <link name="walls">
+        <pose>0 1 0 0 0 0</pose>
+        <collision name="floor">
+          <pose>0 0 -0.01 0 0 0</pose>
+          <geometry><box><size>1 1 0.02</size></box></geometry>
+        </collision>
+        <collision name="ground">
+          <geometry><plane><normal>0 0 2</normal><size>2 2</size></plane></geometry>
+        </collision>
+        <visual name="floor_visual"><geometry><box><size>1 1 0.02</size></box></geometry></visual>
+        <inertial><mass>1</mass></inertial>
+      </link>
+    </model>
+    <plugin name="other" filename="libother.so"><anything/></plugin>
+    <plugin name="m3dp" filename="m3dp">
+      <solver>
+        <particle_radius unit="mm">5</particle_radius>
+        <kernel>wendland_c2</kernel>
+        <cfl_factor>0.4</cfl_factor>
+        <min_time_step unit="ms">0.01</min_time_step>
+        <max_time_step>0.005</max_time_step>
+        <max_density_error unit="%">0.05</max_density_error>
+        <max_divergence_error>0.001</max_divergence_error>
+        <max_iterations>50</max_iterations>
+        <divergence_solver>false</divergence_solver>
+        <warm_start>1</warm_start>
+        <end_time>2</end_time>
+        <bounds><min>-1 -1 -1</min><max>1 1 1</max></bounds>
+      </solver>
+      <material name="water">
+        <density>1000</density>
+        <viscosity unit="mPa*s">1</viscosity>
+        <boundary_viscosity unit="cP">2</boundary_viscosity>
+      </material>
+      <fluid_block name="column" material="water">
+        <min>0 0 0</min>
+        <max>0.1 0.1 0.2</max>
+        <velocity unit="mm/s">0 0 -10</velocity>
+      </fluid_block>
+      <print_head name="head" material="water">
+        <nozzle>
+          <inner_diameter unit="cm">1</inner_diameter>
+          <exit_speed>0.1</exit_speed>
+          <direction>0 0 -2</direction>
+        </nozzle>
+        <path start_time="0.5" speed="0.05">
+          <line><start>0 0 0.1</start><end>0.1 0 0.1</end></line>
+          <polyline><point>0.1 0 0.1</point><point>0.1 0.1 0.1</point></polyline>
+          <circle speed="0.1">
+            <center>0 0 0.1</center><radius>0.05</radius><start_angle unit="deg">90</start_angle>
+          </circle>
+          <helix extrude="false">
+            <centre>0 0 0.2</centre><radius>0.05</radius><turns>2</turns><rise_per_turn>0.01</rise_per_turn>
+          </helix>
+        </path>
+      </print_head>
+      <output>
+        <particles_period unit="ms">20</particles_period>
+        <particles>true</particles>
+      </output>
+    </plugin>
+  </world>
+</sdf>
+)";
+}
+
+/// `text` with the first `from` replaced by `to` (the test fails if `from` is not there).
+std::string replaced(std::string text, const std::string& from, const std::string& to) {
+  const auto position = text.find(from);
+  if (position == std::string::npos) {
+    ADD_FAILURE() << "'" << from << "' is not in the scene";
+    return text;
+  }
+  return text.replace(position, from.size(), to);
+}
+
+/// `text` without the part from the first `begin` up to and including the next `end`.
+std::string erased(std::string text, const std::string& begin, const std::string& end) {
+  const auto first = text.find(begin);
+  const auto last = first == std::string::npos ? std::string::npos : text.find(end, first);
+  if (last == std::string::npos) {
+    ADD_FAILURE() << "'" << begin << "' ... '" << end << "' is not in the scene";
+    return text;
+  }
+  return text.erase(first, last + end.size() - first);
+}
+
+/// The 1-based line of the first `needle` in `text`.
+int line_of(const std::string& text, const std::string& needle) {
+  const auto position = text.find(needle);
+  EXPECT_NE(position, std::string::npos) << "'" << needle << "' is not in the scene";
+  return 1 + int(std::count(text.begin(), text.begin() + std::ptrdiff_t(position), '\n'));
+}
+
+/// "bad.sdf:N:" where N is the line of the first `needle` in `text`.
+std::string location_of(const std::string& text, const std::string& needle) {
+  return "bad.sdf:" + std::to_string(line_of(text, needle)) + ":";
+}
+
+/// The InputError that loading `text` as "bad.sdf" throws.
+InputError load_error(const std::string& text) {
+  try {
+    load_scene_from_string(text, "bad.sdf");
+  } catch (const InputError& error) {
+    return error;
+  }
+  ADD_FAILURE() << "the scene loaded without an error";
+  return InputError(m3dp::SourceLocation{}, "no error");
+}
+
+#define EXPECT_CONTAINS(haystack, needle) \
+  EXPECT_NE(std::string(haystack).find(needle), std::string::npos) << "'" << (needle) << "' not in:\n" << (haystack)
+
+/// Loading must fail with one message at the line of `needle` saying `message`.
+void expect_error_at(const std::string& text, const std::string& needle, const std::string& message) {
+  const InputError error = load_error(text);
+  EXPECT_CONTAINS(error.what(), location_of(text, needle) + " error: " + message);
+}
+
+TEST(Scene, ValidSceneLoadsInSiUnits) {
+  const auto scene = load_scene_from_string(valid_scene(), "scenes/valid.sdf");
+  EXPECT_EQ(scene.world_name, "dam_break");
+  EXPECT_EQ(scene.file, fs::path("scenes/valid.sdf"));
+  EXPECT_FLOAT_EQ(scene.solver.particle_radius, 0.005f);
+  EXPECT_EQ(scene.solver.kernel, m3dp::sph::KernelType::wendland_c2);
+  EXPECT_TRUE(scene.solver.gravity.isApprox(Vec3(0, 0, Real(-9.8))));
+  EXPECT_FLOAT_EQ(scene.solver.cfl_factor, 0.4f);
+  EXPECT_FLOAT_EQ(scene.solver.min_time_step, 1e-5f);
+  EXPECT_FLOAT_EQ(scene.solver.max_time_step, 0.005f);
+  EXPECT_FLOAT_EQ(scene.solver.density_tolerance, 0.0005f);
+  EXPECT_EQ(scene.solver.max_density_iterations, 50);
+  EXPECT_EQ(scene.solver.max_divergence_iterations, 50);
+  EXPECT_FALSE(scene.solver.divergence_solver);
+  EXPECT_TRUE(scene.solver.warm_start);
+  EXPECT_TRUE(scene.solver.bounds.min.isApprox(Vec3(-1, -1, -1)));
+  EXPECT_TRUE(scene.solver.bounds.max.isApprox(Vec3(1, 1, 1)));
+  EXPECT_DOUBLE_EQ(scene.end_time, 2.0);
+
+  ASSERT_EQ(scene.materials.size(), 1u);
+  const auto* water = scene.find_material("water");
+  ASSERT_NE(water, nullptr);
+  EXPECT_EQ(scene.find_material("clay"), nullptr);
+  EXPECT_FLOAT_EQ(water->material.density, 1000.0f);
+  EXPECT_FLOAT_EQ(water->material.dynamic_viscosity, 0.001f);  // 1 mPa*s
+  EXPECT_FLOAT_EQ(water->material.boundary_viscosity, 0.002f); // 2 cP
+  EXPECT_EQ(water->where.line, line_of(valid_scene(), "<material name=\"water\">"));
+
+  ASSERT_EQ(scene.fluid_blocks.size(), 1u);
+  EXPECT_TRUE(scene.fluid_blocks[0].box.max.isApprox(Vec3(Real(0.1), Real(0.1), Real(0.2))));
+  EXPECT_TRUE(scene.fluid_blocks[0].initial_velocity.isApprox(Vec3(0, 0, Real(-0.01))));
+
+  // World pose = model ∘ link ∘ collision: the model turns 90° about z, so the link's +y offset becomes -x.
+  ASSERT_EQ(scene.bodies.size(), 1u);
+  ASSERT_EQ(scene.bodies[0].collisions.size(), 2u);
+  const auto& floor = scene.bodies[0].collisions[0];
+  EXPECT_EQ(floor.name, "tank/walls/floor");
+  EXPECT_LT((floor.pose.position - Vec3(0, 0, Real(-0.01))).norm(), 1e-6);
+  EXPECT_LT((floor.pose.rotate(Vec3::UnitX()) - Vec3::UnitY()).norm(), 1e-6);
+  ASSERT_TRUE(std::holds_alternative<m3dp::BoxShape>(floor.shape));
+  EXPECT_TRUE(std::get<m3dp::BoxShape>(floor.shape).size.isApprox(Vec3(1, 1, Real(0.02))));
+  const auto& ground = scene.bodies[0].collisions[1];
+  ASSERT_TRUE(std::holds_alternative<m3dp::PlaneShape>(ground.shape));
+  EXPECT_TRUE(std::get<m3dp::PlaneShape>(ground.shape).normal.isApprox(Vec3::UnitZ()));
+
+  ASSERT_EQ(scene.print_heads.size(), 1u);
+  const auto& head = scene.print_heads[0];
+  EXPECT_FLOAT_EQ(head.inner_diameter, 0.01f);
+  EXPECT_TRUE(head.direction.isApprox(Vec3(0, 0, -1)));
+  EXPECT_DOUBLE_EQ(head.trajectory.start_time(), 0.5);
+  EXPECT_GT(head.trajectory.end_time(), 0.5);
+
+  EXPECT_FLOAT_EQ(scene.output.particles_period, 0.02f);
+  EXPECT_TRUE(scene.output.write_particles);
+}
+
+TEST(Scene, NegativeParticleRadius) {
+  const std::string text = replaced(valid_scene(), R"(<particle_radius unit="mm">5</particle_radius>)",
+                                    "<particle_radius>-0.01</particle_radius>");
+  expect_error_at(text, "<particle_radius>", "<particle_radius> must be > 0 m, got -0.01");
+}
+
+TEST(Scene, ZeroDensity) {
+  const std::string text = replaced(valid_scene(), "<density>1000</density>", "<density>0</density>");
+  expect_error_at(text, "<density>", "<density> must be > 0 kg/m^3, got 0");
+}
+
+TEST(Scene, UnknownElementListsWhatIsExpected) {
+  const std::string text = replaced(valid_scene(), "<kernel>", "<colour>red</colour>\n        <kernel>");
+  expect_error_at(text, "<colour>", "unknown element <colour> in <solver>; expected one of: particle_radius, kernel");
+}
+
+TEST(Scene, MissingRequiredValue) {
+  const std::string text = replaced(valid_scene(), "<density>1000</density>", "");
+  expect_error_at(text, "<material name=\"water\">", "missing required <density> in <material name=\"water\">");
+}
+
+TEST(Scene, KinematicUnitOnViscosity) {
+  const std::string text = replaced(valid_scene(), R"(<viscosity unit="mPa*s">1</viscosity>)",
+                                    R"(<viscosity unit="m^2/s">1e-6</viscosity>)");
+  expect_error_at(text, "<viscosity", "<viscosity> is dynamic viscosity in Pa*s; 'm^2/s' is a kinematic viscosity "
+                                      "unit (multiply by density to convert)");
+}
+
+TEST(Scene, UnitOfTheWrongDimension) {
+  const std::string text = replaced(valid_scene(), R"(<particle_radius unit="mm">)", R"(<particle_radius unit="s">)");
+  expect_error_at(text, "<particle_radius", "unit 's' on <particle_radius> is not a length unit; expected one of: m");
+}
+
+TEST(Scene, VectorWithATypo) {
+  const std::string text = replaced(valid_scene(), "<max>0.1 0.1 0.2</max>", "<max>0.1 O.1 0.2</max>");
+  expect_error_at(text, "<max>0.1 O.1", "expected 3 numbers (x y z) in <max>, got '0.1 O.1 0.2'");
+}
+
+TEST(Scene, UndefinedMaterial) {
+  const std::string text = replaced(valid_scene(), R"(<fluid_block name="column" material="water">)",
+                                    R"(<fluid_block name="column" material="clay">)");
+  expect_error_at(text, "<fluid_block",
+                  "material 'clay' used by <fluid_block name=\"column\"> is not defined; defined: water");
+}
+
+TEST(Scene, MaterialsMustShareTheirDensity) {
+  const std::string text = replaced(valid_scene(), "<fluid_block name=\"column\" material=\"water\">",
+                                    "<material name=\"clay\"><density unit=\"g/cm^3\">1.8</density>"
+                                    "<viscosity>10</viscosity></material>\n"
+                                    "      <fluid_block name=\"column\" material=\"clay\">");
+  expect_error_at(text, "<material name=\"clay\">", "material 'clay' has density 1800 kg/m^3 but material 'water'");
+}
+
+TEST(Scene, NozzleNarrowerThanAParticle) {
+  const std::string text = replaced(valid_scene(), R"(<inner_diameter unit="cm">1</inner_diameter>)",
+                                    "<inner_diameter>0.004</inner_diameter>");
+  expect_error_at(text, "<inner_diameter>", "the nozzle is narrower than one particle");
+}
+
+TEST(Scene, DynamicModelsAndIncludesAreNotSupportedYet) {
+  std::string text = replaced(valid_scene(), "<static>true</static>", "<static>false</static>");
+  text = replaced(text, "<plugin name=\"other\"",
+                  "<include><uri>model://robot</uri></include>\n    <plugin name=\"other\"");
+  const InputError error = load_error(text);
+  EXPECT_CONTAINS(error.what(), location_of(text, "<model name=\"tank\">") + " error: <model name=\"tank\">: dynamic "
+                                                                              "bodies are not supported yet");
+  EXPECT_CONTAINS(error.what(), location_of(text, "<include>") + " error: <include> is not supported yet");
+}
+
+TEST(Scene, MissingPlugin) {
+  const std::string text = erased(valid_scene(), "<plugin name=\"m3dp\"", "</output>\n    </plugin>");
+  expect_error_at(text, "<world", "missing <plugin name=\"m3dp\" filename=\"m3dp\">");
+}
+
+TEST(Scene, DuplicatePlugin) {
+  const std::string text =
+      replaced(valid_scene(), "  </world>", "    <plugin name=\"m3dp\" filename=\"m3dp\"/>\n  </world>");
+  expect_error_at(text, "<plugin name=\"m3dp\" filename=\"m3dp\"/>", "more than one m3dp <plugin>");
+}
+
+TEST(Scene, NoFluid) {
+  const std::string text = erased(valid_scene(), "<fluid_block", "</print_head>");
+  const InputError error = load_error(text);
+  EXPECT_CONTAINS(error.what(), "the scene has no fluid: add a <fluid_block> or a <print_head>");
+}
+
+TEST(Scene, MalformedXml) {
+  const std::string text = replaced(valid_scene(), "</solver>", "</solvr>");
+  const InputError error = load_error(text);
+  ASSERT_EQ(error.diagnostics().size(), 1u);
+  EXPECT_EQ(error.diagnostics()[0].location.line, line_of(text, "</solvr>"));
+  EXPECT_CONTAINS(error.what(), "not well-formed XML");
+}
+
+TEST(Scene, EveryProblemIsReportedTogether) {
+  std::string text = replaced(valid_scene(), R"(<particle_radius unit="mm">5</particle_radius>)",
+                              "<particle_radius>-1</particle_radius>");
+  text = replaced(text, "<density>1000</density>", "<density>0</density>");
+  text = replaced(text, "<exit_speed>0.1</exit_speed>", "<exit_speed>fast</exit_speed>");
+  const InputError error = load_error(text);
+  EXPECT_GE(error.diagnostics().size(), 3u);
+  EXPECT_CONTAINS(error.what(), location_of(text, "<particle_radius>") + " error: <particle_radius> must be > 0 m");
+  EXPECT_CONTAINS(error.what(), location_of(text, "<density>") + " error: <density> must be > 0");
+  EXPECT_CONTAINS(error.what(),
+                  location_of(text, "<exit_speed>") + " error: expected a number in <exit_speed>, got 'fast'");
+}
+
+/// Mesh collision shapes are read relative to the scene file's folder and scaled.
+class SceneWithMesh : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    std::random_device random;
+    folder_ = fs::temp_directory_path() / ("m3dp_test_scene_" + std::to_string(random()));
+    fs::create_directories(folder_ / "meshes");
+    std::ofstream(folder_ / "meshes" / "triangle.obj") << "v 0 0 0\nv 1000 0 0\nv 0 1000 0\nf 1 2 3\n";
+  }
+  void TearDown() override {
+    std::error_code ignored;
+    fs::remove_all(folder_, ignored);
+  }
+  static std::string with_mesh(const std::string& uri) {
+    return replaced(valid_scene(), "<plane><normal>0 0 2</normal><size>2 2</size></plane>",
+                    "<mesh>\n            <uri>" + uri + "</uri>\n            <scale>0.001 0.001 0.001</scale>\n"
+                    "          </mesh>");
+  }
+  fs::path folder_;
+};
+
+TEST_F(SceneWithMesh, RelativeUriIsReadAndScaled) {
+  const auto scene = load_scene_from_string(with_mesh("meshes/triangle.obj"), folder_ / "scene.sdf");
+  const auto& shape = scene.bodies.at(0).collisions.at(1).shape;
+  ASSERT_TRUE(std::holds_alternative<m3dp::MeshShape>(shape));
+  const auto& mesh = std::get<m3dp::MeshShape>(shape);
+  EXPECT_EQ(fs::path(mesh.file), folder_ / "meshes" / "triangle.obj");
+  ASSERT_EQ(mesh.mesh.vertices.size(), 3u);
+  EXPECT_FLOAT_EQ(mesh.mesh.vertices[1].x(), 1.0f);
+}
+
+TEST_F(SceneWithMesh, MissingMeshAndModelUriAreReportedAtTheUri) {
+  const std::string text = with_mesh("meshes/missing.stl");
+  try {
+    load_scene_from_string(text, folder_ / "bad.sdf");
+    FAIL() << "the scene loaded without an error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), location_of(text, "<uri>") + " error: cannot load mesh");
+    EXPECT_CONTAINS(error.what(), "missing.stl");
+  }
+  const std::string model_uri = with_mesh("model://robot/meshes/part.stl");
+  const InputError error = load_error(model_uri);
+  EXPECT_CONTAINS(error.what(), "use a path relative to the scene file's folder");
+}
+
+}  // namespace
