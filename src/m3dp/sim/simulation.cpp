@@ -47,9 +47,10 @@ std::vector<Vec3> lattice_in_box(const Aabb& box, Real spacing) {
 
 Simulation::Simulation(const scene::Scene& scene) : scene_(scene), solver_(make_solver_parameters(scene)) {
   const Real spacing = solver_.particle_diameter();
+  const Real wall_spacing = scene_.solver.boundary_spacing_factor * spacing;
   for (const auto& body : scene_.bodies) {
     for (const auto& collision : body.collisions) {
-      const sph::SurfaceSamples samples = sph::sample_shape_surface(collision.shape, spacing, -scene_.solver.particle_radius);
+      const sph::SurfaceSamples samples = sph::sample_shape_surface(collision.shape, wall_spacing, -scene_.solver.particle_radius);
       solver_.add_body(collision.name, samples.points, collision.pose, true);
     }
   }

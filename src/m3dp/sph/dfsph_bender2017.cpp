@@ -127,6 +127,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
   const Real rest_density = rest_density_of(parameters);
   const SolverView view = view_of(state, rest_density);
   auto& fluid = state.fluid;
+  const Real boundary_neighbor_weight = parameters.settings.boundary_spacing_factor * parameters.settings.boundary_spacing_factor;
   return with_kernel(parameters.settings.kernel,
                      parameters.settings.support_radius_factor * parameters.settings.particle_radius,
                      [&](const auto& kernel) {
@@ -154,8 +155,12 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                fluid.density[i] = density_ratio * rest_density;
                                const Real denominator = gradient_sum.squaredNorm() + gradient_squares;
                                fluid.dfsph_factor[i] = denominator > kFactorEpsilon ? Real(1) / denominator : Real(0);
-                               fluid.neighbor_count[i] = static_cast<std::uint16_t>(
-                                   std::min<std::size_t>(65535, state.fluid_neighbors.counts[i] + state.boundary_neighbors.counts[i]));
+                               // Boundary neighbours counted as the fluid particles they stand for: a wall
+                               // layer is sampled finer than the fluid (a sheet: count ∝ 1/spacing²), and a
+                               // free-surface particle at a wall must still count as at the surface.
+                               fluid.neighbor_count[i] = static_cast<std::uint16_t>(std::min<Real>(
+                                   65535, Real(state.fluid_neighbors.counts[i]) + boundary_neighbor_weight *
+                                                                                     Real(state.boundary_neighbors.counts[i])));
                                max_error = std::max(max_error, density_ratio - Real(1));
                              }
                              return max_error;
@@ -190,7 +195,7 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
     };
 
     if (settings.warm_start) {
-      // Half of last step's κ as the initial guess (Bender & Koschier 2017, Sec. 4.4).
+      // Half of last step's κ as the initial guess, where the flow diverges now (as the density solve).
       update_divergence();
       parallel_for_each_index(count, [&](std::size_t i) {
         view.kappa[i] = view.density_advected[i] > Real(0) ? Real(0.5) * kappa_total[i] : Real(0);
@@ -243,12 +248,13 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
     };
 
     if (settings.warm_start) {
-      // The whole pressure of the last step, where the particle is compressed now: at rest that is the
-      // hydrostatic pressure, which then needs no iterations to rebuild (as in the reference
-      // implementation; the divergence solve takes half).
+      // Half of last step's pressure, where the particle is compressed now (Bender & Koschier 2017,
+      // Sec. 4.4). Not the whole: the solver only pushes (ρ* is clamped at ρ0), so an initial guess
+      // that overshoots can never be taken back, and with the whole pressure a settling column
+      // gains energy at large time steps.
       update_predicted_density();
       parallel_for_each_index(count, [&](std::size_t i) {
-        view.kappa[i] = view.density_advected[i] > Real(1) ? kappa_total[i] : Real(0);
+        view.kappa[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
         kappa_total[i] = view.kappa[i];
       });
       apply_pressure_velocity_update(kernel, view, state, time_step);

@@ -21,7 +21,7 @@ struct FluidParticles {
   std::vector<Real> kappa_density;       // (n) Σκ of the density solve (m²/s², κ = ρ0 p/ρ²): warm start, pressure
   std::vector<Real> kappa_divergence;    // (n) Σκ of the divergence solve (m²/s²)
   std::vector<std::uint16_t> phase;      // (n) index into Parameters::phases
-  std::vector<std::uint16_t> neighbor_count;  // (n) fluid + boundary neighbours this step
+  std::vector<std::uint16_t> neighbor_count;  // (n) fluid neighbours + boundary ones weighted as fluid, this step
   std::vector<std::uint64_t> id;         // (n) stable id for tracking across reorders
   std::vector<Real> birth_time;          // (n) s, simulated time the particle appeared
 

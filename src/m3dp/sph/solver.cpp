@@ -49,36 +49,36 @@ NozzleGeometry make_nozzle_geometry(const NozzleSettings& nozzle, Real spacing) 
 /// the first pressure solves push violently. This factor scales the boundary volumes so that a
 /// cubic-lattice fluid at one spacing from a square-lattice wall is exactly at rest density.
 /// Computed once from the kernel, with the same sums the solver uses.
-/// Boundary share Σ_b V_b W at a distance of half a spacing from a flat one-layer wall with scaled
-/// volumes: the value a particle centre has on the geometric surface (the layer lies a radius behind it).
-Real boundary_share_at_surface(KernelType type, Real support_radius, Real spacing, Real volume_scale) {
+/// Σ_b V_b W over a flat square-lattice wall layer (spacing `wall_spacing`, Akinci volumes
+/// V_b = 1 / Σ_in-plane W) at `distance` from the layer.
+Real wall_share(KernelType type, Real support_radius, Real wall_spacing, Real distance) {
   return with_kernel(type, support_radius, [&](const auto& kernel) {
-    const int reach = static_cast<int>(std::ceil(support_radius / spacing)) + 1;
+    const int reach = static_cast<int>(std::ceil(support_radius / wall_spacing)) + 1;
     double in_plane = 0, share = 0;
     for (int i = -reach; i <= reach; ++i)
       for (int j = -reach; j <= reach; ++j) {
-        in_plane += kernel.W(Vec3(i * spacing, j * spacing, 0).norm());
-        share += kernel.W(Vec3(i * spacing, j * spacing, spacing / 2).norm());
+        in_plane += kernel.W(Vec3(i * wall_spacing, j * wall_spacing, 0).norm());
+        share += kernel.W(Vec3(i * wall_spacing, j * wall_spacing, distance).norm());
       }
-    return static_cast<Real>(volume_scale * share / in_plane);
+    return static_cast<Real>(share / in_plane);
   });
 }
 
-Real calibrated_boundary_volume_scale(KernelType type, Real support_radius, Real spacing) {
-  return with_kernel(type, support_radius, [&](const auto& kernel) {
-    const int reach = static_cast<int>(std::ceil(support_radius / spacing)) + 1;
-    double in_plane = 0, wall = 0, fluid = 0;
+/// Akinci 2012 volumes make a one-layer wall contribute more density than the fluid it replaces:
+/// a particle resting one spacing in front of a flat wall would sit several per cent over rest
+/// density, so every fluid block would start compressed where it touches a wall and the first
+/// pressure solves push violently. This factor scales the boundary volumes so that a cubic-lattice
+/// fluid (spacing d) one spacing from the wall layer is exactly at rest density.
+Real calibrated_boundary_volume_scale(KernelType type, Real support_radius, Real fluid_spacing, Real wall_spacing) {
+  const double fluid_share = with_kernel(type, support_radius, [&](const auto& kernel) {
+    const int reach = static_cast<int>(std::ceil(support_radius / fluid_spacing)) + 1;
+    double sum = 0;
     for (int i = -reach; i <= reach; ++i)
-      for (int j = -reach; j <= reach; ++j) {
-        in_plane += kernel.W(Vec3(i * spacing, j * spacing, 0).norm());
-        wall += kernel.W(Vec3(i * spacing, j * spacing, spacing).norm());
-        for (int k = 0; k <= reach; ++k) fluid += kernel.W(Vec3(i * spacing, j * spacing, k * spacing).norm());
-      }
-    const double particle_volume = std::pow(static_cast<double>(spacing), 3);
-    const double wall_share = wall / in_plane;          // Σ_b V_b W with V_b = 1 / Σ_in-plane W
-    const double fluid_share = fluid * particle_volume;  // the half-lattice on the particle's side
-    return static_cast<Real>((1.0 - fluid_share) / wall_share);
+      for (int j = -reach; j <= reach; ++j)
+        for (int k = 0; k <= reach; ++k) sum += kernel.W(Vec3(i * fluid_spacing, j * fluid_spacing, k * fluid_spacing).norm());
+    return sum * std::pow(static_cast<double>(fluid_spacing), 3);  // the half-lattice on the particle's side
   });
+  return static_cast<Real>((1.0 - fluid_share) / wall_share(type, support_radius, wall_spacing, fluid_spacing));
 }
 
 }  // namespace
@@ -98,9 +98,12 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
     nozzle_geometry_.push_back(make_nozzle_geometry(nozzle, particle_diameter()));
   }
   state_.nozzles.resize(parameters_.nozzles.size());
-  boundary_volume_scale_ = calibrated_boundary_volume_scale(settings.kernel, support_radius(), particle_diameter());
+  const Real wall_spacing = settings.boundary_spacing_factor * particle_diameter();
+  boundary_volume_scale_ = calibrated_boundary_volume_scale(settings.kernel, support_radius(), particle_diameter(), wall_spacing);
+  // A centre on the geometric surface is a radius from the layer; the limit sits a tenth of a radius
+  // in front of it, so that rounding never leaves a centre on the wrong side.
   boundary_share_at_surface_ =
-      boundary_share_at_surface(settings.kernel, support_radius(), particle_diameter(), boundary_volume_scale_);
+      boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
   state_.time_step = settings.max_time_step;
 }
 
@@ -265,6 +268,11 @@ const StepStats& Solver::step() {
   for (const auto& phase : parameters_.phases)
     max_viscosity = std::max({max_viscosity, phase.kinematic_viscosity, phase.boundary_kinematic_viscosity});
   if (max_viscosity > 0) time_step = std::min(time_step, Real(0.1) * diameter * diameter / max_viscosity);
+  // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
+  // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
+  // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
+  const Real gravity_norm = settings.gravity.norm();
+  if (gravity_norm > 0) time_step = std::min(time_step, std::sqrt(diameter / (50 * gravity_norm)));
   time_step = std::max(time_step, settings.min_time_step);
   state_.time_step = time_step;
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.velocity[i] += time_step * state_.fluid.acceleration[i]; }, 1024);
@@ -457,26 +465,45 @@ void Solver::keep_out_of_boundaries() {
   const auto& boundary = state_.boundary;
   const Real surface_share = boundary_share_at_surface_;
   with_kernel(parameters_.settings.kernel, support_radius(), [&](const auto& kernel) {
-    parallel_for_each_index(fluid.size(), [&](std::size_t i) {
-      const Vec3 position = fluid.position[i];
-      Real share = 0, weight_sum = 0;
-      Vec3 gradient = Vec3::Zero(), wall_velocity = Vec3::Zero();
-      for (const Index b : state_.boundary_neighbors.of(i)) {
-        const Vec3 r = position - boundary.position[b];
-        const Real weight = boundary.volume[b] * kernel.W(r.norm());
-        share += weight;
-        gradient += boundary.volume[b] * kernel.gradW(r);
-        wall_velocity += weight * boundary.velocity[b];
-        weight_sum += weight;
+    const Real inverse_time_step = Real(1) / state_.time_step;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 256), [&](const tbb::blocked_range<std::size_t>& range) {
+     std::vector<Wrench>& wrenches = stages::thread_body_wrenches(state_);
+     for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      // A few Newton steps: one lands short where the share is curved (edges, corners).
+      for (int iteration = 0; iteration < 3; ++iteration) {
+        const Vec3 position = fluid.position[i];
+        Real share = 0, weight_sum = 0, nearest_weight = 0;
+        Index nearest = 0;
+        Vec3 gradient = Vec3::Zero(), wall_velocity = Vec3::Zero();
+        for (const Index b : state_.boundary_neighbors.of(i)) {
+          const Vec3 r = position - boundary.position[b];
+          const Real weight = boundary.volume[b] * kernel.W(r.norm());
+          if (weight > nearest_weight) {
+            nearest_weight = weight;
+            nearest = b;
+          }
+          share += weight;
+          gradient += boundary.volume[b] * kernel.gradW(r);
+          wall_velocity += weight * boundary.velocity[b];
+          weight_sum += weight;
+        }
+        const Real gradient_squared = gradient.squaredNorm();
+        if (share <= surface_share || gradient_squared <= 0) break;
+        fluid.position[i] = position - ((share - surface_share) / gradient_squared) * gradient;
+        const Vec3 away = -gradient / std::sqrt(gradient_squared);
+        const Vec3 relative = fluid.velocity[i] - wall_velocity / weight_sum;
+        const Real into_wall = relative.dot(away);
+        if (into_wall < 0) {
+          fluid.velocity[i] -= into_wall * away;
+          // The wall took that momentum: count it in the body's force like the pressure forces.
+          const Vec3 force = fluid.mass[i] * into_wall * away * inverse_time_step;
+          Wrench& wrench = wrenches[boundary.body[nearest]];
+          wrench.force += force;
+          wrench.torque += (boundary.position[nearest] - state_.bodies[boundary.body[nearest]].pose.position).cross(force);
+        }
       }
-      const Real gradient_squared = gradient.squaredNorm();
-      if (share <= surface_share || gradient_squared <= 0) return;
-      fluid.position[i] = position - ((share - surface_share) / gradient_squared) * gradient;
-      const Vec3 away = -gradient / std::sqrt(gradient_squared);
-      const Vec3 relative = fluid.velocity[i] - wall_velocity / weight_sum;
-      const Real into_wall = relative.dot(away);
-      if (into_wall < 0) fluid.velocity[i] -= into_wall * away;
-    }, 256);
+     }
+    });
   });
 }
 
