@@ -30,8 +30,8 @@ struct SolverSettings {
   Real particle_radius = Real(0.01);          // m; rest spacing is 2 × radius
   KernelType kernel = KernelType::cubic_spline;
   Real support_radius_factor = 4;             // support radius = factor × particle radius
-  Real boundary_spacing_factor = Real(0.5);   // boundary particle spacing = factor × diameter; denser than
-                                              // the fluid so a wall acts as a surface, not a lattice of pairs
+  Real boundary_spacing_factor = Real(1.0);   // boundary particle spacing = factor × diameter (volumes and
+                                              // the wall calibration follow it; 0.5 gives smoother walls)
   Vec3 gravity = Vec3(0, 0, Real(-9.81));     // m/s²
   Real cfl_factor = Real(0.5);                // dt = cfl · 0.4 · diameter / v_max
   Real min_time_step = Real(1e-5);            // s
