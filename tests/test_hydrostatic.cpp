@@ -109,7 +109,7 @@ TEST_F(Hydrostatic, PressureProfileIsHydrostatic) {
     worst = std::max(worst, std::abs(error));
     ++checked;
   }
-  // VALIDATION.md asks for 5 %. The time-averaged κ pressure is 2–10 % high below mid-depth (highest
+  // VALIDATION.md asks for 5 %. The time-averaged κ pressure is up to ~9 % high below mid-depth (highest
   // one layer above the floor) while the force on the tank matches the weight to 0.2 %: the reported
   // pressure, not the momentum balance, is off. Until that is understood this guards the current
   // state against regressions and prints how far the target is.
