@@ -301,13 +301,11 @@ void Solver::update_bodies() {
   auto& boundary = state_.boundary;
   for (const auto& body : state_.bodies) {
     if (body.is_static) continue;
-    const Index end = body.first_particle + body.particle_count;
     parallel_for_each_index(body.particle_count, [&](std::size_t k) {
       const Index b = body.first_particle + static_cast<Index>(k);
       boundary.position[b] = body.pose.apply(boundary.local_position[b]);
       boundary.velocity[b] = body.linear_velocity + body.angular_velocity.cross(boundary.position[b] - body.pose.position);
     }, 1024);
-    (void)end;
     state_.boundary_grid_dirty = true;
   }
 }
@@ -459,20 +457,20 @@ void Solver::keep_out_of_boundaries() {
   // Pressure alone does not stop a lone, fast particle (a splash has too few fluid neighbours to
   // be over-dense at a wall), so a particle whose centre has crossed a geometric surface is moved
   // back onto it and loses its velocity into the wall. The crossing is read from the boundary share
-  // Σ_b V_b W, which grows monotonically towards a wall: one Newton step along its gradient, which
-  // works the same for any shape, edge or corner.
+  // Σ_b V_b W, which grows monotonically towards a wall: Newton steps along its gradient, which
+  // work the same for any shape, edge or corner.
   auto& fluid = state_.fluid;
   const auto& boundary = state_.boundary;
   const Real surface_share = boundary_share_at_surface_;
   with_kernel(parameters_.settings.kernel, support_radius(), [&](const auto& kernel) {
     const Real inverse_time_step = Real(1) / state_.time_step;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 256), [&](const tbb::blocked_range<std::size_t>& range) {
-     std::vector<Wrench>& wrenches = stages::thread_body_wrenches(state_);
-     for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      std::vector<Wrench>& wrenches = stages::thread_body_wrenches(state_);
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
       // A few Newton steps: one lands short where the share is curved (edges, corners).
       for (int iteration = 0; iteration < 3; ++iteration) {
         const Vec3 position = fluid.position[i];
-        Real share = 0, weight_sum = 0, nearest_weight = 0;
+        Real share = 0, nearest_weight = 0;
         Index nearest = 0;
         Vec3 gradient = Vec3::Zero(), wall_velocity = Vec3::Zero();
         for (const Index b : state_.boundary_neighbors.of(i)) {
@@ -485,13 +483,12 @@ void Solver::keep_out_of_boundaries() {
           share += weight;
           gradient += boundary.volume[b] * kernel.gradW(r);
           wall_velocity += weight * boundary.velocity[b];
-          weight_sum += weight;
         }
         const Real gradient_squared = gradient.squaredNorm();
         if (share <= surface_share || gradient_squared <= 0) break;
         fluid.position[i] = position - ((share - surface_share) / gradient_squared) * gradient;
         const Vec3 away = -gradient / std::sqrt(gradient_squared);
-        const Vec3 relative = fluid.velocity[i] - wall_velocity / weight_sum;
+        const Vec3 relative = fluid.velocity[i] - wall_velocity / share;  // share-weighted wall velocity
         const Real into_wall = relative.dot(away);
         if (into_wall < 0) {
           fluid.velocity[i] -= into_wall * away;
@@ -502,7 +499,7 @@ void Solver::keep_out_of_boundaries() {
           wrench.torque += (boundary.position[nearest] - state_.bodies[boundary.body[nearest]].pose.position).cross(force);
         }
       }
-     }
+      }
     });
   });
 }
