@@ -26,30 +26,49 @@ constexpr Real kFactorEpsilon = Real(1e-12);
 // (the surface would otherwise be pulled inwards), as in the reference implementation.
 constexpr int kMinNeighborsForDivergence = 20;
 
+/// Raw pointers of everything the solver sweeps touch; built once per solve.
 struct SolverView {
   const Vec3* position;
   Vec3* velocity;
-  const Real* mass;
   const Real* density;
   const Real* factor;
   Real* density_advected;
   Real* kappa;
   const Vec3* boundary_position;
   const Vec3* boundary_velocity;
-  const Real* boundary_volume;
   const Index* boundary_body;
   const std::uint16_t* neighbor_count;
-  Real inverse_rest_density;
+  const Index* fluid_neighbor;           // fluid lists, stride fluid_stride
+  const Index* fluid_neighbor_count;
+  const Real* fluid_pair_gradient;       // V_j (dW/dr)/r per slot
+  Index fluid_stride;
+  const Index* boundary_neighbor;
+  const Index* boundary_neighbor_count;
+  const Real* boundary_pair_gradient;
+  Index boundary_stride;
 };
 
-SolverView view_of(State& state, Real rest_density) {
+SolverView view_of(State& state) {
   auto& fluid = state.fluid;
   auto& boundary = state.boundary;
-  return SolverView{fluid.position.data(),        fluid.velocity.data(),  fluid.mass.data(),
-                    fluid.density.data(),         fluid.dfsph_factor.data(), fluid.density_advected.data(),
-                    state.kappa.data(),           boundary.position.data(), boundary.velocity.data(),
-                    boundary.volume.data(),       boundary.body.data(),     fluid.neighbor_count.data(),
-                    Real(1) / rest_density};
+  return SolverView{fluid.position.data(),
+                    fluid.velocity.data(),
+                    fluid.density.data(),
+                    fluid.dfsph_factor.data(),
+                    fluid.density_advected.data(),
+                    state.kappa.data(),
+                    boundary.position.data(),
+                    boundary.velocity.data(),
+                    boundary.body.data(),
+                    fluid.neighbor_count.data(),
+                    state.fluid_neighbors.indices.data(),
+                    state.fluid_neighbors.counts.data(),
+                    state.fluid_pair_gradient.data(),
+                    state.fluid_neighbors.stride,
+                    state.boundary_neighbors.indices.data(),
+                    state.boundary_neighbors.counts.data(),
+                    state.boundary_pair_gradient.data(),
+                    state.boundary_neighbors.stride};
 }
 
 Real rest_density_of(const Parameters& parameters) { return parameters.phases.front().rest_density; }
@@ -60,38 +79,48 @@ void for_each_particle_range(std::size_t count, Body&& body) {
 }
 
 /// Σ_j V_j (v_i − v_j)·∇W_ij + Σ_b V_b (v_i − v_b)·∇W_ib: the rate of change of ρ_i/ρ0 (1/s), with minus sign.
-template <class Kernel>
-Real density_change_rate(const Kernel& kernel, const SolverView& view, const State& state, std::size_t i) {
+Real density_change_rate(const SolverView& view, std::size_t i) {
   const Vec3 position_i = view.position[i];
   const Vec3 velocity_i = view.velocity[i];
   Real rate = 0;
-  for (const Index j : state.fluid_neighbors.of(i))
-    rate += view.mass[j] * view.inverse_rest_density * (velocity_i - view.velocity[j]).dot(kernel.gradW(position_i - view.position[j]));
-  for (const Index b : state.boundary_neighbors.of(i))
-    rate += view.boundary_volume[b] *
-            (velocity_i - view.boundary_velocity[b]).dot(kernel.gradW(position_i - view.boundary_position[b]));
+  const std::size_t fluid_first = i * view.fluid_stride;
+  const Index fluid_count = view.fluid_neighbor_count[i];
+  for (Index k = 0; k < fluid_count; ++k) {
+    const Index j = view.fluid_neighbor[fluid_first + k];
+    rate += view.fluid_pair_gradient[fluid_first + k] * (velocity_i - view.velocity[j]).dot(position_i - view.position[j]);
+  }
+  const std::size_t boundary_first = i * view.boundary_stride;
+  const Index boundary_count = view.boundary_neighbor_count[i];
+  for (Index k = 0; k < boundary_count; ++k) {
+    const Index b = view.boundary_neighbor[boundary_first + k];
+    rate += view.boundary_pair_gradient[boundary_first + k] *
+            (velocity_i - view.boundary_velocity[b]).dot(position_i - view.boundary_position[b]);
+  }
   return rate;
 }
 
 /// One pressure velocity update with the κ in view.kappa; adds the reaction on the bodies.
-template <class Kernel>
-void apply_pressure_velocity_update(const Kernel& kernel, const SolverView& view, State& state, Real time_step) {
+void apply_pressure_velocity_update(const SolverView& view, State& state, Real time_step) {
   for_each_particle_range(state.fluid.size(), [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<Wrench>& wrenches = thread_body_wrenches(state);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Real kappa_i = view.kappa[i];
       const Vec3 position_i = view.position[i];
       Vec3 velocity_change = Vec3::Zero();
-      for (const Index j : state.fluid_neighbors.of(i)) {
-        const Real kappa_sum = kappa_i + view.kappa[j];
-        if (std::abs(kappa_sum) > kFactorEpsilon)
-          velocity_change -= (kappa_sum * view.mass[j] * view.inverse_rest_density) * kernel.gradW(position_i - view.position[j]);
+      const std::size_t fluid_first = i * view.fluid_stride;
+      const Index fluid_count = view.fluid_neighbor_count[i];
+      for (Index k = 0; k < fluid_count; ++k) {
+        const Index j = view.fluid_neighbor[fluid_first + k];
+        velocity_change -= ((kappa_i + view.kappa[j]) * view.fluid_pair_gradient[fluid_first + k]) * (position_i - view.position[j]);
       }
-      if (std::abs(kappa_i) > kFactorEpsilon) {
-        const Real mass_i = view.mass[i];
-        for (const Index b : state.boundary_neighbors.of(i)) {
+      if (kappa_i != 0) {
+        const Real mass_i = state.fluid.mass[i];
+        const std::size_t boundary_first = i * view.boundary_stride;
+        const Index boundary_count = view.boundary_neighbor_count[i];
+        for (Index k = 0; k < boundary_count; ++k) {
+          const Index b = view.boundary_neighbor[boundary_first + k];
           const Vec3 boundary_position = view.boundary_position[b];
-          const Vec3 change = -(kappa_i * view.boundary_volume[b]) * kernel.gradW(position_i - boundary_position);
+          const Vec3 change = -(kappa_i * view.boundary_pair_gradient[boundary_first + k]) * (position_i - boundary_position);
           velocity_change += change;
           // Reaction on the body: −m_i Δv_i / Δt, with Δv_i = Δt · change.
           const Vec3 force = -mass_i * change;
@@ -125,8 +154,13 @@ void collect_body_wrenches(State& state) {
 
 Real compute_density_and_factor(const Parameters& parameters, State& state) {
   const Real rest_density = rest_density_of(parameters);
-  const SolverView view = view_of(state, rest_density);
+  const Real inverse_rest_density = Real(1) / rest_density;
   auto& fluid = state.fluid;
+  const auto& boundary = state.boundary;
+  const auto& fluid_lists = state.fluid_neighbors;
+  const auto& boundary_lists = state.boundary_neighbors;
+  state.fluid_pair_gradient.resize(fluid_lists.indices.size());
+  state.boundary_pair_gradient.resize(boundary_lists.indices.size());
   const Real boundary_neighbor_weight = parameters.settings.boundary_spacing_factor * parameters.settings.boundary_spacing_factor;
   return with_kernel(parameters.settings.kernel,
                      parameters.settings.support_radius_factor * parameters.settings.particle_radius,
@@ -135,22 +169,32 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                            tbb::blocked_range<std::size_t>(0, fluid.size(), 128), Real(0),
                            [&](const tbb::blocked_range<std::size_t>& range, Real max_error) {
                              for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                               const Vec3 position_i = view.position[i];
-                               Real density_ratio = view.mass[i] * view.inverse_rest_density * kernel.W_zero();
+                               const Vec3 position_i = fluid.position[i];
+                               Real density_ratio = fluid.mass[i] * inverse_rest_density * kernel.W_zero();
                                Vec3 gradient_sum = Vec3::Zero();
                                Real gradient_squares = 0;
-                               for (const Index j : state.fluid_neighbors.of(i)) {
-                                 const Vec3 r = position_i - view.position[j];
-                                 const Real volume_j = view.mass[j] * view.inverse_rest_density;
-                                 density_ratio += volume_j * kernel.W(r.norm());
-                                 const Vec3 gradient = volume_j * kernel.gradW(r);
+                               const std::size_t fluid_first = i * fluid_lists.stride;
+                               for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+                                 const Index j = fluid_lists.indices[fluid_first + k];
+                                 const Vec3 r = position_i - fluid.position[j];
+                                 const Real distance = r.norm();
+                                 const Real volume_j = fluid.mass[j] * inverse_rest_density;
+                                 density_ratio += volume_j * kernel.W(distance);
+                                 const Real pair_gradient = volume_j * kernel.gradient_factor(distance);
+                                 state.fluid_pair_gradient[fluid_first + k] = pair_gradient;
+                                 const Vec3 gradient = pair_gradient * r;
                                  gradient_sum += gradient;
                                  gradient_squares += gradient.squaredNorm();
                                }
-                               for (const Index b : state.boundary_neighbors.of(i)) {
-                                 const Vec3 r = position_i - view.boundary_position[b];
-                                 density_ratio += view.boundary_volume[b] * kernel.W(r.norm());
-                                 gradient_sum += view.boundary_volume[b] * kernel.gradW(r);
+                               const std::size_t boundary_first = i * boundary_lists.stride;
+                               for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+                                 const Index b = boundary_lists.indices[boundary_first + k];
+                                 const Vec3 r = position_i - boundary.position[b];
+                                 const Real distance = r.norm();
+                                 density_ratio += boundary.volume[b] * kernel.W(distance);
+                                 const Real pair_gradient = boundary.volume[b] * kernel.gradient_factor(distance);
+                                 state.boundary_pair_gradient[boundary_first + k] = pair_gradient;
+                                 gradient_sum += pair_gradient * r;
                                }
                                fluid.density[i] = density_ratio * rest_density;
                                const Real denominator = gradient_sum.squaredNorm() + gradient_squares;
@@ -159,8 +203,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                // layer is sampled finer than the fluid (a sheet: count ∝ 1/spacing²), and a
                                // free-surface particle at a wall must still count as at the surface.
                                fluid.neighbor_count[i] = static_cast<std::uint16_t>(std::min<Real>(
-                                   65535, Real(state.fluid_neighbors.counts[i]) + boundary_neighbor_weight *
-                                                                                     Real(state.boundary_neighbors.counts[i])));
+                                   65535, Real(fluid_lists.counts[i]) + boundary_neighbor_weight * Real(boundary_lists.counts[i])));
                                max_error = std::max(max_error, density_ratio - Real(1));
                              }
                              return max_error;
@@ -173,18 +216,18 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
   const auto& settings = parameters.settings;
   const std::size_t count = state.fluid.size();
   if (count == 0) return 0;
-  const SolverView view = view_of(state, rest_density_of(parameters));
+  const SolverView view = view_of(state);
   const Real inverse_time_step = Real(1) / time_step;
   // Σ κ over this step's updates: a pressure (κ = ρ0 p / ρ²), so it carries over when Δt changes.
   auto& kappa_total = state.fluid.kappa_divergence;
 
-  return with_kernel(settings.kernel, settings.support_radius_factor * settings.particle_radius, [&](const auto& kernel) {
+  {
     auto update_divergence = [&]() {
       return tbb::parallel_deterministic_reduce(
           tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
           [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
             for (std::size_t i = range.begin(); i != range.end(); ++i) {
-              Real rate = density_change_rate(kernel, view, state, i);
+              Real rate = density_change_rate(view, i);
               rate = view.neighbor_count[i] < kMinNeighborsForDivergence ? Real(0) : std::max(rate, Real(0));
               view.density_advected[i] = rate;
               sum += rate;
@@ -201,7 +244,7 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
         view.kappa[i] = view.density_advected[i] > Real(0) ? Real(0.5) * kappa_total[i] : Real(0);
         kappa_total[i] = view.kappa[i];
       });
-      apply_pressure_velocity_update(kernel, view, state, time_step);
+      apply_pressure_velocity_update(view, state, time_step);
     } else {
       parallel_for_each_index(count, [&](std::size_t i) { kappa_total[i] = 0; });
     }
@@ -213,12 +256,12 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
         view.kappa[i] = view.density_advected[i] * view.factor[i] * inverse_time_step;
         kappa_total[i] += view.kappa[i];
       });
-      apply_pressure_velocity_update(kernel, view, state, time_step);
+      apply_pressure_velocity_update(view, state, time_step);
       mean_error = update_divergence() / Real(count) * time_step;
       ++iterations;
     }
     return iterations;
-  });
+  }
 }
 
 int solve_density(const Parameters& parameters, State& state, Real time_step, Real& mean_density_error) {
@@ -226,19 +269,19 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
   const std::size_t count = state.fluid.size();
   mean_density_error = 0;
   if (count == 0) return 0;
-  const SolverView view = view_of(state, rest_density_of(parameters));
+  const SolverView view = view_of(state);
   const Real inverse_time_step_squared = Real(1) / (time_step * time_step);
   auto& kappa_total = state.fluid.kappa_density;  // Σ κ over this step's updates (a pressure, see above)
   const Real rest_density = rest_density_of(parameters);
 
-  return with_kernel(settings.kernel, settings.support_radius_factor * settings.particle_radius, [&](const auto& kernel) {
+  {
     // ρ*/ρ0 = ρ/ρ0 + Δt · (rate of change), clamped at 1: the solver only pushes, never pulls (free surface).
     auto update_predicted_density = [&]() {
       return tbb::parallel_deterministic_reduce(
           tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
           [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
             for (std::size_t i = range.begin(); i != range.end(); ++i) {
-              const Real predicted = view.density[i] / rest_density + time_step * density_change_rate(kernel, view, state, i);
+              const Real predicted = view.density[i] / rest_density + time_step * density_change_rate(view, i);
               view.density_advected[i] = std::max(predicted, Real(1));
               sum += view.density_advected[i] - Real(1);
             }
@@ -257,7 +300,7 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
         view.kappa[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
         kappa_total[i] = view.kappa[i];
       });
-      apply_pressure_velocity_update(kernel, view, state, time_step);
+      apply_pressure_velocity_update(view, state, time_step);
     } else {
       parallel_for_each_index(count, [&](std::size_t i) { kappa_total[i] = 0; });
     }
@@ -270,12 +313,12 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
         view.kappa[i] = (view.density_advected[i] - Real(1)) * view.factor[i] * inverse_time_step_squared;
         kappa_total[i] += view.kappa[i];
       });
-      apply_pressure_velocity_update(kernel, view, state, time_step);
+      apply_pressure_velocity_update(view, state, time_step);
       mean_density_error = update_predicted_density() / Real(count);
       ++iterations;
     }
     return iterations;
-  });
+  }
 }
 
 }  // namespace m3dp::sph::stages

@@ -29,16 +29,18 @@ struct CubicSplineKernel {
   }
   [[nodiscard]] Real W_zero() const { return value_coefficient; }
 
-  /// ∇_i W(x_i − x_j) for r = x_i − x_j.
-  [[nodiscard]] Vec3 gradW(const Vec3& r) const {
-    const Real distance = r.norm();
+  /// (dW/dr) / r, so that ∇_i W(x_i − x_j) = gradient_factor(|r|) · r for r = x_i − x_j.
+  /// Solvers store it per neighbour pair once a step and rebuild ∇W from r without a square root.
+  [[nodiscard]] Real gradient_factor(Real distance) const {
     const Real q = distance / support_radius;
-    if (distance <= Real(1e-9) * support_radius || q > Real(1)) return Vec3::Zero();
-    const Vec3 grad_q = r / (distance * support_radius);
-    if (q <= Real(0.5)) return gradient_coefficient * q * (Real(3) * q - Real(2)) * grad_q;
+    if (q <= Real(0.5)) return gradient_coefficient * (Real(3) * q - Real(2)) / (support_radius * support_radius);
+    if (q > Real(1)) return 0;
     const Real one_minus_q = Real(1) - q;
-    return -gradient_coefficient * one_minus_q * one_minus_q * grad_q;
+    return -gradient_coefficient * one_minus_q * one_minus_q / (distance * support_radius);
   }
+
+  /// ∇_i W(x_i − x_j) for r = x_i − x_j.
+  [[nodiscard]] Vec3 gradW(const Vec3& r) const { return gradient_factor(r.norm()) * r; }
 };
 
 /// Wendland C2 (Wendland 1995; Dehnen & Aly 2012): smoother, no pairing instability.
@@ -61,13 +63,14 @@ struct WendlandC2Kernel {
   }
   [[nodiscard]] Real W_zero() const { return value_coefficient; }
 
-  [[nodiscard]] Vec3 gradW(const Vec3& r) const {
-    const Real distance = r.norm();
+  /// (dW/dr) / r, so that ∇_i W(x_i − x_j) = gradient_factor(|r|) · r.
+  [[nodiscard]] Real gradient_factor(Real distance) const {
     const Real q = distance / support_radius;
-    if (q >= Real(1)) return Vec3::Zero();
+    if (q >= Real(1)) return 0;
     const Real one_minus_q = Real(1) - q;
-    return gradient_coefficient * one_minus_q * one_minus_q * one_minus_q * r;
+    return gradient_coefficient * one_minus_q * one_minus_q * one_minus_q;
   }
+  [[nodiscard]] Vec3 gradW(const Vec3& r) const { return gradient_factor(r.norm()) * r; }
 };
 
 /// Calls `body(kernel)` with the concrete kernel type, so per-pair code is inlined (no per-pair dispatch).

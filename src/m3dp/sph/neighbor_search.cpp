@@ -1,10 +1,12 @@
 #include "m3dp/sph/neighbor_search.hpp"
 
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <atomic>
 #include <bit>
+#include <limits>
 
 #include "m3dp/core/parallel.hpp"
 
@@ -58,24 +60,55 @@ void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_pos
     if (out.indices.size() < needed) out.indices.resize(needed);
     std::atomic<Index> most_needed{0};
     const Index stride = out.stride;
-    parallel_for_each_index(query_count, [&](std::size_t i) {
-      const Vec3 query = query_positions[i];
-      Index* slots = out.indices.data() + i * stride;
-      Index count = 0;
-      grid.for_each_candidate(query, [&](Index j, const Vec3& position_j) {
-        if (exclude_same_index && j == i) return;
-        if ((query - position_j).squaredNorm() < radius_squared) {
-          if (count < stride) slots[count] = j;
-          ++count;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, query_count, 64), [&](const tbb::blocked_range<std::size_t>& range) {
+      NeighborLists::CandidateBuffer& buffer = out.candidate_buffers.local();
+      buffer.valid = false;  // the grid may have changed since this thread's last search
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const Vec3 query = query_positions[i];
+        const auto cell = grid.cell_of(query);
+        if (!buffer.valid || cell != buffer.cell) {
+          buffer.index.clear();
+          buffer.x.clear();
+          buffer.y.clear();
+          buffer.z.clear();
+          grid.for_each_point_around_cell(cell, [&](Index j, const Vec3& position_j) {
+            buffer.index.push_back(j);
+            buffer.x.push_back(position_j.x());
+            buffer.y.push_back(position_j.y());
+            buffer.z.push_back(position_j.z());
+          });
+          buffer.distance_squared.resize(buffer.index.size());
+          buffer.found.resize(buffer.index.size());
+          buffer.cell = cell;
+          buffer.valid = true;
         }
-      });
-      out.counts[i] = std::min(count, stride);
-      if (count > stride) {
-        Index previous = most_needed.load(std::memory_order_relaxed);
-        while (count > previous && !most_needed.compare_exchange_weak(previous, count)) {
+        const std::size_t candidate_count = buffer.index.size();
+        const Real* x = buffer.x.data();
+        const Real* y = buffer.y.data();
+        const Real* z = buffer.z.data();
+        Real* distance_squared = buffer.distance_squared.data();
+        for (std::size_t c = 0; c < candidate_count; ++c) {
+          const Real dx = query.x() - x[c], dy = query.y() - y[c], dz = query.z() - z[c];
+          distance_squared[c] = dx * dx + dy * dy + dz * dz;
+        }
+        // Branch-free compaction: about one candidate in seven is a neighbour, too irregular to predict.
+        const Index* candidate = buffer.index.data();
+        Index* found = buffer.found.data();
+        const Index self = exclude_same_index ? static_cast<Index>(i) : std::numeric_limits<Index>::max();
+        Index count = 0;
+        for (std::size_t c = 0; c < candidate_count; ++c) {
+          found[count] = candidate[c];
+          count += static_cast<Index>((distance_squared[c] < radius_squared) & (candidate[c] != self));
+        }
+        std::copy_n(found, std::min(count, stride), out.indices.data() + i * stride);
+        out.counts[i] = std::min(count, stride);
+        if (count > stride) {
+          Index previous = most_needed.load(std::memory_order_relaxed);
+          while (count > previous && !most_needed.compare_exchange_weak(previous, count)) {
+          }
         }
       }
-    }, 64);
+    });
     if (most_needed.load() == 0) break;
     // Rare: a denser region than ever before. Grow and redo this search.
     out.stride = most_needed.load() + 16;

@@ -8,6 +8,8 @@
 #include <span>
 #include <vector>
 
+#include <tbb/enumerable_thread_specific.h>
+
 #include "m3dp/core/types.hpp"
 
 namespace m3dp::sph {
@@ -18,6 +20,18 @@ struct NeighborLists {
   Index stride = 48;
   std::vector<Index> counts;
   std::vector<Index> indices;
+
+  /// Per-thread copy of the grid points around one cell: consecutive queries (Z-ordered) mostly
+  /// share a cell, so the 27 hashed buckets are gathered once per cell, not once per query.
+  struct CandidateBuffer {
+    std::array<std::int32_t, 3> cell{};
+    bool valid = false;
+    std::vector<Index> index;
+    std::vector<Real> x, y, z;          // positions as separate arrays: the distance loop vectorises
+    std::vector<Real> distance_squared;
+    std::vector<Index> found;            // candidates within the radius, before the copy into the list
+  };
+  tbb::enumerable_thread_specific<CandidateBuffer> candidate_buffers;
 
   [[nodiscard]] std::span<const Index> of(std::size_t particle) const {
     return {indices.data() + particle * stride, counts[particle]};
@@ -33,7 +47,12 @@ class SpatialHashGrid {
   /// Calls visit(point_index, point_position) for every point in the 27 cells around `query`
   /// (each point once, even where hashed cells collide).
   template <class Visit>
-  void for_each_candidate(const Vec3& query, Visit&& visit) const;
+  void for_each_candidate(const Vec3& query, Visit&& visit) const {
+    for_each_point_around_cell(cell_of(query), visit);
+  }
+  /// Calls visit(point_index, point_position) for every point in the 27 cells around `cell`.
+  template <class Visit>
+  void for_each_point_around_cell(const std::array<std::int32_t, 3>& cell, Visit&& visit) const;
 
   [[nodiscard]] Real cell_size() const { return cell_size_; }
   [[nodiscard]] std::size_t point_count() const { return sorted_index_.size(); }
@@ -69,9 +88,8 @@ std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z);
 
 // ---- template implementation ----
 template <class Visit>
-void SpatialHashGrid::for_each_candidate(const Vec3& query, Visit&& visit) const {
+void SpatialHashGrid::for_each_point_around_cell(const std::array<std::int32_t, 3>& cell, Visit&& visit) const {
   if (sorted_index_.empty()) return;
-  const auto cell = cell_of(query);
   std::uint32_t visited[27];
   int visited_count = 0;
   for (int dz = -1; dz <= 1; ++dz)

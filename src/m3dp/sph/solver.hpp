@@ -109,6 +109,12 @@ struct State {
   bool boundary_grid_dirty = true;
   NeighborLists fluid_neighbors;     // fluid → fluid
   NeighborLists boundary_neighbors;  // fluid → boundary
+  // Per neighbour pair (same slots as the lists), filled with the densities each step:
+  // V_j · (dW/dr)/r, so that V_j ∇W_ij = factor · (x_i − x_j). Positions do not move between the
+  // density pass and advection, so every solver sweep rebuilds V_j ∇W_ij from these without a
+  // square root or a branch. V_j = m_j/ρ0 for fluid, the Akinci volume for boundary particles.
+  std::vector<Real> fluid_pair_gradient;
+  std::vector<Real> boundary_pair_gradient;
 
   double time = 0;                   // s
   std::int64_t step = 0;

@@ -3,7 +3,7 @@
 // Using SPH", J. Comput. Phys. 136, 1997, in the form of Monaghan 2005 (eq. 6.19) used by SPlisHSPlasH:
 //   a_i += 2(d+2) ν Σ_j (m_j/ρ_j) (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij
 // ν is the kinematic viscosity (m²/s) = dynamic viscosity (Pa·s) / density. Explicit: the time
-// step is bounded by the viscous limit in Solver::step. Implicit viscosity comes with the materials issue.
+// step is bounded by the viscous limit in Solver::step. Uses the pair gradients of the density pass. Implicit viscosity comes with the materials issue.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -20,40 +20,46 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
   constexpr Real kDimensionFactor = 2 * (3 + 2);
   const Real rest_density = parameters.phases.front().rest_density;
 
-  with_kernel(settings.kernel, support_radius, [&](const auto& kernel) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 128), [&](const tbb::blocked_range<std::size_t>& range) {
-      std::vector<Wrench>& wrenches = thread_body_wrenches(state);
-      for (std::size_t i = range.begin(); i != range.end(); ++i) {
-        const FluidPhase& phase = parameters.phases[fluid.phase[i]];
-        const Vec3 position_i = fluid.position[i];
-        const Vec3 velocity_i = fluid.velocity[i];
-        Vec3 acceleration = settings.gravity;
-        if (phase.kinematic_viscosity > 0) {
-          Vec3 viscous = Vec3::Zero();
-          for (const Index j : state.fluid_neighbors.of(i)) {
-            const Vec3 r = position_i - fluid.position[j];
-            viscous += (fluid.mass[j] / fluid.density[j]) * (velocity_i - fluid.velocity[j]).dot(r) /
-                       (r.squaredNorm() + regularisation) * kernel.gradW(r);
-          }
-          acceleration += kDimensionFactor * phase.kinematic_viscosity * viscous;
+  // V_j ∇W_ij = pair_gradient · x_ij (filled with the densities this step), so
+  // (m_j/ρ_j) ∇W_ij = (ρ0/ρ_j) · pair_gradient · x_ij.
+  const auto& fluid_lists = state.fluid_neighbors;
+  const auto& boundary_lists = state.boundary_neighbors;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 128), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+      const Vec3 position_i = fluid.position[i];
+      const Vec3 velocity_i = fluid.velocity[i];
+      Vec3 acceleration = settings.gravity;
+      if (phase.kinematic_viscosity > 0) {
+        Vec3 viscous = Vec3::Zero();
+        const std::size_t first = i * fluid_lists.stride;
+        for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+          const Index j = fluid_lists.indices[first + k];
+          const Vec3 r = position_i - fluid.position[j];
+          viscous += (rest_density / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
+                     (velocity_i - fluid.velocity[j]).dot(r) / (r.squaredNorm() + regularisation) * r;
         }
-        if (phase.boundary_kinematic_viscosity > 0) {
-          const Real mass_i = fluid.mass[i];
-          for (const Index b : state.boundary_neighbors.of(i)) {
-            const Vec3 r = position_i - boundary.position[b];
-            const Vec3 a = kDimensionFactor * phase.boundary_kinematic_viscosity *
-                           (rest_density * boundary.volume[b] / fluid.density[i]) *
-                           (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * kernel.gradW(r);
-            acceleration += a;
-            const Vec3 force = -mass_i * a;
-            Wrench& wrench = wrenches[boundary.body[b]];
-            wrench.force += force;
-            wrench.torque += (boundary.position[b] - state.bodies[boundary.body[b]].pose.position).cross(force);
-          }
-        }
-        fluid.acceleration[i] = acceleration;
+        acceleration += kDimensionFactor * phase.kinematic_viscosity * viscous;
       }
-    });
+      if (phase.boundary_kinematic_viscosity > 0) {
+        const Real mass_i = fluid.mass[i];
+        const std::size_t first = i * boundary_lists.stride;
+        for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+          const Index b = boundary_lists.indices[first + k];
+          const Vec3 r = position_i - boundary.position[b];
+          const Vec3 a = kDimensionFactor * phase.boundary_kinematic_viscosity *
+                         (rest_density / fluid.density[i]) * state.boundary_pair_gradient[first + k] *
+                         (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * r;
+          acceleration += a;
+          const Vec3 force = -mass_i * a;
+          Wrench& wrench = wrenches[boundary.body[b]];
+          wrench.force += force;
+          wrench.torque += (boundary.position[b] - state.bodies[boundary.body[b]].pose.position).cross(force);
+        }
+      }
+      fluid.acceleration[i] = acceleration;
+    }
   });
 }
 
