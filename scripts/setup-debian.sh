@@ -7,6 +7,8 @@ packages=(
   build-essential cmake ninja-build ccache pkg-config
   libeigen3-dev libtbb-dev libfmt-dev libspdlog-dev libpugixml-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
+  # Surface reconstruction: OpenVDB sparse grids (its CMake config also needs Boost.Iostreams).
+  libopenvdb-dev libboost-iostreams-dev
   # ParaView's pvpython reads our .pvd/.vtu files back in the end-to-end test.
   paraview python3-paraview python3
 )

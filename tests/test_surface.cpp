@@ -1,0 +1,164 @@
+// Surface reconstruction: closed, outward meshes of the right size and shape for every method.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/surface/mesh_tools.hpp"
+#include "m3dp/surface/surface.hpp"
+
+using namespace m3dp;
+using namespace m3dp::surface;
+
+namespace {
+
+constexpr Real kRadius = Real(0.005);  // particle radius r (m); spacing 2r
+constexpr Real kSpacing = 2 * kRadius;
+
+/// Cubic-lattice particles (spacing 2r) whose centres lie inside a ball of radius R. The lattice
+/// is offset by half a spacing, as a block of particles fills space from its faces.
+std::vector<Vec3> ball(const Vec3& centre, Real ball_radius) {
+  std::vector<Vec3> points;
+  const int reach = static_cast<int>(std::ceil(ball_radius / kSpacing)) + 1;
+  for (int i = -reach; i <= reach; ++i)
+    for (int j = -reach; j <= reach; ++j)
+      for (int k = -reach; k <= reach; ++k) {
+        const Vec3 offset((i + Real(0.5)) * kSpacing, (j + Real(0.5)) * kSpacing, (k + Real(0.5)) * kSpacing);
+        if (offset.norm() < ball_radius) points.push_back(centre + offset);
+      }
+  return points;
+}
+
+/// A block of nx × ny × nz particles filling [0, n·2r] on each axis.
+std::vector<Vec3> block(int nx, int ny, int nz, const Vec3& corner = Vec3::Zero()) {
+  std::vector<Vec3> points;
+  for (int i = 0; i < nx; ++i)
+    for (int j = 0; j < ny; ++j)
+      for (int k = 0; k < nz; ++k)
+        points.push_back(corner + Vec3((i + Real(0.5)) * kSpacing, (j + Real(0.5)) * kSpacing, (k + Real(0.5)) * kSpacing));
+  return points;
+}
+
+SurfaceSettings settings_for(Method method) {
+  SurfaceSettings settings;
+  settings.method = method;
+  settings.particle_radius = kRadius;
+  return settings;
+}
+
+class EveryMethod : public ::testing::TestWithParam<Method> {};
+
+std::string name_of(const ::testing::TestParamInfo<Method>& info) { return std::string(method_name(info.param)); }
+
+}  // namespace
+
+TEST_P(EveryMethod, BallIsClosedOutwardAndOfTheRightSize) {
+  const Real ball_radius = 16 * kRadius;
+  const Vec3 centre(Real(0.3), Real(-0.2), Real(0.1));
+  const auto particles = ball(centre, ball_radius);
+  SurfaceStats stats;
+  const TriangleMesh mesh = reconstruct_surface(particles, settings_for(GetParam()), &stats);
+  ASSERT_FALSE(mesh.triangles.empty());
+
+  const double volume = signed_volume(mesh);
+  const double reference_volume = 4.0 / 3.0 * kPi * std::pow(ball_radius, 3);
+  const double area = surface_area(mesh);
+  const double reference_area = 4 * kPi * ball_radius * ball_radius;
+  const double volume_error = volume / reference_volume - 1;
+  const double area_error = area / reference_area - 1;
+  const EdgeReport edges = check_edges(mesh);
+  std::size_t inward = 0;
+  for (const auto& t : mesh.triangles) {
+    const Vec3 a = mesh.vertices[t[0]], b = mesh.vertices[t[1]], c = mesh.vertices[t[2]];
+    if ((b - a).cross(c - a).dot((a + b + c) / 3 - centre) < 0) ++inward;
+  }
+  std::printf("%s: %zu particles, %zu triangles, volume %+.2f %%, area %+.2f %%, %zu boundary / %zu non-manifold edges, "
+              "%zu inward triangles, %zu active voxels, %.3f s + %.3f s\n",
+              std::string(method_name(GetParam())).c_str(), particles.size(), mesh.triangles.size(), 100 * volume_error,
+              100 * area_error, edges.boundary_edges, edges.non_manifold_edges, inward, stats.active_voxels,
+              stats.field_seconds, stats.mesh_seconds);
+
+  EXPECT_TRUE(edges.watertight());
+  EXPECT_EQ(edges.inconsistent_edges, 0u);
+  EXPECT_EQ(connected_components(mesh), 1u);
+  if (GetParam() == Method::spherical) {
+    // A union of spheres is bumpy by design: its area is no measure of the ball's, and dimples
+    // between spheres face sideways. Its volume overshoots by the spheres' overlap past the face.
+    EXPECT_GT(volume_error, 0.0);
+    EXPECT_LT(volume_error, 0.10);
+    return;
+  }
+  EXPECT_EQ(inward, 0u);
+  // Issue 4: volume within 3 % and area within 5 % (asked of anisotropic and Zhu–Bridson; the blobby
+  // field meets it too).
+  EXPECT_LT(std::abs(volume_error), 0.03);
+  EXPECT_LT(std::abs(area_error), 0.05);
+}
+
+TEST(Surface, FlatSlabTopIsFlatAndInPlace) {
+  // 30 × 30 × 8 particles: the top face is at z = 8 · 2r. Vertices of the top face away from the
+  // edges should lie on it: rms deviation below 0.25 r (issue 4, anisotropic).
+  const auto particles = block(30, 30, 8);
+  const Real top = 8 * kSpacing;
+  for (const Method method : {Method::anisotropic, Method::sph_blobby, Method::zhu_bridson}) {
+    const TriangleMesh mesh = reconstruct_surface(particles, settings_for(method));
+    double squared = 0;
+    std::size_t count = 0;
+    for (const Vec3& v : mesh.vertices) {
+      if (v.x() < 8 * kSpacing || v.x() > 22 * kSpacing || v.y() < 8 * kSpacing || v.y() > 22 * kSpacing || v.z() < top / 2) continue;
+      squared += (v.z() - top) * (v.z() - top);
+      ++count;
+    }
+    ASSERT_GT(count, 100u);
+    const double rms_in_radii = std::sqrt(squared / count) / kRadius;
+    std::printf("%s: top face rms deviation %.3f r over %zu vertices (limit 0.25 r)\n", std::string(method_name(method)).c_str(),
+                rms_in_radii, count);
+    EXPECT_LT(rms_in_radii, 0.25) << method_name(method);
+  }
+}
+
+TEST(Surface, SeparateBlobsGiveSeparatePiecesAndAStrandStaysWhole) {
+  // Two blocks 6 spacings apart (beyond every kernel's reach) are two pieces...
+  std::vector<Vec3> particles = block(6, 6, 6);
+  const auto second = block(6, 6, 6, Vec3(12 * kSpacing, 0, 0));
+  particles.insert(particles.end(), second.begin(), second.end());
+  // ...and a printed strand, 2 × 2 particles across and 60 long, is one piece.
+  const auto strand = block(60, 2, 2);
+  for (const Method method : {Method::spherical, Method::sph_blobby, Method::zhu_bridson, Method::anisotropic}) {
+    const auto blobs = reconstruct_surface(particles, settings_for(method));
+    EXPECT_EQ(connected_components(blobs), 2u) << method_name(method);
+    EXPECT_TRUE(check_edges(blobs).watertight()) << method_name(method);
+    const auto strand_mesh = reconstruct_surface(strand, settings_for(method));
+    EXPECT_EQ(connected_components(strand_mesh), 1u) << method_name(method);
+    EXPECT_TRUE(check_edges(strand_mesh).watertight()) << method_name(method);
+    // A section two particles across comes out rounded (a circle in the 2r × 2r square would be
+    // −21 %), so only a collapse or a bloat is an error here.
+    const double strand_volume = 60 * 2 * 2 * std::pow(kSpacing, 3);
+    std::printf("%s: strand volume %+.1f %% of the particles'\n", std::string(method_name(method)).c_str(),
+                100 * (signed_volume(strand_mesh) / strand_volume - 1));
+    EXPECT_GT(signed_volume(strand_mesh) / strand_volume, 0.6) << method_name(method);
+    EXPECT_LT(signed_volume(strand_mesh) / strand_volume, 1.25) << method_name(method);
+  }
+}
+
+TEST(Surface, NoParticlesGiveAnEmptyMeshAndBadSettingsAnError) {
+  EXPECT_TRUE(reconstruct_surface({}, settings_for(Method::anisotropic)).triangles.empty());
+  SurfaceSettings bad = settings_for(Method::sph_blobby);
+  bad.particle_radius = 0;
+  const std::vector<Vec3> one{Vec3::Zero()};
+  EXPECT_THROW((void)reconstruct_surface(one, bad), Error);
+  bad.particle_radius = kRadius;
+  bad.iso_level = Real(1.5);
+  EXPECT_THROW((void)reconstruct_surface(one, bad), Error);
+}
+
+TEST(Surface, MethodNamesRoundTrip) {
+  for (const Method method : {Method::spherical, Method::sph_blobby, Method::zhu_bridson, Method::anisotropic})
+    EXPECT_EQ(parse_method(method_name(method)), method);
+  EXPECT_FALSE(parse_method("marching_squares").has_value());
+}
+
+INSTANTIATE_TEST_SUITE_P(Surface, EveryMethod,
+                         ::testing::Values(Method::spherical, Method::sph_blobby, Method::zhu_bridson, Method::anisotropic),
+                         name_of);
