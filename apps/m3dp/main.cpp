@@ -2,6 +2,7 @@
 //   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N]
 //   m3dp validate SCENE
 //   m3dp bench [--particles N] [--steps S] ...
+//   m3dp mesh INPUT -o OUT [--method M] ...
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
@@ -11,6 +12,7 @@
 #include <filesystem>
 
 #include "bench_command.hpp"
+#include "mesh_command.hpp"
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
@@ -87,11 +89,16 @@ int main(int argc, char** argv) {
   auto* bench = app.add_subcommand("bench", "Measure speed: a dam break at a given particle count");
   m3dp::app::add_bench_options(*bench, bench_options);
 
+  m3dp::app::MeshOptions mesh_options;
+  auto* mesh = app.add_subcommand("mesh", "Turn saved particle frames (.vtu/.ply, or a .pvd sequence) into surface meshes");
+  m3dp::app::add_mesh_options(*mesh, mesh_options);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run->parsed()) return run_command(scene_file, output, until, threads, quiet);
     if (validate->parsed()) return validate_command(validate_file);
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);
+    if (mesh->parsed()) return m3dp::app::mesh_command(mesh_options);
   } catch (const m3dp::InputError& error) {
     fmt::print(stderr, "{}\n", error.what());
     fmt::print(stderr, "m3dp: {} problem(s) found\n", error.diagnostics().size());

@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/io/atomic_file.hpp"
 
 namespace m3dp::io {
 
@@ -355,6 +356,96 @@ TriangleMesh read_triangle_mesh(const std::filesystem::path& file) {
   if (extension == ".stl") return read_stl(file);
   fail(file, 0,
        fmt::format("unsupported mesh file extension '{}'; expected .obj or .stl", file.extension().string()));
+}
+
+bool is_writable_mesh_extension(const std::filesystem::path& file) {
+  const std::string extension = lowercase(file.extension().string());
+  return extension == ".obj" || extension == ".ply" || extension == ".stl";
+}
+
+namespace {
+template <class T>
+void write_le(std::ostream& stream, T value) {
+  static_assert(std::endian::native == std::endian::little, "binary mesh writers assume a little-endian machine");
+  stream.write(reinterpret_cast<const char*>(&value), sizeof(T));
+}
+
+void write_obj(std::ostream& stream, const TriangleMesh& mesh) {
+  stream << "# M3DP surface mesh: " << mesh.vertices.size() << " vertices, " << mesh.triangles.size()
+         << " triangles, metres\n";
+  for (const Vec3& v : mesh.vertices) stream << fmt::format("v {:.9g} {:.9g} {:.9g}\n", v.x(), v.y(), v.z());
+  for (const auto& t : mesh.triangles) stream << fmt::format("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+}
+
+void write_ply(std::ostream& stream, const TriangleMesh& mesh) {
+  stream << "ply\nformat binary_little_endian 1.0\ncomment M3DP surface mesh, metres\n"
+         << "element vertex " << mesh.vertices.size() << "\nproperty float x\nproperty float y\nproperty float z\n"
+         << "element face " << mesh.triangles.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (const Vec3& v : mesh.vertices)
+    for (int k = 0; k < 3; ++k) write_le(stream, static_cast<float>(v[k]));
+  for (const auto& t : mesh.triangles) {
+    write_le(stream, std::uint8_t(3));
+    for (const Index index : t) write_le(stream, static_cast<std::int32_t>(index));
+  }
+}
+
+void write_binary_stl(std::ostream& stream, const TriangleMesh& mesh) {
+  std::string header = "M3DP surface mesh, metres";
+  header.resize(80, ' ');
+  stream.write(header.data(), 80);
+  write_le(stream, static_cast<std::uint32_t>(mesh.triangles.size()));
+  for (const auto& t : mesh.triangles) {
+    const Vec3 a = mesh.vertices[t[0]], b = mesh.vertices[t[1]], c = mesh.vertices[t[2]];
+    Vec3 normal = (b - a).cross(c - a);
+    if (normal.norm() > 0) normal.normalize();
+    for (const Vec3& v : {normal, a, b, c})
+      for (int k = 0; k < 3; ++k) write_le(stream, static_cast<float>(v[k]));
+    write_le(stream, std::uint16_t(0));
+  }
+}
+}  // namespace
+
+void write_triangle_mesh(const std::filesystem::path& file, const TriangleMesh& mesh) {
+  const std::string extension = lowercase(file.extension().string());
+  if (extension == ".obj") {
+    write_file_atomically(file, [&](std::ostream& stream) { write_obj(stream, mesh); });
+  } else if (extension == ".ply") {
+    write_file_atomically(file, [&](std::ostream& stream) { write_ply(stream, mesh); }, true);
+  } else if (extension == ".stl") {
+    write_file_atomically(file, [&](std::ostream& stream) { write_binary_stl(stream, mesh); }, true);
+  } else {
+    throw Error(fmt::format("{}: unsupported mesh file extension '{}'; expected .obj, .ply or .stl", file.string(),
+                            file.extension().string()));
+  }
+}
+
+void write_sdf_model(const std::filesystem::path& folder, const std::string& model_name, const TriangleMesh& mesh) {
+  std::filesystem::create_directories(folder / "meshes");
+  write_triangle_mesh(folder / "meshes" / (model_name + ".stl"), mesh);
+  const std::string uri = fmt::format("model://{}/meshes/{}.stl", model_name, model_name);
+  write_text_atomically(folder / "model.config", fmt::format(R"(<?xml version="1.0"?>
+<model>
+  <name>{0}</name>
+  <version>1.0</version>
+  <sdf version="1.9">model.sdf</sdf>
+  <description>Printed material reconstructed by M3DP ({1} triangles, metres).</description>
+</model>
+)", model_name, mesh.triangles.size()));
+  write_text_atomically(folder / "model.sdf", fmt::format(R"(<?xml version="1.0"?>
+<sdf version="1.9">
+  <model name="{0}">
+    <static>true</static>
+    <link name="surface">
+      <collision name="collision">
+        <geometry><mesh><uri>{1}</uri></mesh></geometry>
+      </collision>
+      <visual name="visual">
+        <geometry><mesh><uri>{1}</uri></mesh></geometry>
+      </visual>
+    </link>
+  </model>
+</sdf>
+)", model_name, uri));
 }
 
 }  // namespace m3dp::io

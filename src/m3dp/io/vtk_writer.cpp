@@ -27,7 +27,8 @@ PointArray PointArray::of(std::string name, std::span<const std::uint64_t> value
   return {std::move(name), "UInt64", 1, values.data(), sizeof(std::uint64_t)};
 }
 
-void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays) {
+void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays,
+               const std::vector<FieldValue>& field_data) {
   const std::uint64_t count = points.size();
   // Appended blocks: each is a UInt64 byte count followed by the bytes.
   struct Block {
@@ -54,6 +55,13 @@ void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, 
   header += "<?xml version=\"1.0\"?>\n";
   header += "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n";
   header += "  <UnstructuredGrid>\n";
+  if (!field_data.empty()) {
+    header += "    <FieldData>\n";
+    for (const auto& field : field_data)
+      header += fmt::format("      <DataArray type=\"Float64\" Name=\"{}\" NumberOfTuples=\"1\" format=\"ascii\">{:.17g}</DataArray>\n",
+                            field.name, field.value);
+    header += "    </FieldData>\n";
+  }
   header += fmt::format("    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n", count, count);
   header += "      <PointData>\n";
   for (const auto& array : arrays) {

@@ -25,8 +25,15 @@ struct PointArray {
   static PointArray of(std::string name, std::span<const std::uint64_t> values);
 };
 
+/// A single number stored with the whole dataset (VTK FieldData), e.g. the particle radius.
+struct FieldValue {
+  std::string name;
+  double value = 0;
+};
+
 /// Writes `points` and `arrays` (each with points.size() tuples) to `file`, atomically.
-void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays);
+void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays,
+               const std::vector<FieldValue>& field_data = {});
 
 /// A .pvd collection that is rewritten (atomically) each time a frame is added.
 class PvdCollection {

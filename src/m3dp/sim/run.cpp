@@ -35,7 +35,8 @@ class ParticleFrameWriter {
     io::write_vtu(file, fluid.position,
                   {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", fluid.density),
                    io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
-                   io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time)});
+                   io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time)},
+                  {{"particle_radius", solver.parameters().settings.particle_radius}, {"time", solver.time()}});
     collection_.add(solver.time(), file);
   }
   [[nodiscard]] std::size_t frames() const { return collection_.size(); }

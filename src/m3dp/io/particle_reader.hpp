@@ -1,0 +1,29 @@
+#pragma once
+// Reading particle frames back for offline work (m3dp mesh): VTK XML UnstructuredGrid / PolyData
+// (.vtu/.vtp, ASCII or raw appended, uncompressed), PLY point sets (ASCII or binary little-endian)
+// and ParaView collections (.pvd) of such files.
+#include <filesystem>
+#include <optional>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+
+namespace m3dp::io {
+
+struct ParticleFrame {
+  std::vector<Vec3> positions;          // m
+  std::optional<Real> particle_radius;  // m, from the file's FieldData "particle_radius" when present
+};
+
+/// Reads positions from a .vtu, .vtp or .ply file. Throws InputError naming the file (and line
+/// where there is one) for anything it cannot read, saying what it expected.
+ParticleFrame read_particle_frame(const std::filesystem::path& file);
+
+struct CollectionEntry {
+  double time = 0;                  // s
+  std::filesystem::path file;       // resolved against the .pvd's folder
+};
+/// The datasets of a ParaView .pvd collection in file order.
+std::vector<CollectionEntry> read_pvd(const std::filesystem::path& file);
+
+}  // namespace m3dp::io
