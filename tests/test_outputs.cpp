@@ -76,6 +76,40 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   fs::remove_all(directory);
 }
 
+TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  setup.end_time = 0.1;
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.output.write_particles = false;
+  scene.meshing.enabled = true;
+  scene.meshing.period = Real(0.04);
+  scene.meshing.format = "stl";
+  scene.meshing.surface.method = surface::Method::sph_blobby;
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("meshing");
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  const auto summary = sim::run_simulation(simulation, options);
+  ASSERT_EQ(summary.status, "completed");
+  EXPECT_TRUE(summary.error.empty()) << summary.error;
+
+  // Requested at 0.04 and 0.08 (either may be skipped while the mesher is busy), plus the final state.
+  EXPECT_EQ(summary.meshes_written + summary.meshes_skipped, 3u);
+  EXPECT_GE(summary.meshes_written, 2u);
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  ASSERT_EQ(json["meshes"].size(), summary.meshes_written);
+  const auto& last = json["meshes"].back();
+  EXPECT_NEAR(last["time_s"].get<double>(), summary.simulated_time, 1e-9);
+  EXPECT_EQ(last["particles"].get<std::size_t>(), summary.particles);
+  // The file is where the summary says, relative to the run folder, and holds the triangles it lists.
+  const fs::path file = directory / last["file"].get<std::string>();
+  ASSERT_TRUE(fs::exists(file)) << file;
+  EXPECT_EQ(fs::file_size(file), 84 + 50 * last["triangles"].get<std::uintmax_t>());  // binary STL
+  fs::remove_all(directory);
+}
+
 TEST(Outputs, StopRequestEndsCleanlyWithSummary) {
   sim::HydrostaticSetup setup;
   setup.particle_radius = Real(0.005);

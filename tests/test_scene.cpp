@@ -274,6 +274,24 @@ TEST(Scene, DynamicModelsAndIncludesAreNotSupportedYet) {
   EXPECT_CONTAINS(error.what(), location_of(text, "<include>") + " error: <include> is not supported yet");
 }
 
+TEST(Scene, MeshingBlockIsReadAndCheckedAtItsLine) {
+  std::string text = valid_scene();
+  text.replace(text.find("</plugin>\n  </world>"), 0,
+               "  <meshing><method>zhu_bridson</method><period unit=\"ms\">250</period><format>stl</format>"
+               "<voxel_size unit=\"mm\">2</voxel_size></meshing>\n    ");
+  const auto scene = load_scene_from_string(text, "meshing.sdf");
+  EXPECT_TRUE(scene.meshing.enabled);
+  EXPECT_EQ(scene.meshing.surface.method, m3dp::surface::Method::zhu_bridson);
+  EXPECT_NEAR(scene.meshing.period, 0.25, 1e-7);
+  EXPECT_EQ(scene.meshing.format, "stl");
+  EXPECT_NEAR(scene.meshing.surface.voxel_size, 0.002, 1e-9);
+
+  std::string bad = valid_scene();
+  bad.replace(bad.find("</plugin>\n  </world>"), 0, "  <meshing><method>marching_cubes</method></meshing>\n    ");
+  expect_error_at(bad, "<method>marching_cubes",
+                  "<method> must be one of: spherical, sph_blobby, zhu_bridson, anisotropic; got 'marching_cubes'");
+}
+
 TEST(Scene, MissingPlugin) {
   const std::string text = erased(valid_scene(), "<plugin name=\"m3dp\"", "</output>\n    </plugin>");
   expect_error_at(text, "<world", "missing <plugin name=\"m3dp\" filename=\"m3dp\">");

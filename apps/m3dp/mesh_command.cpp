@@ -29,7 +29,7 @@ void add_mesh_options(CLI::App& command, MeshOptions& options) {
   command.add_option("--particle-radius", options.particle_radius,
                      "Particle radius r in m (default: read from the file, as m3dp run writes it)")
       ->check(CLI::PositiveNumber);
-  command.add_option("--voxel-size", options.voxel_size, "Grid spacing in m (default r, or r/2 for spherical)")
+  command.add_option("--voxel-size", options.voxel_size, "Grid spacing in m (default r)")
       ->check(CLI::PositiveNumber);
   command.add_option("--kernel-radius", options.kernel_radius, "Kernel support in m (default 4 r)")->check(CLI::PositiveNumber);
   command.add_option("--sphere-radius", options.sphere_radius, "spherical: sphere radius in m (default 1.5 r)")

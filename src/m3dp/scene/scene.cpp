@@ -271,6 +271,7 @@ class SceneReader {
   std::optional<toolpath::Curve> read_curve(const pugi::xml_node& element);
   pugi::xml_node find_centre(const pugi::xml_node& curve);
   void read_output(const pugi::xml_node& output);
+  void read_meshing(const pugi::xml_node& meshing);
   void check_materials();
 
   const std::string& text_;
@@ -808,7 +809,7 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
 // ---- the m3dp plugin ----
 
 void SceneReader::read_plugin(const pugi::xml_node& plugin) {
-  check_children(plugin, {"solver", "material", "fluid_block", "print_head", "output"},
+  check_children(plugin, {"solver", "material", "fluid_block", "print_head", "output", "meshing"},
                  {"material", "fluid_block", "print_head"});
   // The solver comes first: other checks need the particle radius and the bounds.
   if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
@@ -816,6 +817,7 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
   for (const auto& block : child_elements(plugin, "fluid_block")) read_fluid_block(block);
   for (const auto& head : child_elements(plugin, "print_head")) read_print_head(head);
   if (const pugi::xml_node output = plugin.child("output")) read_output(output);
+  if (const pugi::xml_node meshing = plugin.child("meshing")) read_meshing(meshing);
 
   if (!plugin.child("fluid_block") && !plugin.child("print_head")) {
     report(plugin, "the scene has no fluid: add a <fluid_block> or a <print_head>");
@@ -1091,6 +1093,45 @@ void SceneReader::read_output(const pugi::xml_node& output) {
     scene_.output.particles_period = Real(*period);
   }
   if (const auto write = read_bool(output, "particles")) scene_.output.write_particles = *write;
+}
+
+void SceneReader::read_meshing(const pugi::xml_node& meshing) {
+  check_attributes(meshing, {});
+  check_children(meshing, {"method", "period", "format", "voxel_size", "kernel_radius", "iso_level", "smoothing_iterations"});
+  MeshingSettings& settings = scene_.meshing;
+  settings.enabled = true;
+  settings.where = where(meshing);
+  if (const pugi::xml_node method = meshing.child("method")) {
+    const std::string_view name = leaf_text(method, {});
+    if (const auto parsed = surface::parse_method(name)) {
+      settings.surface.method = *parsed;
+    } else {
+      report(method, fmt::format("<method> must be one of: {}; got '{}'", surface::method_names(), name));
+    }
+  }
+  if (const auto period = read_scalar(meshing, "period", Quantity::time, Limits::positive(), Presence::optional))
+    settings.period = Real(*period);
+  if (const pugi::xml_node format = meshing.child("format")) {
+    const std::string_view name = leaf_text(format, {});
+    if (name == "obj" || name == "ply" || name == "stl") {
+      settings.format = std::string(name);
+    } else {
+      report(format, fmt::format("<format> must be one of: obj, ply, stl; got '{}'", name));
+    }
+  }
+  if (const auto voxel = read_scalar(meshing, "voxel_size", Quantity::length, Limits::positive(), Presence::optional))
+    settings.surface.voxel_size = Real(*voxel);
+  if (const auto kernel = read_scalar(meshing, "kernel_radius", Quantity::length, Limits::positive(), Presence::optional))
+    settings.surface.kernel_radius = Real(*kernel);
+  if (const auto iso = read_scalar(meshing, "iso_level", Quantity::fraction, Limits{0.0, std::nullopt, std::nullopt},
+                                   Presence::optional)) {
+    if (*iso < 1) {
+      settings.surface.iso_level = Real(*iso);
+    } else {
+      report(meshing.child("iso_level"), fmt::format("<iso_level> must lie between 0 and 1 (a volume fraction); got {}", *iso));
+    }
+  }
+  if (const auto iterations = read_int(meshing, "smoothing_iterations", 0)) settings.surface.smoothing_iterations = *iterations;
 }
 
 void SceneReader::check_materials() {

@@ -10,6 +10,7 @@
 #include "m3dp/core/geometry.hpp"
 #include "m3dp/material/newtonian.hpp"
 #include "m3dp/sph/solver.hpp"
+#include "m3dp/surface/surface.hpp"
 #include "m3dp/toolpath/parametric.hpp"
 
 namespace m3dp::scene {
@@ -59,6 +60,16 @@ struct OutputSettings {
   bool write_particles = true;
 };
 
+/// Surface meshes made during the run (issue 4): every `period` seconds of simulated time the fluid
+/// is meshed on a worker thread and written to meshes/ (the solver does not wait for it).
+struct MeshingSettings {
+  bool enabled = false;
+  Real period = Real(0.5);                // s of simulated time between meshes
+  std::string format = "ply";            // obj, ply or stl
+  surface::SurfaceSettings surface;       // particle_radius filled from the solver
+  SourceLocation where;
+};
+
 struct Scene {
   std::filesystem::path file;   // the scene file as given
   std::string world_name;
@@ -69,6 +80,7 @@ struct Scene {
   std::vector<FluidBlock> fluid_blocks;
   std::vector<PrintHead> print_heads;
   OutputSettings output;
+  MeshingSettings meshing;
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
 };

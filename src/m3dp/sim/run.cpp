@@ -12,6 +12,7 @@
 #include "m3dp/core/progress.hpp"
 #include "m3dp/io/atomic_file.hpp"
 #include "m3dp/io/vtk_writer.hpp"
+#include "m3dp/sim/meshing_worker.hpp"
 #include "m3dp/sim/simulation.hpp"
 
 namespace m3dp::sim {
@@ -47,12 +48,20 @@ class ParticleFrameWriter {
   std::vector<Real> pressure_;
 };
 
-nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulation) {
+nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulation, const MeshingWorker* meshing) {
   nlohmann::json bodies = nlohmann::json::array();
   for (const auto& body : simulation.solver().bodies())
     bodies.push_back({{"name", body.name},
                       {"fluid_force_N", {body.fluid_force.x(), body.fluid_force.y(), body.fluid_force.z()}},
                       {"fluid_torque_Nm", {body.fluid_torque.x(), body.fluid_torque.y(), body.fluid_torque.z()}}});
+  nlohmann::json meshes = nlohmann::json::array();
+  if (meshing)
+    for (const auto& mesh : meshing->meshes())
+      meshes.push_back({{"time_s", mesh.time},
+                        {"file", std::filesystem::relative(mesh.file, std::filesystem::path(summary.output_directory)).generic_string()},
+                        {"particles", mesh.particles},
+                        {"triangles", mesh.triangles},
+                        {"seconds", mesh.seconds}});
   return {
       {"scene", simulation.scene().file.string()},
       {"status", summary.status},
@@ -76,6 +85,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"bodies", bodies},
+      {"meshes", meshes},
+      {"meshes_skipped", meshing ? meshing->skipped() : 0},
   };
 }
 
@@ -89,16 +100,24 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   RunSummary summary;
   const double end_time = options.until.value_or(simulation.scene().end_time);
   summary.end_time = end_time;
+  summary.output_directory = options.output_directory.string();
   summary.mass_initial = simulation.initial_fluid_mass();
   const bool writing = !options.output_directory.empty();
   const auto& output = simulation.scene().output;
 
   std::optional<ParticleFrameWriter> frames;
+  std::unique_ptr<MeshingWorker> meshing;
+  const auto& meshing_settings = simulation.scene().meshing;
   std::FILE* timing = nullptr;
   std::filesystem::path timing_partial, timing_final;
   if (writing) {
     std::filesystem::create_directories(options.output_directory);
     if (output.write_particles) frames.emplace(options.output_directory);
+    if (meshing_settings.enabled) {
+      surface::SurfaceSettings surface = meshing_settings.surface;
+      surface.particle_radius = simulation.solver().parameters().settings.particle_radius;
+      meshing = std::make_unique<MeshingWorker>(surface, options.output_directory / "meshes", meshing_settings.format);
+    }
     // The timing table grows during the run; it gets its real name only when complete.
     timing_final = options.output_directory / "timing.csv";
     timing_partial = options.output_directory / "timing.csv.partial";
@@ -127,6 +146,14 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
   };
 
+  double next_mesh_time = meshing_settings.period;
+  double last_meshed_time = -1;
+  auto mesh_if_due = [&]() {
+    if (!meshing || solver.time() + 1e-12 < next_mesh_time) return;
+    if (meshing->submit(solver.time(), solver.fluid().position)) last_meshed_time = solver.time();
+    while (next_mesh_time <= solver.time() + 1e-12) next_mesh_time += meshing_settings.period;
+  };
+
   summary.status = "completed";
   try {
     write_frame_if_due();
@@ -137,6 +164,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
       }
       const sph::StepStats& stats = simulation.step();
       const double output_ms = write_frame_if_due();
+      mesh_if_due();
       const std::size_t particles = solver.fluid().size();
       particle_steps += static_cast<double>(particles);
       density_iterations_sum += stats.density_iterations;
@@ -156,6 +184,17 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     summary.error = error.what();
   }
 
+  if (meshing) {
+    // The final state is always meshed (after the mesh in progress): nothing printed goes unmeshed.
+    meshing->wait_idle();
+    if (last_meshed_time < solver.time() && solver.fluid().size() > 0) {
+      meshing->submit(solver.time(), solver.fluid().position);
+      meshing->wait_idle();
+    }
+    summary.meshes_written = meshing->meshes().size();
+    summary.meshes_skipped = meshing->skipped();
+    if (!meshing->error().empty() && summary.error.empty()) summary.error = meshing->error();
+  }
   summary.wall_time = wall_seconds();
   summary.simulated_time = solver.time();
   summary.steps = solver.state().step;
@@ -177,7 +216,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   if (writing) {
     std::fclose(timing);
     std::filesystem::rename(timing_partial, timing_final);
-    io::write_text_atomically(options.output_directory / "summary.json", summary_json(summary, simulation).dump(2) + "\n");
+    io::write_text_atomically(options.output_directory / "summary.json", summary_json(summary, simulation, meshing.get()).dump(2) + "\n");
   }
   return summary;
 }
@@ -198,6 +237,9 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
   if (!output_directory.empty())
     text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
                         summary.frames_written);
+  if (summary.meshes_written + summary.meshes_skipped > 0)
+    text += fmt::format("  meshes      {} written to meshes/ ({} skipped while the mesher was busy)\n", summary.meshes_written,
+                        summary.meshes_skipped);
   return text;
 }
 

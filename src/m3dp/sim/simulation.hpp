@@ -59,7 +59,10 @@ struct RunSummary {
   double mean_density_iterations = 0;
   double mean_divergence_iterations = 0;
   std::size_t frames_written = 0;
+  std::size_t meshes_written = 0;    // surface meshes in meshes/ (scene <meshing>)
+  std::size_t meshes_skipped = 0;    // requests that came while the mesher was still busy
   double particle_steps_per_second = 0;
+  std::string output_directory;
 };
 
 /// Runs `simulation` to the end time (or until a stop request / failure), writing the run folder.

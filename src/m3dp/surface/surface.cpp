@@ -70,7 +70,7 @@ SurfaceSettings SurfaceSettings::resolved() const {
   if (smoothing_iterations < 0) throw Error("surface reconstruction: smoothing_iterations must be >= 0");
   SurfaceSettings out = *this;
   const Real r = particle_radius;
-  if (out.voxel_size == 0) out.voxel_size = method == Method::spherical ? r / 2 : r;
+  if (out.voxel_size == 0) out.voxel_size = r;
   if (out.kernel_radius == 0) out.kernel_radius = 4 * r;
   if (out.sphere_radius == 0) out.sphere_radius = Real(1.5) * r;
   if (out.anisotropy_neighborhood == 0) out.anisotropy_neighborhood = Real(1.5) * out.kernel_radius;

@@ -32,7 +32,7 @@ enum class Method { spherical, sph_blobby, zhu_bridson, anisotropic };
 struct SurfaceSettings {
   Method method = Method::anisotropic;
   Real particle_radius = 0;   // m, r: half the rest spacing of the particles (required)
-  Real voxel_size = 0;        // m, grid spacing of the field; 0 = r/2 (spherical) or r (others)
+  Real voxel_size = 0;        // m, grid spacing of the field; 0 = r (finer costs ~8x per halving)
   Real kernel_radius = 0;     // m, support of the field's kernel; 0 = 4 r (the SPH support)
   Real sphere_radius = 0;     // m, spherical: radius of each sphere; 0 = 1.5 r, the smallest
                               // round number that closes a lattice's faces (√2 r) so the union is solid

@@ -1,0 +1,66 @@
+#pragma once
+// Surface meshes during a run (issue 4): the run loop hands a copy of the particle positions to a
+// worker thread and steps on; the worker reconstructs the surface and writes meshes/mesh_NNNNNN.EXT.
+// While the worker is busy, a new request is skipped (and counted), never queued: the solver
+// does not wait, and meshes never fall further and further behind.
+#include <condition_variable>
+#include <filesystem>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "m3dp/core/geometry.hpp"
+#include "m3dp/surface/surface.hpp"
+
+namespace m3dp::sim {
+
+class MeshingWorker {
+ public:
+  struct Mesh {
+    double time = 0;                 // s, simulated time of the particles it was made from
+    std::filesystem::path file;
+    std::size_t particles = 0, triangles = 0;
+    double seconds = 0;              // wall time to reconstruct and write
+  };
+
+  /// `settings` must have the particle radius; `format` is obj, ply or stl.
+  MeshingWorker(surface::SurfaceSettings settings, std::filesystem::path folder, std::string format);
+  ~MeshingWorker();
+  MeshingWorker(const MeshingWorker&) = delete;
+  MeshingWorker& operator=(const MeshingWorker&) = delete;
+
+  /// Copies `positions` for a mesh at `time`. Returns false (and counts a skip) if the worker is busy.
+  bool submit(double time, std::span<const Vec3> positions);
+  /// Blocks until the worker is idle.
+  void wait_idle();
+
+  [[nodiscard]] std::vector<Mesh> meshes() const;
+  [[nodiscard]] std::size_t skipped() const;
+  /// The newest mesh (null before the first): for consumers such as the world's collision bodies.
+  [[nodiscard]] std::shared_ptr<const TriangleMesh> latest_mesh() const;
+  /// The first error the worker met (a mesh it could not write), empty if none.
+  [[nodiscard]] std::string error() const;
+
+ private:
+  void run();
+
+  surface::SurfaceSettings settings_;
+  std::filesystem::path folder_;
+  std::string format_;
+
+  mutable std::mutex mutex_;
+  std::condition_variable work_ready_, work_done_;
+  bool busy_ = false, stopping_ = false;
+  double pending_time_ = 0;
+  std::vector<Vec3> pending_positions_;   // filled by submit, swapped out by the worker
+  std::vector<Mesh> meshes_;
+  std::size_t skipped_ = 0;
+  std::shared_ptr<const TriangleMesh> latest_;
+  std::string error_;
+  std::thread thread_;                    // last: starts after every member above exists
+};
+
+}  // namespace m3dp::sim
