@@ -147,6 +147,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   };
 
   double next_mesh_time = meshing_settings.period;
+  std::shared_ptr<const TriangleMesh> inserted_mesh;
   double last_meshed_time = -1;
   auto mesh_if_due = [&]() {
     if (!meshing || solver.time() + 1e-12 < next_mesh_time) return;
@@ -165,6 +166,15 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
       const sph::StepStats& stats = simulation.step();
       const double output_ms = write_frame_if_due();
       mesh_if_due();
+      if (meshing) {
+        // The newest finished mesh joins the world as a collision body (replacing the previous one).
+        auto newest = meshing->latest_mesh();
+        if (newest && newest != inserted_mesh) {
+          simulation.set_printed_mesh(*newest);
+          inserted_mesh = std::move(newest);
+          ++summary.meshes_inserted;
+        }
+      }
       const std::size_t particles = solver.fluid().size();
       particle_steps += static_cast<double>(particles);
       density_iterations_sum += stats.density_iterations;

@@ -45,13 +45,15 @@ std::vector<Vec3> lattice_in_box(const Aabb& box, Real spacing) {
 }
 }  // namespace
 
-Simulation::Simulation(const scene::Scene& scene) : scene_(scene), solver_(make_solver_parameters(scene)) {
+Simulation::Simulation(const scene::Scene& scene)
+    : scene_(scene), solver_(make_solver_parameters(scene)), world_(world::WorldSettings{scene.solver.gravity}) {
   const Real spacing = solver_.particle_diameter();
   const Real wall_spacing = scene_.solver.boundary_spacing_factor * spacing;
   for (const auto& body : scene_.bodies) {
     for (const auto& collision : body.collisions) {
       const sph::SurfaceSamples samples = sph::sample_shape_surface(collision.shape, wall_spacing, -scene_.solver.particle_radius);
       solver_.add_body(collision.name, samples.points, collision.pose, true);
+      world_.add_static_shape(collision.name, collision.shape, collision.pose);
     }
   }
   std::size_t initial_particles = 0;
@@ -84,7 +86,11 @@ void Simulation::update_print_heads() {
 
 const sph::StepStats& Simulation::step() {
   update_print_heads();
-  return solver_.step();
+  const sph::StepStats& stats = solver_.step();
+  world_.step_to(solver_.time());
+  return stats;
 }
+
+void Simulation::set_printed_mesh(const TriangleMesh& mesh) { world_.set_static_mesh("printed_material", mesh); }
 
 }  // namespace m3dp::sim

@@ -9,6 +9,7 @@
 
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sph/solver.hpp"
+#include "m3dp/world/world.hpp"
 
 namespace m3dp::sim {
 
@@ -19,20 +20,28 @@ class Simulation {
  public:
   explicit Simulation(const scene::Scene& scene);
 
-  /// One step: print heads follow their paths, then the fluid advances (adaptive dt).
+  /// One step: print heads follow their paths, the fluid advances (adaptive dt), and the rigid
+  /// world is stepped to the same clock.
   const sph::StepStats& step();
+
+  /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
+  /// collision body "printed_material", replacing the previous one.
+  void set_printed_mesh(const TriangleMesh& mesh);
 
   [[nodiscard]] const scene::Scene& scene() const { return scene_; }
   [[nodiscard]] sph::Solver& solver() { return solver_; }
   [[nodiscard]] const sph::Solver& solver() const { return solver_; }
   [[nodiscard]] double time() const { return solver_.time(); }
   [[nodiscard]] double initial_fluid_mass() const { return initial_fluid_mass_; }
+  /// The rigid world: the scene's static shapes, bodies added by the caller, printed meshes.
+  [[nodiscard]] world::World& world() { return world_; }
 
  private:
   void update_print_heads();
 
   scene::Scene scene_;
   sph::Solver solver_;
+  world::World world_;
   double initial_fluid_mass_ = 0;
 };
 
@@ -61,6 +70,7 @@ struct RunSummary {
   std::size_t frames_written = 0;
   std::size_t meshes_written = 0;    // surface meshes in meshes/ (scene <meshing>)
   std::size_t meshes_skipped = 0;    // requests that came while the mesher was still busy
+  std::size_t meshes_inserted = 0;   // meshes put into the world as the printed-material collision body
   double particle_steps_per_second = 0;
   std::string output_directory;
 };
