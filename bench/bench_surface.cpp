@@ -53,6 +53,7 @@ static void BM_Surface(benchmark::State& state) {
   }
   state.SetLabel(std::string(surface::method_name(settings.method)));
   state.counters["particles"] = static_cast<double>(frame.positions.size());
+  state.counters["surface_particles"] = static_cast<double>(stats.surface_particles);
   state.counters["triangles"] = static_cast<double>(triangles);
   state.counters["field_s"] = stats.field_seconds;
   state.counters["mesh_s"] = stats.mesh_seconds;

@@ -36,8 +36,15 @@ Real lattice_covariance_scale(Real spacing, Real radius) {
 
 }  // namespace
 
-AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, const SurfaceSettings& settings) {
-  const std::size_t count = positions.size();
+AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, const SurfaceSettings& settings,
+                                               std::span<const Index> which) {
+  std::vector<Vec3> queries;
+  if (!which.empty()) {
+    queries.resize(which.size());
+    for (std::size_t n = 0; n < which.size(); ++n) queries[n] = positions[which[n]];
+  }
+  const std::span<const Vec3> query_positions = which.empty() ? positions : std::span<const Vec3>(queries);
+  const std::size_t count = query_positions.size();
   AnisotropicKernels kernels;
   kernels.centre.resize(count);
   kernels.transform.resize(count);
@@ -52,11 +59,11 @@ AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, 
   sph::SpatialHashGrid grid;
   grid.build(positions, radius);
   sph::NeighborLists neighbors;
-  sph::find_neighbors(grid, positions, radius, false, neighbors);  // includes the particle itself
+  sph::find_neighbors(grid, query_positions, radius, false, neighbors);  // includes the particle itself
 
   std::vector<unsigned char> sparse(count, 0);
   parallel_for_each_index(count, [&](std::size_t i) {
-    const Vec3 position = positions[i];
+    const Vec3 position = query_positions[i];
     const auto list = neighbors.of(i);
     // Weighted mean (eq. 8's x_i^w) and the smoothed centre (eq. 6).
     double weight_sum = 0;
@@ -87,8 +94,9 @@ AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, 
       const double largest = sigma(2);
       // Clamp (eq. 11): no axis shorter than largest / k_r; then scale so the full lattice is 1.
       for (int k = 0; k < 3; ++k) scale(k) = std::max(sigma(k), largest / settings.max_anisotropy) / interior_scale;
-      // Eigenvalues are variances: axis lengths go with their square roots.
-      scale = scale.cwiseSqrt();
+      // Eigenvalues are variances: axis lengths go with their square roots. No axis longer than the
+      // isotropic kernel's, so a kernel never reaches beyond the kernel radius.
+      scale = scale.cwiseSqrt().cwiseMin(1.0);
     } else {
       sparse[i] = 1;
     }

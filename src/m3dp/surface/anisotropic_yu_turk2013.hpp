@@ -23,7 +23,9 @@ struct AnisotropicKernels {
   std::size_t sparse_particles = 0;          // particles that fell back to the isotropic kernel
 };
 
-/// `settings` must be resolved(). Runs in parallel.
-[[nodiscard]] AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, const SurfaceSettings& settings);
+/// Kernels of the particles `which` (all when empty), in that order; every particle counts as a
+/// neighbour. `settings` must be resolved(). Runs in parallel.
+[[nodiscard]] AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, const SurfaceSettings& settings,
+                                                             std::span<const Index> which = {});
 
 }  // namespace m3dp::surface

@@ -14,6 +14,7 @@
 #include <cmath>
 #include <mutex>
 #include <numeric>
+#include <unordered_map>
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/sph/kernels.hpp"
@@ -54,6 +55,82 @@ std::vector<Index> spatial_order(std::span<const Vec3> positions, Real cell_size
   return order;
 }
 
+/// Where the material is deep, the field is "inside" whatever the exact sums: only particles near
+/// the surface need to be splatted, and the deep cells are filled with an inside value afterwards.
+/// This makes the cost follow the surface rather than the volume (issue 4).
+/// Cells have the size of the farthest reach of a particle's contribution. A cell is full when it
+/// holds at least 60 % of a resting lattice's particles; interior when it and its 26 neighbours are
+/// full (the surface cannot cross it); a particle contributes unless all 27 cells around its own
+/// are interior (then no voxel it reaches can be near the surface).
+struct DeepRegion {
+  std::vector<Index> contributing;                 // particle indices, Z-ordered
+  std::vector<std::array<std::int32_t, 3>> interior_cells;
+  Real cell_size = 0;
+};
+
+DeepRegion find_deep_region(std::span<const Vec3> positions, Real cell_size, Real particle_radius) {
+  DeepRegion region;
+  region.cell_size = cell_size;
+  const Real inverse = Real(1) / cell_size;
+  auto cell_of = [&](const Vec3& p) {
+    return std::array<std::int32_t, 3>{static_cast<std::int32_t>(std::floor(p.x() * inverse)),
+                                       static_cast<std::int32_t>(std::floor(p.y() * inverse)),
+                                       static_cast<std::int32_t>(std::floor(p.z() * inverse))};
+  };
+  auto key_of = [](const std::array<std::int32_t, 3>& c) { return sph::morton_code(c[0], c[1], c[2]); };
+  const std::vector<Index> order = spatial_order(positions, cell_size);
+  std::unordered_map<std::uint64_t, std::uint32_t> count;
+  count.reserve(positions.size() / 4 + 16);
+  for (const Index i : order) ++count[key_of(cell_of(positions[i]))];
+  const double lattice_capacity = std::pow(static_cast<double>(cell_size / (2 * particle_radius)), 3);
+  const auto full_count = static_cast<std::uint32_t>(std::max(1.0, 0.6 * lattice_capacity));
+  auto is_full = [&](const std::array<std::int32_t, 3>& c) {
+    const auto found = count.find(key_of(c));
+    return found != count.end() && found->second >= full_count;
+  };
+  auto all_around = [](const std::array<std::int32_t, 3>& c, auto&& predicate) {
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (!predicate(std::array<std::int32_t, 3>{c[0] + dx, c[1] + dy, c[2] + dz})) return false;
+    return true;
+  };
+  std::unordered_map<std::uint64_t, bool> interior;
+  interior.reserve(count.size());
+  auto is_interior = [&](const std::array<std::int32_t, 3>& c) {
+    const std::uint64_t key = key_of(c);
+    if (const auto known = interior.find(key); known != interior.end()) return known->second;
+    const bool value = is_full(c) && all_around(c, is_full);
+    interior.emplace(key, value);
+    if (value) region.interior_cells.push_back(c);
+    return value;
+  };
+  std::unordered_map<std::uint64_t, bool> deep;
+  region.contributing.reserve(positions.size());
+  for (const Index i : order) {
+    const auto cell = cell_of(positions[i]);
+    const std::uint64_t key = key_of(cell);
+    auto known = deep.find(key);
+    if (known == deep.end()) known = deep.emplace(key, all_around(cell, is_interior)).first;
+    if (!known->second) region.contributing.push_back(i);
+  }
+  return region;
+}
+
+/// Sets every voxel of the interior cells to `inside` (active), after the splats.
+template <class GridT>
+void fill_interior(GridT& grid, const DeepRegion& region, Real voxel_size, typename GridT::ValueType inside) {
+  const double ratio = static_cast<double>(region.cell_size) / voxel_size;
+  for (const auto& cell : region.interior_cells) {
+    openvdb::Coord low, high;
+    for (int k = 0; k < 3; ++k) {
+      low[k] = static_cast<int>(std::ceil(cell[k] * ratio - 1e-9));
+      high[k] = static_cast<int>(std::ceil((cell[k] + 1) * ratio - 1e-9)) - 1;
+    }
+    grid.tree().fill(openvdb::CoordBBox(low, high), inside, true);
+  }
+}
+
 /// Adds splat(particle, accessors…) over all particles into per-thread grids merged by compSum.
 /// The split tree is fixed (deterministic reduce), so the sums come out the same on every run.
 template <class GridT, class Splat>
@@ -79,7 +156,9 @@ typename GridT::Ptr splat_particles(const std::vector<Index>& order, const openv
     void join(Body& other) { openvdb::tools::compSum(*grid, *other.grid); }
   };
   Body body(&order, &splat, transform, background);
-  tbb::parallel_deterministic_reduce(tbb::blocked_range<std::size_t>(0, order.size(), 2048), body);
+  // A fixed number of blocks (not of particles per block): few grids to merge, same split on every run.
+  const std::size_t grain = std::max<std::size_t>(1024, order.size() / 8 + 1);
+  tbb::parallel_deterministic_reduce(tbb::blocked_range<std::size_t>(0, order.size(), grain), body);
   return body.grid;
 }
 
@@ -107,97 +186,129 @@ struct ParticleList {
   }
 };
 
-openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const SurfaceSettings& settings) {
+openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats) {
   constexpr float kHalfWidthVoxels = 3;
+  const Real reach = settings.sphere_radius + kHalfWidthVoxels * settings.voxel_size;
+  const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
+  stats.surface_particles = region.contributing.size();
+  std::vector<Vec3> near_surface(region.contributing.size());
+  for (std::size_t n = 0; n < near_surface.size(); ++n) near_surface[n] = positions[region.contributing[n]];
   auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(settings.voxel_size, kHalfWidthVoxels);
   openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
   raster.setRmin(0.5);  // spheres smaller than 1.5 voxels are kept, not dropped as the default does
-  raster.rasterizeSpheres(ParticleList{positions, settings.sphere_radius}, settings.sphere_radius);
+  raster.rasterizeSpheres(ParticleList{near_surface, settings.sphere_radius}, settings.sphere_radius);
   raster.finalize(true);
+  fill_interior(*grid, region, settings.voxel_size, -static_cast<float>(grid->background()));
   return grid;
+}
+
+/// Calls visit(ijk, q) for every voxel centre x with q = ‖M (x − centre)‖ < 1: a sphere of radius R
+/// for M = I/R, an anisotropic kernel's ellipsoid for M = G. Walks only the voxels inside: per
+/// (i, j) column the z range solves |u + dz·m₃|² ≤ 1, so no time goes to the box's corners.
+template <class Visit>
+void for_each_voxel_in_ellipsoid(const Vec3& centre, const Eigen::Matrix3f& transform_m, const Vec3& half_extent,
+                                 Real voxel_size, Visit&& visit) {
+  const openvdb::CoordBBox box = voxel_box(centre, half_extent, voxel_size);
+  const Vec3 column = transform_m.col(2);
+  const Real a = column.squaredNorm();
+  for (int i = box.min().x(); i <= box.max().x(); ++i)
+    for (int j = box.min().y(); j <= box.max().y(); ++j) {
+      const Vec3 u = transform_m * Vec3(i * voxel_size - centre.x(), j * voxel_size - centre.y(), -centre.z());
+      // |u + z m₃|² < 1 with z the voxel's absolute height: a z² + 2 (u·m₃) z + |u|² − 1 < 0.
+      const Real b = u.dot(column), c = u.squaredNorm() - 1;
+      const Real discriminant = b * b - a * c;
+      if (discriminant <= 0) continue;
+      const Real root = std::sqrt(discriminant);
+      const int k_low = static_cast<int>(std::ceil((-b - root) / a / voxel_size));
+      const int k_high = static_cast<int>(std::floor((-b + root) / a / voxel_size));
+      for (int k = k_low; k <= k_high; ++k) {
+        const Real q = (u + (k * voxel_size) * column).norm();
+        if (q < 1) visit(openvdb::Coord(i, j, k), q);
+      }
+    }
 }
 
 /// −Σ_j V_j W(x − x_j): negative inside, so the mesher's "inside = below the iso-value" holds.
 openvdb::FloatGrid::Ptr blobby_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                     const openvdb::math::Transform::Ptr& transform) {
+                                     const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats) {
   const Real spacing = 2 * settings.particle_radius;
   const Real volume = spacing * spacing * spacing;
   const sph::CubicSplineKernel kernel(settings.kernel_radius);
   const Real voxel = settings.voxel_size;
   const Vec3 half_extent = Vec3::Constant(settings.kernel_radius);
-  const auto order = spatial_order(positions, settings.kernel_radius);
+  const DeepRegion region = find_deep_region(positions, settings.kernel_radius, settings.particle_radius);
+  stats.surface_particles = region.contributing.size();
+  const Eigen::Matrix3f to_unit = Eigen::Matrix3f::Identity() / settings.kernel_radius;
   auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    const Vec3 centre = positions[particle];
-    const openvdb::CoordBBox box = voxel_box(centre, half_extent, voxel);
-    for (auto it = box.begin(); it; ++it) {
-      const openvdb::Coord& ijk = *it;
-      const Real distance = (Vec3(ijk.x() * voxel, ijk.y() * voxel, ijk.z() * voxel) - centre).norm();
-      if (distance >= settings.kernel_radius) continue;
-      accessor.setValue(ijk, accessor.getValue(ijk) - volume * kernel.W(distance));
-    }
+    for_each_voxel_in_ellipsoid(positions[particle], to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
+      const float weight = volume * kernel.W(q * settings.kernel_radius);
+      accessor.modifyValue(ijk, [weight](float& value) { value -= weight; });
+    });
   };
-  return splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
+  auto grid = splat_particles<openvdb::FloatGrid>(region.contributing, transform, 0.f, splat);
+  fill_interior(*grid, region, voxel, -1.f);
+  return grid;
 }
 
 openvdb::FloatGrid::Ptr anisotropic_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                          const openvdb::math::Transform::Ptr& transform) {
-  const AnisotropicKernels kernels = compute_anisotropic_kernels(positions, settings);
+                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats) {
+  // Kernels reach at most the kernel radius (their axes are capped at the isotropic one's), and
+  // smoothing moves a centre by less than the neighbourhood radius times λ.
+  const Real reach = settings.kernel_radius + settings.centre_smoothing * settings.anisotropy_neighborhood;
+  const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
+  stats.surface_particles = region.contributing.size();
+  const AnisotropicKernels kernels = compute_anisotropic_kernels(positions, settings, region.contributing);
   const Real spacing = 2 * settings.particle_radius;
   const Real volume = spacing * spacing * spacing;
   const sph::CubicSplineKernel unit_kernel(1);
   const Real voxel = settings.voxel_size;
-  const auto order = spatial_order(kernels.centre, settings.kernel_radius);
+  std::vector<Index> order(region.contributing.size());
+  std::iota(order.begin(), order.end(), Index(0));  // kernels are stored in the contributing order
   auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    const Vec3 centre = kernels.centre[particle];
-    const Eigen::Matrix3f& transform_g = kernels.transform[particle];
     const Real scale = volume * kernels.determinant[particle];
-    const openvdb::CoordBBox box = voxel_box(centre, kernels.half_extent[particle], voxel);
-    for (auto it = box.begin(); it; ++it) {
-      const openvdb::Coord& ijk = *it;
-      const Real q = (transform_g * (Vec3(ijk.x() * voxel, ijk.y() * voxel, ijk.z() * voxel) - centre)).norm();
-      if (q >= 1) continue;
-      accessor.setValue(ijk, accessor.getValue(ijk) - scale * unit_kernel.W(q));
-    }
+    for_each_voxel_in_ellipsoid(kernels.centre[particle], kernels.transform[particle], kernels.half_extent[particle], voxel,
+                                [&](const openvdb::Coord& ijk, Real q) {
+                                  const float weight = scale * unit_kernel.W(q);
+                                  accessor.modifyValue(ijk, [weight](float& value) { value -= weight; });
+                                });
   };
-  return splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
+  auto grid = splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
+  fill_interior(*grid, region, voxel, -1.f);
+  return grid;
 }
 
 /// Zhu & Bridson 2005: φ(x) = |x − x̄| − r̄, x̄ = Σ k_i x_i / Σ k_i, k(s) = max(0, 1 − s²)³, s = |x − x_i| / R.
 openvdb::FloatGrid::Ptr zhu_bridson_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                          const openvdb::math::Transform::Ptr& transform, std::size_t& grid_bytes) {
+                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats) {
   const Real support = settings.kernel_radius;
   const Real voxel = settings.voxel_size;
   const Vec3 half_extent = Vec3::Constant(support);
-  const auto order = spatial_order(positions, support);
+  const DeepRegion region = find_deep_region(positions, support, settings.particle_radius);
+  stats.surface_particles = region.contributing.size();
+  const std::vector<Index>& order = region.contributing;
   // x̄ needs Σk and Σk·x: a float grid and a Vec3 grid (OpenVDB registers no Vec4 float grid).
+  const Eigen::Matrix3f to_unit = Eigen::Matrix3f::Identity() / support;
   auto splat_weight = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    const Vec3 centre = positions[particle];
-    const openvdb::CoordBBox box = voxel_box(centre, half_extent, voxel);
-    for (auto it = box.begin(); it; ++it) {
-      const openvdb::Coord& ijk = *it;
-      const Real s2 = (Vec3(ijk.x() * voxel, ijk.y() * voxel, ijk.z() * voxel) - centre).squaredNorm() / (support * support);
-      if (s2 >= 1) continue;
-      const Real one_minus = 1 - s2;
-      accessor.setValue(ijk, accessor.getValue(ijk) + one_minus * one_minus * one_minus);
-    }
+    for_each_voxel_in_ellipsoid(positions[particle], to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
+      const Real one_minus = 1 - q * q;
+      const float weight = one_minus * one_minus * one_minus;
+      accessor.modifyValue(ijk, [weight](float& value) { value += weight; });
+    });
   };
   auto splat_moment = [&](Index particle, openvdb::Vec3SGrid::Accessor& accessor) {
     const Vec3 centre = positions[particle];
-    const openvdb::CoordBBox box = voxel_box(centre, half_extent, voxel);
-    for (auto it = box.begin(); it; ++it) {
-      const openvdb::Coord& ijk = *it;
-      const Real s2 = (Vec3(ijk.x() * voxel, ijk.y() * voxel, ijk.z() * voxel) - centre).squaredNorm() / (support * support);
-      if (s2 >= 1) continue;
-      const Real one_minus = 1 - s2;
+    for_each_voxel_in_ellipsoid(centre, to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
+      const Real one_minus = 1 - q * q;
       const Real weight = one_minus * one_minus * one_minus;
-      accessor.setValue(ijk, accessor.getValue(ijk) + openvdb::Vec3s(weight * centre.x(), weight * centre.y(), weight * centre.z()));
-    }
+      const openvdb::Vec3s moment(weight * centre.x(), weight * centre.y(), weight * centre.z());
+      accessor.modifyValue(ijk, [&moment](openvdb::Vec3s& value) { value += moment; });
+    });
   };
   auto weight = splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat_weight);
   auto moment = splat_particles<openvdb::Vec3SGrid>(order, transform, openvdb::Vec3s(0, 0, 0), splat_moment);
 
   const float outside = static_cast<float>(support);
-  grid_bytes = weight->memUsage() + moment->memUsage();
+  stats.grid_bytes = weight->memUsage() + moment->memUsage();
   auto phi = openvdb::FloatGrid::create(outside);
   phi->setTransform(transform);
   phi->setTree(std::make_shared<openvdb::FloatTree>(weight->tree(), outside, openvdb::TopologyCopy()));
@@ -221,6 +332,7 @@ openvdb::FloatGrid::Ptr zhu_bridson_field(std::span<const Vec3> positions, const
       }
     }
   });
+  fill_interior(*phi, region, voxel, static_cast<float>(-mean_radius));
   return phi;
 }
 
@@ -259,18 +371,18 @@ TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceS
   double isovalue = 0;
   switch (settings.method) {
     case Method::spherical:
-      field = spherical_field(positions, settings);
+      field = spherical_field(positions, settings, local_stats);
       break;
     case Method::sph_blobby:
-      field = blobby_field(positions, settings, transform);
+      field = blobby_field(positions, settings, transform, local_stats);
       isovalue = -settings.iso_level;
       break;
     case Method::anisotropic:
-      field = anisotropic_field(positions, settings, transform);
+      field = anisotropic_field(positions, settings, transform, local_stats);
       isovalue = -settings.iso_level;
       break;
     case Method::zhu_bridson:
-      field = zhu_bridson_field(positions, settings, transform, local_stats.grid_bytes);
+      field = zhu_bridson_field(positions, settings, transform, local_stats);
       break;
   }
   local_stats.active_voxels = field->activeVoxelCount();

@@ -60,6 +60,7 @@ struct SurfaceSettings {
 
 struct SurfaceStats {
   std::size_t particles = 0;
+  std::size_t surface_particles = 0;  // particles near enough to the surface to be splatted
   std::size_t active_voxels = 0;
   std::size_t grid_bytes = 0;     // memory of the field grid(s) at their largest
   double field_seconds = 0;       // particles → grid
