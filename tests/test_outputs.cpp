@@ -110,6 +110,32 @@ TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
   fs::remove_all(directory);
 }
 
+TEST(Outputs, MeshingRegionSelectsTheParticlesInside) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  setup.end_time = 0.02;
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.output.write_particles = false;
+  scene.meshing.enabled = true;
+  scene.meshing.period = Real(1);  // only the final state
+  scene.meshing.material = scene.materials.front().material.name;
+  scene.meshing.region = Aabb{Vec3(-1, -1, -1), Vec3(1, 1, Real(0.05))};  // the lower half of the column
+  scene.meshing.surface.method = surface::Method::sph_blobby;
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("meshing_region");
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  const auto summary = sim::run_simulation(simulation, options);
+  ASSERT_EQ(summary.meshes_written, 1u);
+  std::size_t below = 0;
+  for (const Vec3& p : simulation.solver().fluid().position) below += p.z() < Real(0.05) ? 1 : 0;
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  EXPECT_EQ(json["meshes"][0]["particles"].get<std::size_t>(), below);
+  EXPECT_LT(below, summary.particles);
+  fs::remove_all(directory);
+}
+
 TEST(Outputs, StopRequestEndsCleanlyWithSummary) {
   sim::HydrostaticSetup setup;
   setup.particle_radius = Real(0.005);

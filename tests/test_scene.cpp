@@ -278,18 +278,25 @@ TEST(Scene, MeshingBlockIsReadAndCheckedAtItsLine) {
   std::string text = valid_scene();
   text.replace(text.find("</plugin>\n  </world>"), 0,
                "  <meshing><method>zhu_bridson</method><period unit=\"ms\">250</period><format>stl</format>"
-               "<voxel_size unit=\"mm\">2</voxel_size></meshing>\n    ");
+               "<voxel_size unit=\"mm\">2</voxel_size><material>water</material>"
+               "<region><min>0 0 0</min><max>0.5 0.5 0.2</max></region></meshing>\n    ");
   const auto scene = load_scene_from_string(text, "meshing.sdf");
   EXPECT_TRUE(scene.meshing.enabled);
   EXPECT_EQ(scene.meshing.surface.method, m3dp::surface::Method::zhu_bridson);
   EXPECT_NEAR(scene.meshing.period, 0.25, 1e-7);
   EXPECT_EQ(scene.meshing.format, "stl");
   EXPECT_NEAR(scene.meshing.surface.voxel_size, 0.002, 1e-9);
+  EXPECT_EQ(scene.meshing.material, "water");
+  ASSERT_TRUE(scene.meshing.region.has_value());
+  EXPECT_NEAR(scene.meshing.region->max.z(), 0.2, 1e-7);
 
   std::string bad = valid_scene();
   bad.replace(bad.find("</plugin>\n  </world>"), 0, "  <meshing><method>marching_cubes</method></meshing>\n    ");
   expect_error_at(bad, "<method>marching_cubes",
                   "<method> must be one of: spherical, sph_blobby, zhu_bridson, anisotropic; got 'marching_cubes'");
+  std::string unknown = valid_scene();
+  unknown.replace(unknown.find("</plugin>\n  </world>"), 0, "  <meshing><material>clay</material></meshing>\n    ");
+  expect_error_at(unknown, "<material>clay", "material 'clay' used by <meshing> is not defined");
 }
 
 TEST(Scene, MissingPlugin) {

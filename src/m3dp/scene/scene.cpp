@@ -1097,7 +1097,8 @@ void SceneReader::read_output(const pugi::xml_node& output) {
 
 void SceneReader::read_meshing(const pugi::xml_node& meshing) {
   check_attributes(meshing, {});
-  check_children(meshing, {"method", "period", "format", "voxel_size", "kernel_radius", "iso_level", "smoothing_iterations"});
+  check_children(meshing, {"method", "period", "format", "material", "region", "voxel_size", "kernel_radius", "iso_level",
+                           "smoothing_iterations"});
   MeshingSettings& settings = scene_.meshing;
   settings.enabled = true;
   settings.where = where(meshing);
@@ -1118,6 +1119,15 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
     } else {
       report(format, fmt::format("<format> must be one of: obj, ply, stl; got '{}'", name));
     }
+  }
+  if (const pugi::xml_node material = meshing.child("material")) {
+    settings.material = std::string(leaf_text(material, {}));
+    material_uses_.push_back(MaterialUse{settings.material, "<meshing>", where(material)});
+  }
+  if (const pugi::xml_node region = meshing.child("region")) {
+    check_attributes(region, {});
+    check_children(region, {"min", "max"});
+    settings.region = read_box(region);
   }
   if (const auto voxel = read_scalar(meshing, "voxel_size", Quantity::length, Limits::positive(), Presence::optional))
     settings.surface.voxel_size = Real(*voxel);

@@ -149,9 +149,24 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   double next_mesh_time = meshing_settings.period;
   std::shared_ptr<const TriangleMesh> inserted_mesh;
   double last_meshed_time = -1;
+  // The particles the meshing block asks for: one material, one region, or all.
+  std::optional<std::uint16_t> meshed_phase;
+  for (std::size_t m = 0; m < simulation.scene().materials.size(); ++m)
+    if (simulation.scene().materials[m].material.name == meshing_settings.material) meshed_phase = static_cast<std::uint16_t>(m);
+  std::vector<Vec3> meshed_positions;
+  auto select_meshed = [&]() -> std::span<const Vec3> {
+    const auto& fluid = solver.fluid();
+    if (meshing_settings.material.empty() && !meshing_settings.region) return fluid.position;
+    meshed_positions.clear();
+    for (std::size_t i = 0; i < fluid.size(); ++i)
+      if ((!meshed_phase || fluid.phase[i] == *meshed_phase) &&
+          (!meshing_settings.region || meshing_settings.region->contains(fluid.position[i])))
+        meshed_positions.push_back(fluid.position[i]);
+    return meshed_positions;
+  };
   auto mesh_if_due = [&]() {
     if (!meshing || solver.time() + 1e-12 < next_mesh_time) return;
-    if (meshing->submit(solver.time(), solver.fluid().position)) last_meshed_time = solver.time();
+    if (meshing->submit(solver.time(), select_meshed())) last_meshed_time = solver.time();
     while (next_mesh_time <= solver.time() + 1e-12) next_mesh_time += meshing_settings.period;
   };
 
@@ -198,7 +213,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     // The final state is always meshed (after the mesh in progress): nothing printed goes unmeshed.
     meshing->wait_idle();
     if (last_meshed_time < solver.time() && solver.fluid().size() > 0) {
-      meshing->submit(solver.time(), solver.fluid().position);
+      meshing->submit(solver.time(), select_meshed());
       meshing->wait_idle();
     }
     summary.meshes_written = meshing->meshes().size();
