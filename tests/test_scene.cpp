@@ -2,6 +2,8 @@
 // with file:line and what was expected.
 #include <gtest/gtest.h>
 
+#include <unistd.h>
+
 #include <algorithm>
 #include <filesystem>
 #include <fstream>
@@ -297,6 +299,44 @@ TEST(Scene, MeshingBlockIsReadAndCheckedAtItsLine) {
   std::string unknown = valid_scene();
   unknown.replace(unknown.find("</plugin>\n  </world>"), 0, "  <meshing><material>clay</material></meshing>\n    ");
   expect_error_at(unknown, "<material>clay", "material 'clay' used by <meshing> is not defined");
+}
+
+TEST(Scene, GcodePathIsReadRelativeToTheSceneWithWarningsAndErrorsAtTheirLines) {
+  const fs::path folder = fs::temp_directory_path() / ("m3dp_test_gcode_scene_" + std::to_string(::getpid()));
+  fs::create_directories(folder);
+  std::ofstream(folder / "part.gcode") << "M104 S200\nG21\nG90\nM82\nG1 X10 Y10 Z0.3 F6000\nG1 X30 E1 F1200\nG4 S1\n";
+  std::ofstream(folder / "bad.gcode") << "G1 X10\nG1 Y\"oops\"\n";
+  auto scene_with = [&](const std::string& file) {
+    std::string text = valid_scene();
+    const std::size_t path_start = text.find("<path");
+    const std::size_t path_end = text.find("</path>") + 7;
+    text.replace(path_start, path_end - path_start,
+                 "<path><gcode file=\"" + file + "\"><pose>1 0 0 0 0 0</pose>"
+                 "<filament_diameter unit=\"mm\">2.85</filament_diameter></gcode></path>");
+    return text;
+  };
+  const auto scene = load_scene_from_string(scene_with("part.gcode"), folder / "scene.sdf");
+  const auto& trajectory = scene.print_heads.front().trajectory;
+  // √200.09 mm of travel at 100 mm/s, 20 mm of printing at 20 mm/s, 1 s dwell.
+  const double travel = std::sqrt(200.09) / 100;
+  EXPECT_NEAR(trajectory.end_time() - trajectory.start_time(), travel + 1.0 + 1.0, 1e-5);
+  const auto printing = trajectory.sample(trajectory.start_time() + travel + 0.5);
+  EXPECT_TRUE(printing.extruding);
+  EXPECT_NEAR(printing.position.x(), 1.020, 1e-5);  // halfway along X10 → X30, placed 1 m along x, mm → m
+  // 1 mm of 2.85 mm filament over 1 s.
+  EXPECT_NEAR(printing.volume_rate, m3dp::kPi * 1.425 * 1.425 * 1e-9, 1e-13);
+  ASSERT_EQ(scene.warnings.size(), 1u);
+  EXPECT_EQ(scene.warnings[0].location.str(), (folder / "part.gcode").string() + ":1");
+
+  const std::string bad = scene_with("bad.gcode");
+  try {
+    (void)load_scene_from_string(bad, folder / "scene.sdf");
+    ADD_FAILURE() << "bad G-code loaded";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), (folder / "bad.gcode").string() + ":2: error:");
+  }
+  EXPECT_CONTAINS(load_error(scene_with("missing.gcode")).what(), "G-code file 'missing.gcode' not found");
+  fs::remove_all(folder);
 }
 
 TEST(Scene, MissingPlugin) {

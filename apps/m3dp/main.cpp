@@ -30,6 +30,7 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
   using namespace m3dp;
   ThreadLimit thread_limit(threads);
   const scene::Scene scene = scene::load_scene(scene_file);
+  for (const auto& warning : scene.warnings) fmt::print(stderr, "{}: warning: {}\n", warning.location.str(), warning.message);
   if (output.empty()) output = std::filesystem::path("out") / scene_file.stem();
   fmt::print(stderr, "m3dp: {} → {} ({} threads)\n", scene_file.string(), output.string(), ThreadLimit::active_threads());
   sim::Simulation simulation(scene);
@@ -55,6 +56,7 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
 
 int validate_command(const std::filesystem::path& scene_file) {
   const m3dp::scene::Scene scene = m3dp::scene::load_scene(scene_file);
+  for (const auto& warning : scene.warnings) fmt::print(stderr, "{}: warning: {}\n", warning.location.str(), warning.message);
   std::size_t collisions = 0;
   for (const auto& body : scene.bodies) collisions += body.collisions.size();
   fmt::print("{}: OK — world '{}', {} bodies ({} collision shapes), {} materials, {} fluid blocks, {} print heads, {} s\n",

@@ -14,6 +14,7 @@
 #include <utility>
 
 #include "m3dp/io/mesh_io.hpp"
+#include "m3dp/toolpath/gcode.hpp"
 
 namespace m3dp::scene {
 
@@ -268,6 +269,7 @@ class SceneReader {
   void read_print_head(const pugi::xml_node& head);
   std::optional<toolpath::Trajectory> read_path(const pugi::xml_node& path);
   std::optional<toolpath::PathSegment> read_path_segment(const pugi::xml_node& element, Real path_speed);
+  std::optional<std::vector<toolpath::PathSegment>> read_gcode_segments(const pugi::xml_node& element);
   std::optional<toolpath::Curve> read_curve(const pugi::xml_node& element);
   pugi::xml_node find_centre(const pugi::xml_node& curve);
   void read_output(const pugi::xml_node& output);
@@ -974,7 +976,7 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
 
 std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node& path) {
   check_attributes(path, {"start_time", "speed"});
-  check_children(path, {"line", "polyline", "circle", "helix"}, {"line", "polyline", "circle", "helix"});
+  check_children(path, {"line", "polyline", "circle", "helix", "gcode"}, {"line", "polyline", "circle", "helix", "gcode"});
   const auto start_time = read_number_attribute(path, "start_time", Quantity::time, Limits::non_negative());
   const auto speed = read_number_attribute(path, "speed", Quantity::speed, Limits::positive());
   const bool attributes_valid = (start_time || !path.attribute("start_time")) && (speed || !path.attribute("speed"));
@@ -984,6 +986,14 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
   for (const auto& child : path.children()) {
     if (child.type() != pugi::node_element) continue;
     const std::string_view kind = child.name();
+    if (kind == "gcode") {
+      if (auto gcode = read_gcode_segments(child)) {
+        segments.insert(segments.end(), std::make_move_iterator(gcode->begin()), std::make_move_iterator(gcode->end()));
+      } else {
+        segments_valid = false;
+      }
+      continue;
+    }
     if (kind != "line" && kind != "polyline" && kind != "circle" && kind != "helix") continue;  // reported above
     if (auto segment = read_path_segment(child, Real(speed.value_or(toolpath::PathSegment{}.speed)))) {
       segments.push_back(std::move(*segment));
@@ -992,11 +1002,42 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
     }
   }
   if (segments.empty() && segments_valid) {
-    report(path, "<path> has no segments; expected one or more of: line, polyline, circle, helix");
+    report(path, "<path> has no segments; expected one or more of: line, polyline, circle, helix, gcode");
     return std::nullopt;
   }
   if (!segments_valid || !attributes_valid) return std::nullopt;
   return toolpath::Trajectory(std::move(segments), start_time.value_or(0));
+}
+
+std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segments(const pugi::xml_node& element) {
+  check_attributes(element, {"file"});
+  check_children(element, {"pose", "filament_diameter", "volumetric_extrusion"});
+  const auto file = read_attribute(element, "file", Presence::required);
+  if (!file) return std::nullopt;
+  toolpath::GcodeSettings settings;
+  settings.placement = read_pose(element);
+  if (const auto diameter =
+          read_scalar(element, "filament_diameter", Quantity::length, Limits::positive(), Presence::optional))
+    settings.filament_diameter = Real(*diameter);
+  if (const auto volumetric = read_bool(element, "volumetric_extrusion")) settings.volumetric_extrusion = *volumetric;
+  fs::path gcode_path(*file);
+  if (gcode_path.is_relative()) gcode_path = file_.parent_path() / gcode_path;
+  if (!fs::exists(gcode_path)) {
+    report(element, fmt::format("G-code file '{}' not found (looked for {})", *file, gcode_path.string()));
+    return std::nullopt;
+  }
+  try {
+    toolpath::GcodeProgram program = toolpath::read_gcode(gcode_path, settings);
+    for (auto& warning : program.warnings) scene_.warnings.push_back(std::move(warning));
+    if (program.moves.empty()) {
+      report(element, fmt::format("G-code file '{}' has no moves", *file));
+      return std::nullopt;
+    }
+    return program.path_segments();
+  } catch (const InputError& error) {
+    for (const auto& diagnostic : error.diagnostics()) report(diagnostic.location, diagnostic.message);
+    return std::nullopt;
+  }
 }
 
 std::optional<toolpath::PathSegment> SceneReader::read_path_segment(const pugi::xml_node& element, Real path_speed) {

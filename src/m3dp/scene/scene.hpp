@@ -83,6 +83,7 @@ struct Scene {
   std::vector<PrintHead> print_heads;
   OutputSettings output;
   MeshingSettings meshing;
+  std::vector<Diagnostic> warnings;  // not errors: e.g. G-code commands that were skipped (file:line)
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
 };

@@ -80,7 +80,10 @@ void Simulation::update_print_heads() {
     Pose pose;
     pose.position = sample.position;
     pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
-    solver_.set_nozzle(static_cast<Index>(i), pose, sample.velocity, sample.extruding);
+    // A G-code move asks for its own flow (E over time); other paths use the nozzle's nominal one.
+    const Real nominal_flow = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed;
+    const Real flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
+    solver_.set_nozzle(static_cast<Index>(i), pose, sample.velocity, sample.extruding, flow_scale);
   }
 }
 

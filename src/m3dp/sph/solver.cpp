@@ -203,8 +203,10 @@ void Solver::set_body_motion(Index body, const Pose& pose, const Vec3& linear_ve
   target.is_static = false;
 }
 
-void Solver::set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding) {
+void Solver::set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding, Real flow_scale) {
+  if (!(flow_scale >= 0)) throw Error(fmt::format("sph::Solver::set_nozzle: flow_scale must be >= 0, got {}", flow_scale));
   auto& target = state_.nozzles.at(nozzle);
+  target.flow_scale = flow_scale;
   target.pose = pose;
   target.velocity = nozzle_velocity;
   target.extruding = extruding;
@@ -350,11 +352,14 @@ void Solver::emit(StepStats& stats) {
     const NozzleSettings& settings = parameters_.nozzles[n];
     const NozzleGeometry& geometry = nozzle_geometry_[n];
     if (!nozzle.extruding || geometry.layer_period <= 0) continue;
-    nozzle.pending_time += step;
+    // Layers come at the nominal period scaled by the flow; they also leave faster or slower.
+    nozzle.pending_time += step * nozzle.flow_scale;
+    const Real exit_speed = settings.exit_speed * nozzle.flow_scale;
     const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
-    const Vec3 exit_velocity = settings.exit_speed * axis + nozzle.velocity;
+    const Vec3 exit_velocity = exit_speed * axis + nozzle.velocity;
     while (nozzle.pending_time >= geometry.layer_period) {
       // The layer was due (pending − period) seconds ago: place it that far along the axis.
+      // pending_time counts nominal seconds: at the nominal speed that is the distance travelled.
       const Real travelled = static_cast<Real>((nozzle.pending_time - geometry.layer_period) * settings.exit_speed);
       const Vec3 centre = nozzle.pose.position + travelled * axis;
       const Real reach = settings.inner_diameter / 2 + diameter;

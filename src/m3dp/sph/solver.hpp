@@ -66,7 +66,8 @@ struct NozzleState {
   Pose pose;                          // emission axis = pose · (0, 0, −1): pointing down by default
   Vec3 velocity = Vec3::Zero();       // m/s of the nozzle itself (added to the exit velocity)
   bool extruding = false;
-  double pending_time = 0;            // s of extrusion not yet emitted as a layer
+  Real flow_scale = 1;                // flow / nominal flow π D²/4 · U (a G-code move's E rate); 1 = nominal
+  double pending_time = 0;            // s of nominal extrusion not yet emitted as a layer
   std::uint64_t layers_emitted = 0;
   std::uint64_t particles_emitted = 0;
   std::uint64_t blocked_layers = 0;   // layers delayed because the space in front was occupied
@@ -156,7 +157,8 @@ class Solver {
 
   // ---- inputs set between steps ----
   void set_body_motion(Index body, const Pose& pose, const Vec3& linear_velocity, const Vec3& angular_velocity);
-  void set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding);
+  /// `flow_scale` multiplies the nominal flow π D²/4 · U (and the exit speed): G-code sets it per move.
+  void set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding, Real flow_scale = 1);
 
   /// Replaces the whole mutable state with a saved copy (checkpoints; benchmarks that time the same step).
   void restore(const State& saved) { state_ = saved; }

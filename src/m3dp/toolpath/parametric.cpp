@@ -66,6 +66,15 @@ Trajectory::Trajectory(std::vector<PathSegment> segments, double start_time) : s
   Real previous_speed = 0;
   for (auto& segment : segments) {
     const Vec3 start = first_point(segment.curve);
+    if (segment.dwell > 0) {
+      // A pause where the head is (G4): no travel to it, no motion.
+      const Vec3 where = have_previous ? previous_end : start;
+      pieces_.push_back(Piece{LineCurve{where, where}, 0, 0, false, time, segment.dwell});
+      time += segment.dwell;
+      previous_end = where;
+      have_previous = true;
+      continue;
+    }
     // Travel (no extrusion) where a segment does not start where the last one ended.
     if (have_previous && (start - previous_end).norm() > Real(1e-9)) {
       const Real length = (start - previous_end).norm();
@@ -78,7 +87,7 @@ Trajectory::Trajectory(std::vector<PathSegment> segments, double start_time) : s
     previous_end = last_point(segment.curve);
     previous_speed = segment.speed;
     have_previous = true;
-    pieces_.push_back(Piece{std::move(segment.curve), length, segment.speed, segment.extrude, time, duration});
+    pieces_.push_back(Piece{std::move(segment.curve), length, segment.speed, segment.extrude, time, duration, segment.volume_rate});
     time += duration;
   }
 }
@@ -92,9 +101,11 @@ TrajectorySample Trajectory::sample(double time) const {
     sample.position = first_point(pieces_.front().curve);
     return sample;
   }
-  // Few pieces per path: a linear scan is clearer than a search and costs nothing here.
-  for (const Piece& piece : pieces_) {
-    if (time > piece.begin_time + piece.duration) continue;
+  // Binary search: G-code paths have tens of thousands of pieces, sampled every step.
+  const auto found = std::lower_bound(pieces_.begin(), pieces_.end(), time,
+                                      [](const Piece& piece, double t) { return piece.begin_time + piece.duration < t; });
+  if (found != pieces_.end()) {
+    const Piece& piece = *found;
     const Real arc = static_cast<Real>((time - piece.begin_time) * piece.speed);
     sample.position = curve_point(piece.curve, arc);
     // Velocity by a central difference along the curve: exact for lines, O(ds²) for arcs.
@@ -102,6 +113,7 @@ TrajectorySample Trajectory::sample(double time) const {
     const Real a = std::max(Real(0), arc - ds), b = std::min(piece.length, arc + ds);
     if (b > a) sample.velocity = (curve_point(piece.curve, b) - curve_point(piece.curve, a)) / (b - a) * piece.speed;
     sample.extruding = piece.extrude;
+    sample.volume_rate = piece.volume_rate;
     return sample;
   }
   sample.position = last_point(pieces_.back().curve);

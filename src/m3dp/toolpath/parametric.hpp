@@ -37,12 +37,15 @@ struct PathSegment {
   Curve curve;
   Real speed = Real(0.05);  // m/s along the curve
   bool extrude = true;
+  Real dwell = 0;           // s; > 0: wait this long at the curve's first point instead of moving (G4)
+  Real volume_rate = 0;     // m³/s of material while extruding; 0 = the nozzle's own π D²/4 · U (G-code sets it)
 };
 
 struct TrajectorySample {
   Vec3 position = Vec3::Zero();  // m
   Vec3 velocity = Vec3::Zero();  // m/s
   bool extruding = false;
+  Real volume_rate = 0;          // m³/s asked of the nozzle; 0 = its nominal flow
 };
 
 /// Arc length of a curve (m) and the point at arc length s.
@@ -68,6 +71,7 @@ class Trajectory {
     bool extrude;
     double begin_time;
     double duration;
+    Real volume_rate = 0;
   };
   std::vector<Piece> pieces_;
   double start_time_ = 0;

@@ -1,0 +1,167 @@
+// G-code: a real slicer's file read back to the slicer's own totals; arcs, modes, comments; errors
+// with file:line.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <fstream>
+#include <regex>
+#include <set>
+#include <sstream>
+
+#include "m3dp/toolpath/gcode.hpp"
+
+using namespace m3dp;
+using namespace m3dp::toolpath;
+
+namespace {
+const std::filesystem::path kSlicerFile = std::filesystem::path(M3DP_TEST_DATA) / "gcode" / "cylinder_shell.gcode";
+
+std::string read_text(const std::filesystem::path& file) {
+  std::ifstream stream(file);
+  std::stringstream buffer;
+  buffer << stream.rdbuf();
+  return buffer.str();
+}
+
+/// A number the slicer wrote in a "; key = value" comment.
+double slicer_total(const std::string& text, const std::string& key) {
+  const std::regex pattern("; " + std::regex_replace(key, std::regex(R"([\[\]])"), R"(\$&)") + R"( = ([0-9.]+))");
+  std::smatch match;
+  if (!std::regex_search(text, match, pattern)) ADD_FAILURE() << "no '" << key << "' in the slicer file";
+  return std::stod(match[1]);
+}
+
+GcodeProgram parse(const std::string& text, GcodeSettings settings = {}) { return parse_gcode(text, "test.gcode", settings); }
+
+std::string error_of(const std::string& text) {
+  try {
+    (void)parse(text);
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  return "no error";
+}
+}  // namespace
+
+TEST(Gcode, PrusaSlicerFileMatchesTheSlicersTotals) {
+  const std::string text = read_text(kSlicerFile);
+  const GcodeProgram program = read_gcode(kSlicerFile, GcodeSettings{});
+  const double filament_mm = slicer_total(text, "filament used [mm]");
+  const double filament_cm3 = slicer_total(text, "filament used [cm3]");
+  std::size_t layer_changes = 0;
+  for (std::size_t at = text.find(";LAYER_CHANGE"); at != std::string::npos; at = text.find(";LAYER_CHANGE", at + 1)) ++layer_changes;
+  std::printf("filament: parsed %.2f mm, PrusaSlicer %.2f mm (%+.3f %%); volume %.4f cm³ vs %.2f cm³; %d layers; %zu moves; "
+              "%.0f s\n",
+              program.net_extrusion, filament_mm, 100 * (program.net_extrusion / filament_mm - 1), program.material_volume * 1e6,
+              filament_cm3, program.layers, program.moves.size(), program.duration);
+  EXPECT_NEAR(program.net_extrusion / filament_mm, 1.0, 0.01);
+  EXPECT_NEAR(program.material_volume * 1e6 / filament_cm3, 1.0, 0.01);
+  EXPECT_EQ(program.layers, static_cast<int>(layer_changes));
+
+  // The part: a shell of 15 mm outer radius centred at (100, 100) mm, 17 layers of 0.3 mm.
+  double max_radius = 0, max_z = 0;
+  std::set<std::string> features;
+  for (const GcodeMove& move : program.moves) {
+    if (!move.extruding()) continue;
+    features.insert(move.feature);
+    const Vec3 offset = move.end - Vec3(Real(0.1), Real(0.1), 0);
+    if (move.feature != "Skirt/Brim") max_radius = std::max<double>(max_radius, offset.head<2>().norm());
+    max_z = std::max<double>(max_z, move.end.z());
+  }
+  EXPECT_NEAR(max_radius, 0.015, 0.0005);  // metres: mm scaled
+  EXPECT_NEAR(max_z, 17 * 0.0003, 1e-6);
+  EXPECT_TRUE(features.count("External perimeter")) << "features seen: " << features.size();
+  EXPECT_TRUE(features.count("Skirt/Brim"));
+  // Temperatures, fans, homing are skipped with a warning at their first line.
+  bool temperature_warning = false;
+  for (const auto& warning : program.warnings)
+    if (warning.message.rfind("M104 does not move the nozzle", 0) == 0) temperature_warning = warning.location.line > 0;
+  EXPECT_TRUE(temperature_warning);
+
+  // The nozzle path follows the moves in time.
+  const Trajectory trajectory(program.path_segments(), 0.0);
+  EXPECT_NEAR(trajectory.end_time(), program.duration, 1e-6 * program.duration);
+  const GcodeMove& middle = program.moves[program.moves.size() / 2];
+  double begin = 0;
+  for (const GcodeMove& move : program.moves) {
+    if (&move == &middle) break;
+    begin += move.duration;
+  }
+  const auto sample = trajectory.sample(begin + middle.duration / 2);
+  EXPECT_LT((sample.position - (middle.start + middle.end) / 2).norm(), 1e-6);
+}
+
+TEST(Gcode, ArcsRelativeModesAndUnits) {
+  // Quarter circle of radius 10 mm counter-clockwise (I J), then back clockwise by radius (R).
+  const auto arcs = parse("G21\nG90\nG1 X10 Y0 F600\nG3 X0 Y10 I-10 J0 E1\nG2 X10 Y0 R10\n");
+  double arc_length = 0;
+  for (const auto& move : arcs.moves)
+    if (move.line == 4) arc_length += (move.end - move.start).norm();
+  std::printf("G3 quarter circle: %.4f mm of polyline, exact %.4f mm\n", arc_length * 1e3, kPi * 10 / 2);
+  EXPECT_NEAR(arc_length * 1e3, kPi * 10 / 2, 0.002 * kPi * 10 / 2);
+  EXPECT_NEAR(arcs.moves.back().end.x(), 0.010, 1e-7);
+  for (const auto& move : arcs.moves)
+    if (move.line == 4) EXPECT_NEAR(((move.end) * 1e3).head<2>().norm(), 10.0, 1e-3);  // on the circle
+  // The clockwise R arc passes through the same quadrant (its centre is the origin too).
+  for (const auto& move : arcs.moves)
+    if (move.line == 5) EXPECT_NEAR(((move.end) * 1e3).head<2>().norm(), 10.0, 1e-3);
+
+  // G91 relative moves, M83 relative E, G92 resets, inches.
+  const auto relative = parse("G91\nM83\nG1 X5 E1 F600\nG1 X5 E1\nG92 E0\nG90\nM82\nG1 X20 E2\nG20\nG1 X1\n");
+  ASSERT_EQ(relative.moves.size(), 4u);
+  EXPECT_NEAR(relative.moves[1].end.x(), 0.010, 1e-7);
+  EXPECT_NEAR(relative.moves[2].end.x(), 0.020, 1e-7);
+  EXPECT_NEAR(relative.moves[2].extrusion, 2.0, 1e-9);  // E from the G92 zero
+  EXPECT_NEAR(relative.net_extrusion, 4.0, 1e-9);
+  EXPECT_NEAR(relative.moves[3].end.x(), 0.0254, 1e-6);  // G20: X1 is one inch
+  // Feed rate: 600 mm/min over 5 mm takes 0.5 s.
+  EXPECT_NEAR(relative.moves[0].duration, 0.5, 1e-9);
+}
+
+TEST(Gcode, CuraCommentsDwellRetractionAndPlacement) {
+  GcodeSettings settings;
+  settings.placement = Pose::from_xyz_rpy(1, 2, Real(0.5), 0, 0, kPi / 2);  // build plate at (1, 2, 0.5), turned 90°
+  const auto program = parse(
+      ";FLAVOR:Marlin\n;LAYER:0\n;TYPE:WALL-OUTER\nG0 X10 Y0 Z0.2 F3000\nG1 X20 E1 F1200\nG1 E-0.8 F2400 ; retract\n"
+      "G4 P500\nG1 E0.2\n;LAYER:1\n;TYPE:SKIN\nN12 G1 X30 E1.2*93\nM107\n",
+      settings);
+  EXPECT_EQ(program.layers, 2);
+  ASSERT_GE(program.moves.size(), 5u);
+  const GcodeMove& wall = program.moves[1];
+  EXPECT_EQ(wall.feature, "WALL-OUTER");
+  EXPECT_EQ(wall.layer, 0);
+  EXPECT_TRUE(wall.extruding());
+  // X along the G-code frame is +y in the world after the 90° turn; mm → m.
+  EXPECT_NEAR(wall.end.x(), 1.0, 1e-6);
+  EXPECT_NEAR(wall.end.y(), 2.020, 1e-6);
+  EXPECT_NEAR(wall.end.z(), 0.5002, 1e-6);
+  // Retraction and un-retraction take time in place and lay nothing; G4 P500 waits 0.5 s.
+  EXPECT_TRUE(program.moves[2].dwell);
+  EXPECT_FALSE(program.moves[2].extruding());
+  EXPECT_NEAR(program.moves[3].duration, 0.5, 1e-12);
+  EXPECT_EQ(program.moves.back().feature, "SKIN");
+  EXPECT_EQ(program.moves.back().layer, 1);
+  EXPECT_EQ(program.moves.back().line, 11);  // line numbers and checksums are read past
+  // A 1.75 mm filament: 1 mm of E is π·0.875² mm³.
+  EXPECT_NEAR(wall.material_volume, kPi * 0.875 * 0.875 * 1e-9, 1e-15);
+  // The trajectory holds still through the dwell.
+  const Trajectory trajectory(program.path_segments(), 0.0);
+  double dwell_start = 0;
+  for (std::size_t k = 0; k < 3; ++k) dwell_start += program.moves[k].duration;
+  const Vec3 before = trajectory.sample(dwell_start + 0.01).position, after = trajectory.sample(dwell_start + 0.49).position;
+  EXPECT_LT((before - after).norm(), 1e-9);
+  EXPECT_FALSE(trajectory.sample(dwell_start + 0.2).extruding);
+}
+
+TEST(Gcode, BadLinesNameFileAndLine) {
+  EXPECT_NE(error_of("G1 X10\nG1 Xabc Y2\n").find("test.gcode:2: error: 'Xabc' in 'G1 Xabc Y2' is not a number"),
+            std::string::npos)
+      << error_of("G1 X10\nG1 Xabc Y2\n");
+  EXPECT_NE(error_of("G1 X10\nG2 X0 Y10\n").find("test.gcode:2: error: G2 needs a centre (I and J) or a radius (R)"),
+            std::string::npos);
+  EXPECT_NE(error_of("G1 X10\n\nX5 Y5\n").find("test.gcode:3: error: 'X5 Y5' has parameters but no G or M command"),
+            std::string::npos);
+  EXPECT_NE(error_of("G1 X10 F0\n").find("test.gcode:1: error:"), std::string::npos);
+  EXPECT_NE(error_of("G1 X10 Y0\nG3 X0 Y30 I-10 J0\n").find("test.gcode:2: error: G3: start and end are not on one circle"),
+            std::string::npos);
+}
