@@ -14,7 +14,7 @@ using namespace m3dp;
 using namespace m3dp::toolpath;
 
 namespace {
-const std::filesystem::path kSlicerFile = std::filesystem::path(M3DP_TEST_DATA) / "gcode" / "cylinder_shell.gcode";
+const std::filesystem::path kSlicerFile = std::filesystem::path(M3DP_SCENES) / "gcode" / "cylinder_shell.gcode";
 
 std::string read_text(const std::filesystem::path& file) {
   std::ifstream stream(file);
@@ -75,7 +75,7 @@ TEST(Gcode, PrusaSlicerFileMatchesTheSlicersTotals) {
   // Temperatures, fans, homing are skipped with a warning at their first line.
   bool temperature_warning = false;
   for (const auto& warning : program.warnings)
-    if (warning.message.rfind("M104 does not move the nozzle", 0) == 0) temperature_warning = warning.location.line > 0;
+    if (warning.message.rfind("M104 is not simulated", 0) == 0) temperature_warning = warning.location.line > 0;
   EXPECT_TRUE(temperature_warning);
 
   // The nozzle path follows the moves in time.
@@ -116,6 +116,15 @@ TEST(Gcode, ArcsRelativeModesAndUnits) {
   EXPECT_NEAR(relative.moves[3].end.x(), 0.0254, 1e-6);  // G20: X1 is one inch
   // Feed rate: 600 mm/min over 5 mm takes 0.5 s.
   EXPECT_NEAR(relative.moves[0].duration, 0.5, 1e-9);
+
+  // Construction scale: ten times larger, a thousand times the material, the same timing.
+  GcodeSettings enlarged;
+  enlarged.geometry_scale = 10;
+  const auto big = parse("G1 X10 F600\nG1 X20 E1\n", enlarged);
+  const auto small = parse("G1 X10 F600\nG1 X20 E1\n");
+  EXPECT_NEAR(big.moves[1].end.x(), 0.2, 1e-6);
+  EXPECT_NEAR(big.material_volume / small.material_volume, 1000.0, 1e-6);
+  EXPECT_NEAR(big.duration, small.duration, 1e-12);
 }
 
 TEST(Gcode, CuraCommentsDwellRetractionAndPlacement) {

@@ -1011,7 +1011,7 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
 
 std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segments(const pugi::xml_node& element) {
   check_attributes(element, {"file"});
-  check_children(element, {"pose", "filament_diameter", "volumetric_extrusion"});
+  check_children(element, {"pose", "scale", "filament_diameter", "volumetric_extrusion"});
   const auto file = read_attribute(element, "file", Presence::required);
   if (!file) return std::nullopt;
   toolpath::GcodeSettings settings;
@@ -1020,6 +1020,8 @@ std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segmen
           read_scalar(element, "filament_diameter", Quantity::length, Limits::positive(), Presence::optional))
     settings.filament_diameter = Real(*diameter);
   if (const auto volumetric = read_bool(element, "volumetric_extrusion")) settings.volumetric_extrusion = *volumetric;
+  if (const auto scale = read_scalar(element, "scale", Quantity::plain_number, Limits::positive(), Presence::optional))
+    settings.geometry_scale = Real(*scale);
   fs::path gcode_path(*file);
   if (gcode_path.is_relative()) gcode_path = file_.parent_path() / gcode_path;
   if (!fs::exists(gcode_path)) {

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <charconv>
 #include <cmath>
@@ -28,7 +29,8 @@ struct Words {
 class Parser {
  public:
   Parser(const fs::path& file, const GcodeSettings& settings) : file_(file), settings_(settings) {
-    feed_rate_ = settings.default_feed_rate / settings.length_scale * 60;  // G-code units per minute
+    // G-code units per minute: the default is a world speed, so it is unscaled back to G-code units.
+    feed_rate_ = settings.default_feed_rate / (settings.length_scale * settings.geometry_scale) * 60;
   }
 
   GcodeProgram parse(std::string_view text) {
@@ -43,8 +45,11 @@ class Parser {
     }
     for (const auto& [command, skipped] : skipped_)
       program_.warnings.push_back(Diagnostic{SourceLocation{file_.string(), skipped.first_line},
-                                             fmt::format("{} does not move the nozzle; skipped ({} time{})", command,
-                                                         skipped.count, skipped.count == 1 ? "" : "s")});
+                                             fmt::format("{} is not simulated (only moves, arcs, dwells and modes are); "
+                                                         "skipped ({} time{})",
+                                                         command, skipped.count, skipped.count == 1 ? "" : "s")});
+    std::sort(program_.warnings.begin(), program_.warnings.end(),
+              [](const Diagnostic& a, const Diagnostic& b) { return a.location.line < b.location.line; });
     program_.layers = layer_ + 1;
     return std::move(program_);
   }
@@ -183,9 +188,9 @@ class Parser {
 
   /// G-code millimetres → world metres through the placement.
   Vec3 world(const std::array<double, 3>& millimetres) const {
-    return settings_.placement.apply(Vec3(static_cast<Real>(millimetres[0] * settings_.length_scale),
-                                          static_cast<Real>(millimetres[1] * settings_.length_scale),
-                                          static_cast<Real>(millimetres[2] * settings_.length_scale)));
+    const double scale = settings_.length_scale * settings_.geometry_scale;
+    return settings_.placement.apply(Vec3(static_cast<Real>(millimetres[0] * scale), static_cast<Real>(millimetres[1] * scale),
+                                          static_cast<Real>(millimetres[2] * scale)));
   }
 
   double volume_of(double extrusion_mm) const {
@@ -193,7 +198,7 @@ class Parser {
     const double mm3 = settings_.volumetric_extrusion
                            ? extrusion_mm
                            : extrusion_mm * kPiDouble * std::pow(settings_.filament_diameter * 1e3, 2) / 4;
-    return mm3 * 1e-9;  // m³
+    return mm3 * 1e-9 * std::pow(static_cast<double>(settings_.geometry_scale), 3);  // m³
   }
 
   /// Adds one straight piece from position_ to `target` with `extrusion` E units.
@@ -259,7 +264,8 @@ class Parser {
     if (clockwise && sweep >= 0) sweep -= 2 * kPiDouble;
     if (!clockwise && sweep <= 0) sweep += 2 * kPiDouble;
     const double arc_mm = std::abs(sweep) * radius;
-    const int pieces = std::max(1, static_cast<int>(std::ceil(arc_mm * settings_.length_scale / settings_.arc_segment_length)));
+    const int pieces = std::max(
+        1, static_cast<int>(std::ceil(arc_mm * settings_.length_scale * settings_.geometry_scale / settings_.arc_segment_length)));
     const double start_z = position_[2], total_e = e_target_value - e_;
     for (int k = 1; k <= pieces; ++k) {
       const double fraction = double(k) / pieces;
@@ -329,8 +335,9 @@ std::vector<PathSegment> GcodeProgram::path_segments() const {
 
 GcodeProgram parse_gcode(std::string_view text, const fs::path& file, const GcodeSettings& settings) {
   if (!(settings.length_scale > 0) || !(settings.filament_diameter > 0) || !(settings.default_feed_rate > 0) ||
-      !(settings.arc_segment_length > 0))
-    throw Error("G-code settings: length_scale, filament_diameter, default_feed_rate and arc_segment_length must be > 0");
+      !(settings.arc_segment_length > 0) || !(settings.geometry_scale > 0))
+    throw Error("G-code settings: length_scale, geometry_scale, filament_diameter, default_feed_rate and arc_segment_length "
+                "must be > 0");
   return Parser(file, settings).parse(text);
 }
 

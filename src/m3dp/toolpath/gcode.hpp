@@ -21,6 +21,8 @@ struct GcodeSettings {
   bool volumetric_extrusion = false;       // true: E counts mm³ of material (slicers' "volumetric E")
   Pose placement;                          // the G-code frame (scaled to m) → world: where the build plate is
   Real length_scale = Real(1e-3);          // G-code millimetres → m (G20 switches to inches)
+  Real geometry_scale = 1;                 // enlarges the part: lengths and speeds × s, volumes × s³
+                                           // (a desktop slicer's G-code printed at construction scale)
   Real default_feed_rate = Real(0.025);    // m/s until the first F word (1500 mm/min)
   Real arc_segment_length = Real(0.5e-3);  // m, longest chord when arcs are split into lines
 };
