@@ -100,11 +100,17 @@ TEST(Gcode, ArcsRelativeModesAndUnits) {
   std::printf("G3 quarter circle: %.4f mm of polyline, exact %.4f mm\n", arc_length * 1e3, kPi * 10 / 2);
   EXPECT_NEAR(arc_length * 1e3, kPi * 10 / 2, 0.002 * kPi * 10 / 2);
   EXPECT_NEAR(arcs.moves.back().end.x(), 0.010, 1e-7);
-  for (const auto& move : arcs.moves)
-    if (move.line == 4) EXPECT_NEAR(((move.end) * 1e3).head<2>().norm(), 10.0, 1e-3);  // on the circle
+  for (const auto& move : arcs.moves) {
+    if (move.line == 4) {
+      EXPECT_NEAR((move.end * 1e3).head<2>().norm(), 10.0, 1e-3);  // on the circle
+    }
+  }
   // The clockwise R arc passes through the same quadrant (its centre is the origin too).
-  for (const auto& move : arcs.moves)
-    if (move.line == 5) EXPECT_NEAR(((move.end) * 1e3).head<2>().norm(), 10.0, 1e-3);
+  for (const auto& move : arcs.moves) {
+    if (move.line == 5) {
+      EXPECT_NEAR((move.end * 1e3).head<2>().norm(), 10.0, 1e-3);
+    }
+  }
 
   // G91 relative moves, M83 relative E, G92 resets, inches.
   const auto relative = parse("G91\nM83\nG1 X5 E1 F600\nG1 X5 E1\nG92 E0\nG90\nM82\nG1 X20 E2\nG20\nG1 X1\n");

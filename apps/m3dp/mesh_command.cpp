@@ -76,8 +76,13 @@ surface::SurfaceSettings settings_of(const MeshOptions& options, const io::Parti
   return settings;
 }
 
-/// Meshes one frame and writes it; returns the line to print.
-std::string mesh_one(const MeshOptions& options, const fs::path& input, const fs::path& output, const std::string& format) {
+struct MeshedFrame {
+  std::string line;  // what to print
+  std::size_t particles = 0;
+};
+
+/// Meshes one frame and writes it.
+MeshedFrame mesh_one(const MeshOptions& options, const fs::path& input, const fs::path& output, const std::string& format) {
   const io::ParticleFrame frame = io::read_particle_frame(input);
   const surface::SurfaceSettings settings = settings_of(options, frame, input);
   surface::SurfaceStats stats;
@@ -88,11 +93,12 @@ std::string mesh_one(const MeshOptions& options, const fs::path& input, const fs
     if (output.has_parent_path()) fs::create_directories(output.parent_path());
     io::write_triangle_mesh(output, mesh);
   }
-  return fmt::format("{} → {}: {} particles, {} triangles, {} pieces, volume {:.6g} m³ ({} method, {:.3f} s field + {:.3f} s mesh, "
+  return {fmt::format("{} → {}: {} particles, {} triangles, {} pieces, volume {:.6g} m³ ({} method, {:.3f} s field + {:.3f} s mesh, "
                      "{:.1f} MB grid)",
                      input.string(), output.string(), frame.positions.size(), mesh.triangles.size(),
                      surface::connected_components(mesh), surface::signed_volume(mesh), surface::method_name(settings.method),
-                     stats.field_seconds, stats.mesh_seconds, stats.grid_bytes / 1e6);
+                     stats.field_seconds, stats.mesh_seconds, stats.grid_bytes / 1e6),
+          frame.positions.size()};
 }
 
 }  // namespace
@@ -102,7 +108,7 @@ int mesh_command(const MeshOptions& options) {
   const bool sequence = options.input.extension() == ".pvd";
   const std::string format = format_of(options, sequence);
   if (!sequence) {
-    fmt::print("{}\n", mesh_one(options, options.input, options.output, format));
+    fmt::print("{}\n", mesh_one(options, options.input, options.output, format).line);
     return 0;
   }
   const auto entries = io::read_pvd(options.input);
@@ -115,8 +121,9 @@ int mesh_command(const MeshOptions& options) {
   for (std::size_t n = 0; n < entries.size(); ++n) {
     const std::string name = fmt::format("mesh_{:06}", n);
     const fs::path output = format == "sdf" ? options.output / name : options.output / (name + "." + format);
-    const std::string line = mesh_one(options, entries[n].file, output, format);
-    if (options.quiet) fmt::print("{}\n", line);
+    const MeshedFrame meshed = mesh_one(options, entries[n].file, output, format);
+    if (options.quiet) fmt::print("{}\n", meshed.line);
+    sample.particles = static_cast<long long>(meshed.particles);
     sample.simulated_time_s = entries[n].time;
     sample.steps = static_cast<long long>(n + 1);
     sample.wall_time_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

@@ -52,6 +52,9 @@ void ProgressBar::update(const ProgressSample& sample) {
 
 void ProgressBar::finish(const ProgressSample& sample) {
   if (!enabled_) return;
+  // In a log the 100 % line may already be there: do not print it twice.
+  const bool complete = sample.end_time_s > 0 && sample.simulated_time_s >= sample.end_time_s;
+  if (!is_terminal_ && complete && last_decile_ >= 10) return;
   draw(sample, true);
 }
 

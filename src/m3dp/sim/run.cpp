@@ -166,7 +166,9 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   };
   auto mesh_if_due = [&]() {
     if (!meshing || solver.time() + 1e-12 < next_mesh_time) return;
+    if (options.wait_for_meshes) meshing->wait_idle();
     if (meshing->submit(solver.time(), select_meshed())) last_meshed_time = solver.time();
+    if (options.wait_for_meshes) meshing->wait_idle();
     while (next_mesh_time <= solver.time() + 1e-12) next_mesh_time += meshing_settings.period;
   };
 

@@ -50,6 +50,10 @@ struct RunOptions {
   std::optional<double> until;                  // s; default the scene's end_time
   bool show_progress = true;
   const std::atomic<bool>* stop_requested = nullptr;  // set by a signal handler: stop cleanly
+  /// Meshing normally runs beside the solver, so when a mesh reaches the world depends on wall-clock
+  /// speed. True: the solver waits for each mesh, which then joins the world at the step it was asked
+  /// for: reproducible runs (tests, comparisons), at the cost of the meshing time.
+  bool wait_for_meshes = false;
 };
 
 struct RunSummary {
