@@ -51,7 +51,7 @@ void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
 }
 
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
-                    bool exclude_same_index, NeighborLists& out) {
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists) {
   const std::size_t query_count = query_positions.size();
   const Real radius_squared = radius * radius;
   out.counts.resize(query_count);
@@ -114,6 +114,7 @@ void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_pos
     out.stride = most_needed.load() + 16;
   }
   // Keep each list sorted by index: neighbours then sit in memory order (after Z-order reordering).
+  if (!sort_lists) return;
   parallel_for_each_index(query_count, [&](std::size_t i) {
     Index* begin = out.indices.data() + i * out.stride;
     std::sort(begin, begin + out.counts[i]);

@@ -80,8 +80,10 @@ class SpatialHashGrid {
 
 /// Fills `out` with, for each query point, the grid points within `radius` (strictly closer).
 /// With `exclude_same_index` the point with the query's own index is skipped (fluid–fluid lists).
+/// With `sort_lists` each list is in index order (memory order for the solver's sweeps); without,
+/// in grid order, which is as deterministic and cheaper for users that only sum over the list.
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
-                    bool exclude_same_index, NeighborLists& out);
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists = true);
 
 /// 63-bit Morton (Z-order) code of a grid cell; used to reorder particles so neighbours sit near in memory.
 std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z);

@@ -59,7 +59,11 @@ AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, 
   sph::SpatialHashGrid grid;
   grid.build(positions, radius);
   sph::NeighborLists neighbors;
-  sph::find_neighbors(grid, query_positions, radius, false, neighbors);  // includes the particle itself
+  // Room for a full lattice neighbourhood (and some compression) from the start, so the search
+  // does not run twice to grow its lists; sums only, so no sorting.
+  const double lattice_neighbors = 4.0 / 3.0 * 3.14159265 * std::pow(radius / (2 * settings.particle_radius), 3);
+  neighbors.stride = static_cast<Index>(1.3 * lattice_neighbors) + 16;
+  sph::find_neighbors(grid, query_positions, radius, false, neighbors, false);  // includes the particle itself
 
   std::vector<unsigned char> sparse(count, 0);
   parallel_for_each_index(count, [&](std::size_t i) {
