@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/core/text.hpp"
 #include "m3dp/io/atomic_file.hpp"
 
 namespace m3dp::io {
@@ -43,20 +44,6 @@ std::vector<std::string_view> split_words(std::string_view line) {
     if (position > start) words.push_back(line.substr(start, position - start));
   }
   return words;
-}
-
-/// Calls `visit(line_text, line_number)` for each line (1-based), without the line break.
-template <typename Visitor>
-void for_each_line(std::string_view text, Visitor&& visit) {
-  int line_number = 0;
-  std::size_t start = 0;
-  while (start < text.size()) {
-    std::size_t end = text.find('\n', start);
-    if (end == std::string_view::npos) end = text.size();
-    ++line_number;
-    visit(text.substr(start, end - start), line_number);
-    start = end + 1;
-  }
 }
 
 /// A finite decimal number, the whole word. Accepts a leading '+', which from_chars does not.

@@ -11,6 +11,8 @@
 #include <optional>
 #include <sstream>
 
+#include "m3dp/core/text.hpp"
+
 namespace m3dp::toolpath {
 
 namespace fs = std::filesystem;
@@ -34,15 +36,7 @@ class Parser {
   }
 
   GcodeProgram parse(std::string_view text) {
-    int line_number = 0;
-    std::size_t begin = 0;
-    while (begin < text.size()) {
-      std::size_t end = text.find('\n', begin);
-      if (end == std::string_view::npos) end = text.size();
-      ++line_number;
-      parse_line(text.substr(begin, end - begin), line_number);
-      begin = end + 1;
-    }
+    for_each_line(text, [this](std::string_view line, int line_number) { parse_line(line, line_number); });
     for (const auto& [command, skipped] : skipped_)
       program_.warnings.push_back(Diagnostic{SourceLocation{file_.string(), skipped.first_line},
                                              fmt::format("{} is not simulated (only moves, arcs, dwells and modes are); "
