@@ -76,22 +76,34 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   fs::remove_all(directory);
 }
 
-TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
+namespace {
+/// A small water tank meshed every `period` seconds (blobby field), no particle frames.
+scene::Scene meshed_tank(double end_time, Real period) {
   sim::HydrostaticSetup setup;
   setup.particle_radius = Real(0.005);
-  setup.end_time = 0.1;
+  setup.end_time = end_time;
   scene::Scene scene = sim::hydrostatic_scene(setup);
   scene.output.write_particles = false;
   scene.meshing.enabled = true;
-  scene.meshing.period = Real(0.04);
-  scene.meshing.format = "stl";
+  scene.meshing.period = period;
   scene.meshing.surface.method = surface::Method::sph_blobby;
-  sim::Simulation simulation(scene);
-  const fs::path directory = fresh_directory("meshing");
+  return scene;
+}
+
+sim::RunSummary run_into(sim::Simulation& simulation, const fs::path& directory) {
   sim::RunOptions options;
   options.output_directory = directory;
   options.show_progress = false;
-  const auto summary = sim::run_simulation(simulation, options);
+  return sim::run_simulation(simulation, options);
+}
+}  // namespace
+
+TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
+  scene::Scene scene = meshed_tank(0.1, Real(0.04));
+  scene.meshing.format = "stl";
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("meshing");
+  const auto summary = run_into(simulation, directory);
   ASSERT_EQ(summary.status, "completed");
   EXPECT_TRUE(summary.error.empty()) << summary.error;
 
@@ -111,22 +123,12 @@ TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
 }
 
 TEST(Outputs, MeshingRegionSelectsTheParticlesInside) {
-  sim::HydrostaticSetup setup;
-  setup.particle_radius = Real(0.005);
-  setup.end_time = 0.02;
-  scene::Scene scene = sim::hydrostatic_scene(setup);
-  scene.output.write_particles = false;
-  scene.meshing.enabled = true;
-  scene.meshing.period = Real(1);  // only the final state
+  scene::Scene scene = meshed_tank(0.02, Real(1));  // only the final state is meshed
   scene.meshing.material = scene.materials.front().material.name;
   scene.meshing.region = Aabb{Vec3(-1, -1, -1), Vec3(1, 1, Real(0.05))};  // the lower half of the column
-  scene.meshing.surface.method = surface::Method::sph_blobby;
   sim::Simulation simulation(scene);
   const fs::path directory = fresh_directory("meshing_region");
-  sim::RunOptions options;
-  options.output_directory = directory;
-  options.show_progress = false;
-  const auto summary = sim::run_simulation(simulation, options);
+  const auto summary = run_into(simulation, directory);
   ASSERT_EQ(summary.meshes_written, 1u);
   std::size_t below = 0;
   for (const Vec3& p : simulation.solver().fluid().position) below += p.z() < Real(0.05) ? 1 : 0;
