@@ -9,8 +9,8 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   # Surface reconstruction: OpenVDB sparse grids (its CMake config also needs Boost.Iostreams).
   libopenvdb-dev libboost-iostreams-dev
-  # The rigid world: DART with Bullet collision (meshes of printed material, robots later).
-  libdart-dev libdart-collision-bullet-dev libdart-external-ikfast-dev
+  # The rigid world: DART with Bullet collision (meshes of printed material) and its URDF loader (robots).
+  libdart-dev libdart-collision-bullet-dev libdart-external-ikfast-dev libdart-utils-urdf-dev
   # ParaView's pvpython reads our .pvd/.vtu files back in the end-to-end test.
   paraview python3-paraview python3
 )

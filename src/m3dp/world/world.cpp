@@ -4,11 +4,16 @@
 #include <assimp/scene.h>
 #include <dart/collision/bullet/BulletCollisionDetector.hpp>
 #include <dart/dart.hpp>
+#include <dart/utils/urdf/DartLoader.hpp>
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
+#include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
+#include <set>
 #include <variant>
 
 #include "m3dp/core/error.hpp"
@@ -16,6 +21,17 @@
 namespace m3dp::world {
 
 namespace {
+
+using dart::dynamics::BodyNode;
+using dart::dynamics::ShapeNode;
+using dart::dynamics::SkeletonPtr;
+
+Pose pose_of(const Eigen::Isometry3d& transform) {
+  Pose pose;
+  pose.position = transform.translation().cast<Real>();
+  pose.orientation = Quat(transform.linear().cast<Real>()).normalized();
+  return pose;
+}
 
 Eigen::Isometry3d isometry_of(const Pose& pose) {
   Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
@@ -83,28 +99,128 @@ Pose plane_pose(const Shape& shape, const Pose& pose) {
   return adjusted;
 }
 
-/// Bodies that cannot move never need contacts between themselves: skipping them keeps a printed
-/// mesh lying on the floor from costing a mesh–box contact query every step.
-class SkipImmobilePairs : public dart::collision::CollisionFilter {
+}  // namespace
+
+
+namespace {
+
+/// Our shape for a DART shape (what the fluid samples into boundary particles); none for shapes
+/// the fluid cannot see yet (capsules, cones, soft shapes).
+std::optional<Shape> m3dp_shape_of(const dart::dynamics::Shape& shape) {
+  if (const auto* box = dynamic_cast<const dart::dynamics::BoxShape*>(&shape)) return BoxShape{box->getSize().cast<Real>()};
+  if (const auto* sphere = dynamic_cast<const dart::dynamics::SphereShape*>(&shape))
+    return SphereShape{static_cast<Real>(sphere->getRadius())};
+  if (const auto* cylinder = dynamic_cast<const dart::dynamics::CylinderShape*>(&shape))
+    return CylinderShape{static_cast<Real>(cylinder->getRadius()), static_cast<Real>(cylinder->getHeight())};
+  if (const auto* mesh_shape = dynamic_cast<const dart::dynamics::MeshShape*>(&shape)) {
+    const aiScene* scene = mesh_shape->getMesh();
+    if (!scene) return std::nullopt;
+    MeshShape result;
+    result.file = mesh_shape->getMeshPath();
+    const Eigen::Vector3d scale = mesh_shape->getScale();
+    for (unsigned m = 0; m < scene->mNumMeshes; ++m) {
+      const aiMesh* mesh = scene->mMeshes[m];
+      const auto first = static_cast<Index>(result.mesh.vertices.size());
+      for (unsigned v = 0; v < mesh->mNumVertices; ++v)
+        result.mesh.vertices.emplace_back(Real(mesh->mVertices[v].x * scale.x()), Real(mesh->mVertices[v].y * scale.y()),
+                                          Real(mesh->mVertices[v].z * scale.z()));
+      for (unsigned f = 0; f < mesh->mNumFaces; ++f)
+        if (mesh->mFaces[f].mNumIndices == 3)
+          result.mesh.triangles.push_back({first + mesh->mFaces[f].mIndices[0], first + mesh->mFaces[f].mIndices[1],
+                                           first + mesh->mFaces[f].mIndices[2]});
+    }
+    return result;
+  }
+  return std::nullopt;
+}
+
+/// A body node that cannot move: its skeleton is immobile or only welds lead from it to the world
+/// (an arm's base).
+bool is_immobile(const BodyNode* node) {
+  return !node->getSkeleton()->isMobile() || node->getNumDependentGenCoords() == 0;
+}
+
+const BodyNode* body_node_of(const dart::collision::CollisionObject* object) {
+  const auto* shape_node = dynamic_cast<const ShapeNode*>(object->getShapeFrame());
+  return shape_node ? shape_node->getBodyNodePtr().get() : nullptr;
+}
+
+/// Pairs the world never needs contacts for:
+/// - what DART's own body-node filter skips (a robot's links against each other, unless its
+///   self-collision check is on);
+/// - two bodies that cannot move (a printed mesh lying on the floor, an arm's base on its table);
+/// - a print nozzle and the printed material: the nozzle sits in the strand it is laying.
+class WorldCollisionFilter : public dart::collision::CollisionFilter {
  public:
+  WorldCollisionFilter(const std::set<const BodyNode*>* nozzles, const std::set<const dart::dynamics::Skeleton*>* printed)
+      : nozzles_(nozzles), printed_(printed) {}
+
   bool ignoresCollision(const dart::collision::CollisionObject* object1,
                         const dart::collision::CollisionObject* object2) const override {
-    auto immobile = [](const dart::collision::CollisionObject* object) {
-      const auto* shape_node = dynamic_cast<const dart::dynamics::ShapeNode*>(object->getShapeFrame());
-      return shape_node != nullptr && !shape_node->getSkeleton()->isMobile();
+    if (body_node_filter_.ignoresCollision(object1, object2)) return true;
+    const BodyNode* node1 = body_node_of(object1);
+    const BodyNode* node2 = body_node_of(object2);
+    if (!node1 || !node2) return false;
+    if (is_immobile(node1) && is_immobile(node2)) return true;
+    auto nozzle_in_print = [&](const BodyNode* nozzle, const BodyNode* other) {
+      return nozzles_->count(nozzle) > 0 && printed_->count(other->getSkeleton().get()) > 0;
     };
-    return immobile(object1) && immobile(object2);
+    return nozzle_in_print(node1, node2) || nozzle_in_print(node2, node1);
   }
+
+ private:
+  dart::collision::BodyNodeCollisionFilter body_node_filter_;
+  const std::set<const BodyNode*>* nozzles_;
+  const std::set<const dart::dynamics::Skeleton*>* printed_;
 };
+
+constexpr std::size_t kNoRobot = std::numeric_limits<std::size_t>::max();
 
 }  // namespace
 
 struct World::Impl {
+  struct Link {
+    BodyNode* node = nullptr;
+    std::string name;
+    Vec3 force = Vec3::Zero();   // N, world, at the link origin
+    Vec3 torque = Vec3::Zero();  // N·m, world
+  };
+  struct Tool {
+    std::string name;
+    RobotIndex robot = 0;
+    dart::dynamics::EndEffector* end_effector = nullptr;
+    std::shared_ptr<dart::dynamics::SimpleFrame> target;
+    ToolTrajectory trajectory;
+    std::vector<Eigen::Index> target_slot;  // per IK DoF: its slot in the robot's position targets, or −1
+    Eigen::VectorXd solution;
+    double error_squared_sum = 0, error_max = 0;
+    std::size_t error_count = 0;
+  };
+  struct Robot {
+    std::string name;
+    SkeletonPtr skeleton;
+    std::vector<dart::dynamics::DegreeOfFreedom*> joint_dofs;  // the actuated joints, in joint_names() order
+    Eigen::VectorXd position_targets;
+    std::vector<ToolIndex> tools;
+    RobotContacts contacts;
+  };
+
   dart::simulation::WorldPtr world;
-  std::vector<dart::dynamics::SkeletonPtr> bodies;
-  std::map<std::string, dart::dynamics::SkeletonPtr> meshes;
+  std::vector<SkeletonPtr> bodies;
+  std::vector<LinkIndex> body_links;  // per body: its link, or npos for static ones
+  std::map<std::string, SkeletonPtr> meshes;
+  std::vector<Link> links;
+  std::vector<Robot> robots;
+  std::vector<Tool> tools;
+  std::map<const dart::dynamics::Skeleton*, RobotIndex> robot_of_skeleton;
+  std::set<const BodyNode*> nozzle_nodes;
+  std::set<const dart::dynamics::Skeleton*> printed_skeletons;
   std::size_t replacements = 0;
   std::size_t rigid_bodies = 0;
+
+  void control(double step);
+  void count_contacts();
+  void record_tracking();
 };
 
 World::World(const WorldSettings& settings) : impl_(std::make_unique<Impl>()) {
@@ -113,7 +229,8 @@ World::World(const WorldSettings& settings) : impl_(std::make_unique<Impl>()) {
   impl_->world->setTimeStep(settings.time_step);
   // Bullet handles mesh–primitive contacts more robustly than DART's default FCL.
   impl_->world->getConstraintSolver()->setCollisionDetector(dart::collision::BulletCollisionDetector::create());
-  impl_->world->getConstraintSolver()->getCollisionOption().collisionFilter = std::make_shared<SkipImmobilePairs>();
+  impl_->world->getConstraintSolver()->getCollisionOption().collisionFilter =
+      std::make_shared<WorldCollisionFilter>(&impl_->nozzle_nodes, &impl_->printed_skeletons);
 }
 
 World::~World() = default;
@@ -127,23 +244,35 @@ BodyIndex World::add_static_shape(const std::string& name, const Shape& shape, c
   skeleton->setMobile(false);
   impl_->world->addSkeleton(skeleton);
   impl_->bodies.push_back(skeleton);
+  impl_->body_links.push_back(std::numeric_limits<LinkIndex>::max());
   return impl_->bodies.size() - 1;
 }
 
-BodyIndex World::add_rigid_body(const std::string& name, const Shape& shape, double mass, const Pose& pose) {
+BodyIndex World::add_rigid_body(const std::string& name, const std::vector<Shape>& shapes,
+                                const std::vector<Pose>& shape_poses, double mass, const Pose& pose,
+                                const std::optional<Mat3>& inertia_tensor) {
   using namespace dart::dynamics;
   if (!(mass > 0)) throw Error(fmt::format("world: rigid body '{}' needs a mass > 0 kg", name));
+  if (shapes.empty() || shapes.size() != shape_poses.size())
+    throw Error(fmt::format("world: rigid body '{}' needs at least one shape, each with a pose", name));
   auto skeleton = Skeleton::create(name);
   auto pair = skeleton->createJointAndBodyNodePair<FreeJoint>();
-  const ShapePtr dart_shape = dart_shape_of(shape);
-  pair.second->createShapeNodeWith<CollisionAspect, DynamicsAspect>(dart_shape);
+  std::vector<ShapePtr> dart_shapes;
+  for (std::size_t s = 0; s < shapes.size(); ++s) {
+    dart_shapes.push_back(dart_shape_of(shapes[s]));
+    auto* shape_node = pair.second->createShapeNodeWith<CollisionAspect, DynamicsAspect>(dart_shapes.back());
+    shape_node->setRelativeTransform(isometry_of(plane_pose(shapes[s], shape_poses[s])));
+  }
   Inertia inertia;
   inertia.setMass(mass);
-  inertia.setMoment(dart_shape->computeInertia(mass));
+  inertia.setMoment(inertia_tensor ? Eigen::Matrix3d(inertia_tensor->cast<double>())
+                                   : Eigen::Matrix3d(dart_shapes.front()->computeInertia(mass)));
   pair.second->setInertia(inertia);
   pair.first->setPositions(FreeJoint::convertToPositions(isometry_of(pose)));
   impl_->world->addSkeleton(skeleton);
   impl_->bodies.push_back(skeleton);
+  impl_->links.push_back(Impl::Link{pair.second, name});
+  impl_->body_links.push_back(impl_->links.size() - 1);
   ++impl_->rigid_bodies;
   return impl_->bodies.size() - 1;
 }
@@ -151,6 +280,7 @@ BodyIndex World::add_rigid_body(const std::string& name, const Shape& shape, dou
 void World::set_static_mesh(const std::string& name, const TriangleMesh& mesh) {
   using namespace dart::dynamics;
   if (const auto old = impl_->meshes.find(name); old != impl_->meshes.end()) {
+    impl_->printed_skeletons.erase(old->second.get());
     impl_->world->removeSkeleton(old->second);
     impl_->meshes.erase(old);
     ++impl_->replacements;
@@ -163,26 +293,290 @@ void World::set_static_mesh(const std::string& name, const TriangleMesh& mesh) {
   skeleton->setMobile(false);
   impl_->world->addSkeleton(skeleton);
   impl_->meshes[name] = skeleton;
+  impl_->printed_skeletons.insert(skeleton.get());
+}
+
+RobotIndex World::add_robot(const RobotDescription& description) {
+  using namespace dart::dynamics;
+  const std::string file = description.urdf_file.string();
+  if (!std::filesystem::exists(description.urdf_file))
+    throw InputError(SourceLocation{file, 0}, "URDF file not found");
+  dart::utils::DartLoader loader;
+  SkeletonPtr skeleton = loader.parseSkeleton(dart::common::Uri::createFromPath(std::filesystem::absolute(description.urdf_file).string()));
+  if (!skeleton)
+    throw InputError(SourceLocation{file, 0},
+                     "DART's URDF loader rejected the robot (its reason is printed above); check the <link>, <joint> "
+                     "and <inertial> elements");
+  skeleton->setName(description.name);
+  // Place the base: a welded root (URDF root link "world") moves its weld, a floating base its free joint.
+  Joint* root = skeleton->getRootJoint();
+  if (auto* free_joint = dynamic_cast<FreeJoint*>(root)) {
+    free_joint->setPositions(FreeJoint::convertToPositions(isometry_of(description.base_pose) * free_joint->getRelativeTransform()));
+  } else {
+    root->setTransformFromParentBodyNode(isometry_of(description.base_pose) * root->getTransformFromParentBodyNode());
+  }
+  // The actuated joints: every one-DoF joint below the root, tracked by servo motors.
+  std::vector<DegreeOfFreedom*> joint_dofs;
+  for (std::size_t j = 0; j < skeleton->getNumJoints(); ++j) {
+    Joint* joint = skeleton->getJoint(j);
+    if (joint == root || joint->getNumDofs() != 1) continue;
+    joint->setActuatorType(Joint::SERVO);
+    joint_dofs.push_back(joint->getDof(0));
+  }
+  if (!description.initial_joint_positions.empty()) {
+    if (description.initial_joint_positions.size() != joint_dofs.size())
+      throw InputError(SourceLocation{file, 0},
+                       fmt::format("robot '{}' has {} joints but {} initial joint positions were given", description.name,
+                                   joint_dofs.size(), description.initial_joint_positions.size()));
+    for (std::size_t k = 0; k < joint_dofs.size(); ++k) joint_dofs[k]->setPosition(description.initial_joint_positions[k]);
+  }
+  Impl::Robot robot;
+  robot.name = description.name;
+  robot.skeleton = skeleton;
+  robot.joint_dofs = joint_dofs;
+  robot.position_targets.resize(static_cast<Eigen::Index>(joint_dofs.size()));
+  for (std::size_t k = 0; k < joint_dofs.size(); ++k) robot.position_targets[static_cast<Eigen::Index>(k)] = joint_dofs[k]->getPosition();
+  impl_->world->addSkeleton(skeleton);
+  const RobotIndex index = impl_->robots.size();
+  impl_->robot_of_skeleton[skeleton.get()] = index;
+  for (std::size_t b = 0; b < skeleton->getNumBodyNodes(); ++b) {
+    BodyNode* node = skeleton->getBodyNode(b);
+    if (node->getNumDependentGenCoords() == 0 || node->getShapeNodesWith<CollisionAspect>().empty()) continue;
+    impl_->links.push_back(Impl::Link{node, description.name + "/" + node->getName()});
+  }
+  impl_->robots.push_back(std::move(robot));
+  return index;
+}
+
+ToolIndex World::add_tool(RobotIndex robot_index, const ToolDescription& description) {
+  using namespace dart::dynamics;
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  BodyNode* link = robot.skeleton->getBodyNode(description.link);
+  if (!link)
+    throw Error(fmt::format("robot '{}' has no link '{}'; its links: {}", robot.name, description.link,
+                            fmt::join(link_names(robot_index), ", ")));
+  Impl::Tool tool;
+  tool.name = description.name;
+  tool.robot = robot_index;
+  tool.end_effector = link->createEndEffector(description.name);
+  tool.end_effector->setDefaultRelativeTransform(isometry_of(description.offset), true);
+  tool.target = std::make_shared<SimpleFrame>(Frame::World(), description.name + "_target");
+  tool.target->setTransform(tool.end_effector->getWorldTransform());
+
+  // The tool's inverse kinematics: position exact, the tool axis along the target's z, rotation
+  // about that axis free (the error is measured in the target's frame; its z rotation is unbounded).
+  auto ik = tool.end_effector->getIK(true);
+  ik->setTarget(tool.target);
+  ik->useWholeBody();
+  auto& error_method = ik->getErrorMethod();
+  if (auto* region = dynamic_cast<InverseKinematics::TaskSpaceRegion*>(&error_method)) region->setReferenceFrame(tool.target);
+  error_method.setLinearBounds(Eigen::Vector3d::Constant(-1e-6), Eigen::Vector3d::Constant(1e-6));
+  error_method.setAngularBounds(Eigen::Vector3d(-1e-5, -1e-5, -kPi), Eigen::Vector3d(1e-5, 1e-5, kPi));
+  ik->getSolver()->setNumMaxIterations(50);
+  for (const std::size_t dof : ik->getDofs()) {
+    const auto found = std::find(robot.joint_dofs.begin(), robot.joint_dofs.end(), robot.skeleton->getDof(dof));
+    tool.target_slot.push_back(found == robot.joint_dofs.end() ? -1 : static_cast<Eigen::Index>(found - robot.joint_dofs.begin()));
+  }
+
+  // A body for the tool (the nozzle's barrel): a cylinder along the tool axis from the link to
+  // `body_clearance` before the tool frame's origin. Its own body node, so it is a link the fluid
+  // sees and the world can exclude from contacts with the printed material.
+  if (description.body_radius > 0) {
+    const Vec3 tip = description.offset.position - description.body_clearance * description.offset.rotate(Vec3::UnitZ());
+    const Real length = tip.norm();
+    if (length > Real(1e-4)) {
+      auto pair = link->createChildJointAndBodyNodePair<WeldJoint>(
+          WeldJoint::Properties(), BodyNode::AspectProperties(description.name));
+      Pose barrel;
+      barrel.position = tip / 2;
+      barrel.orientation = Quat::FromTwoVectors(Vec3::UnitZ(), tip / length);
+      pair.first->setTransformFromParentBodyNode(isometry_of(barrel));
+      pair.second->createShapeNodeWith<CollisionAspect, DynamicsAspect>(
+          std::make_shared<dart::dynamics::CylinderShape>(description.body_radius, length));
+      Inertia inertia;
+      inertia.setMass(description.body_mass);
+      inertia.setMoment(dart::dynamics::CylinderShape::computeInertia(description.body_radius, length, description.body_mass));
+      pair.second->setInertia(inertia);
+      impl_->nozzle_nodes.insert(pair.second);
+      impl_->links.push_back(Impl::Link{pair.second, robot.name + "/" + description.name});
+    }
+  }
+  impl_->tools.push_back(std::move(tool));
+  robot.tools.push_back(impl_->tools.size() - 1);
+  return impl_->tools.size() - 1;
+}
+
+void World::set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory) {
+  impl_->tools.at(tool).trajectory = std::move(trajectory);
+}
+
+void World::set_joint_targets(RobotIndex robot_index, const std::vector<double>& positions) {
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  if (positions.size() != static_cast<std::size_t>(robot.position_targets.size()))
+    throw Error(fmt::format("robot '{}': {} joint targets for {} joints", robot.name, positions.size(), robot.position_targets.size()));
+  for (std::size_t k = 0; k < positions.size(); ++k) robot.position_targets[static_cast<Eigen::Index>(k)] = positions[k];
+}
+
+std::size_t World::robot_count() const { return impl_->robots.size(); }
+const std::string& World::robot_name(RobotIndex robot) const { return impl_->robots.at(robot).name; }
+
+std::vector<std::string> World::joint_names(RobotIndex robot) const {
+  std::vector<std::string> names;
+  for (const auto* dof : impl_->robots.at(robot).joint_dofs) names.push_back(dof->getJoint()->getName());
+  return names;
+}
+
+std::vector<std::string> World::link_names(RobotIndex robot) const {
+  std::vector<std::string> names;
+  const auto& skeleton = *impl_->robots.at(robot).skeleton;
+  for (std::size_t b = 0; b < skeleton.getNumBodyNodes(); ++b) names.push_back(skeleton.getBodyNode(b)->getName());
+  return names;
+}
+
+std::vector<double> World::joint_positions(RobotIndex robot) const {
+  std::vector<double> positions;
+  for (const auto* dof : impl_->robots.at(robot).joint_dofs) positions.push_back(dof->getPosition());
+  return positions;
+}
+
+Pose World::tool_pose(ToolIndex tool) const { return pose_of(impl_->tools.at(tool).end_effector->getWorldTransform()); }
+
+Vec3 World::tool_linear_velocity(ToolIndex tool) const {
+  return impl_->tools.at(tool).end_effector->getLinearVelocity().cast<Real>();
+}
+
+const RobotContacts& World::robot_contacts(RobotIndex robot) const { return impl_->robots.at(robot).contacts; }
+
+double World::tool_tracking_rms(ToolIndex tool) const {
+  const auto& record = impl_->tools.at(tool);
+  return record.error_count ? std::sqrt(record.error_squared_sum / static_cast<double>(record.error_count)) : 0.0;
+}
+
+double World::tool_tracking_max(ToolIndex tool) const { return impl_->tools.at(tool).error_max; }
+
+std::size_t World::link_count() const { return impl_->links.size(); }
+
+LinkShapes World::link_shapes(LinkIndex link) const {
+  const auto& record = impl_->links.at(link);
+  LinkShapes result;
+  result.name = record.name;
+  for (const ShapeNode* shape_node : record.node->getShapeNodesWith<dart::dynamics::CollisionAspect>()) {
+    if (auto shape = m3dp_shape_of(*shape_node->getShape())) {
+      result.shapes.push_back(std::move(*shape));
+      result.poses.push_back(pose_of(shape_node->getRelativeTransform()));
+    }
+  }
+  return result;
+}
+
+Pose World::link_pose(LinkIndex link) const { return pose_of(impl_->links.at(link).node->getWorldTransform()); }
+
+Vec3 World::link_linear_velocity(LinkIndex link) const {
+  return impl_->links.at(link).node->getLinearVelocity().cast<Real>();
+}
+
+Vec3 World::link_angular_velocity(LinkIndex link) const {
+  return impl_->links.at(link).node->getAngularVelocity().cast<Real>();
+}
+
+void World::set_link_wrench(LinkIndex link, const Vec3& force, const Vec3& torque) {
+  auto& record = impl_->links.at(link);
+  record.force = force;
+  record.torque = torque;
+}
+
+LinkIndex World::link_of_body(BodyIndex body) const {
+  const LinkIndex link = impl_->body_links.at(body);
+  if (link == std::numeric_limits<LinkIndex>::max()) throw Error("world: a static body has no link");
+  return link;
+}
+
+void World::Impl::control(double step) {
+  const double next_time = world->getTime() + step;
+  for (Robot& robot : robots) {
+    // A tool with a trajectory drives its robot: the joint targets are the IK solution for the
+    // tool's target at the end of this step, seeded with the current joint positions.
+    for (const ToolIndex t : robot.tools) {
+      Tool& tool = tools[t];
+      if (!tool.trajectory) continue;
+      const ToolTarget target = tool.trajectory(next_time);
+      Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
+      transform.translation() = target.position.cast<double>();
+      transform.linear() = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), target.axis.cast<double>().normalized())
+                               .toRotationMatrix();
+      tool.target->setTransform(transform);
+      tool.end_effector->getIK()->findSolution(tool.solution);
+      for (std::size_t k = 0; k < tool.target_slot.size(); ++k)
+        if (tool.target_slot[k] >= 0) robot.position_targets[tool.target_slot[k]] = tool.solution[static_cast<Eigen::Index>(k)];
+    }
+    // Servo velocity that reaches the target in one step, within the joint's speed limits.
+    for (std::size_t k = 0; k < robot.joint_dofs.size(); ++k) {
+      auto* dof = robot.joint_dofs[k];
+      double velocity = (robot.position_targets[static_cast<Eigen::Index>(k)] - dof->getPosition()) / step;
+      velocity = std::clamp(velocity, dof->getVelocityLowerLimit(), dof->getVelocityUpperLimit());
+      dof->setCommand(velocity);
+    }
+  }
+  for (const Link& link : links) {
+    if (link.force.isZero() && link.torque.isZero()) continue;
+    link.node->addExtForce(link.force.cast<double>(), Eigen::Vector3d::Zero(), false, true);
+    link.node->addExtTorque(link.torque.cast<double>(), false);
+  }
+}
+
+void World::Impl::count_contacts() {
+  if (robots.empty()) return;
+  std::vector<bool> touched(robots.size(), false);
+  for (const auto& contact : world->getLastCollisionResult().getContacts()) {
+    const BodyNode* nodes[2] = {body_node_of(contact.collisionObject1), body_node_of(contact.collisionObject2)};
+    for (int side = 0; side < 2; ++side) {
+      if (!nodes[side]) continue;
+      const auto robot = robot_of_skeleton.find(nodes[side]->getSkeleton().get());
+      if (robot == robot_of_skeleton.end()) continue;
+      const BodyNode* other = nodes[1 - side];
+      RobotContacts& contacts = robots[robot->second].contacts;
+      if (other && robot_of_skeleton.count(other->getSkeleton().get()) && other->getSkeleton() != nodes[side]->getSkeleton())
+        ++contacts.with_robots;
+      else if (other && printed_skeletons.count(other->getSkeleton().get()))
+        ++contacts.with_printed_material;
+      else
+        ++contacts.with_other;
+      touched[robot->second] = true;
+    }
+  }
+  for (std::size_t r = 0; r < robots.size(); ++r)
+    if (touched[r]) ++robots[r].contacts.steps_in_contact;
+}
+
+void World::Impl::record_tracking() {
+  for (Tool& tool : tools) {
+    if (!tool.trajectory) continue;
+    const double error = (tool.end_effector->getWorldTransform().translation() - tool.target->getWorldTransform().translation()).norm();
+    tool.error_squared_sum += error * error;
+    ++tool.error_count;
+    tool.error_max = std::max(tool.error_max, error);
+  }
 }
 
 void World::step_to(double time) {
   const double step = impl_->world->getTimeStep();
-  if (impl_->rigid_bodies == 0) {
+  if (impl_->rigid_bodies == 0 && impl_->robots.empty()) {
     // Nothing can move: keep the clock, skip collision detection against static meshes.
     while (impl_->world->getTime() + 0.5 * step <= time) impl_->world->setTime(impl_->world->getTime() + step);
     return;
   }
-  while (impl_->world->getTime() + 0.5 * step <= time) impl_->world->step();
+  while (impl_->world->getTime() + 0.5 * step <= time) {
+    impl_->control(step);
+    impl_->world->step();  // clears the commands and external forces: control() sets them every step
+    impl_->count_contacts();
+    impl_->record_tracking();
+  }
 }
 
 double World::time() const { return impl_->world->getTime(); }
 
 Pose World::pose(BodyIndex body) const {
-  const Eigen::Isometry3d transform = impl_->bodies.at(body)->getRootBodyNode()->getWorldTransform();
-  Pose pose;
-  pose.position = transform.translation().cast<Real>();
-  pose.orientation = Quat(transform.linear().cast<Real>());
-  return pose;
+  return pose_of(impl_->bodies.at(body)->getRootBodyNode()->getWorldTransform());
 }
 
 Vec3 World::linear_velocity(BodyIndex body) const {

@@ -1,9 +1,13 @@
 #pragma once
-// The rigid-body world (DART): static geometry, free rigid bodies, and printed-material meshes
-// added at run time as static collision bodies. DART stays inside world.cpp (pimpl), so the rest
-// of M3DP never includes its headers. Robots, controllers and the two-way coupling with the fluid
-// come with the robots issue; this is the part the surface meshes need.
+// The rigid-body world (DART): static geometry, free rigid bodies, robots loaded from URDF with
+// their controllers, and printed-material meshes added at run time as static collision bodies.
+// DART stays inside world.cpp (pimpl), so the rest of M3DP never includes its headers; the fluid
+// coupling (coupling module) sees the world only through links: poses, velocities, shapes, wrenches.
+#include <cstdint>
+#include <filesystem>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -19,6 +23,54 @@ struct WorldSettings {
 
 /// A handle to a body of the world: its index in the order bodies were added.
 using BodyIndex = std::size_t;
+using RobotIndex = std::size_t;
+using ToolIndex = std::size_t;
+/// A handle to a movable link: a free rigid body or one link of a robot (see link_count()).
+using LinkIndex = std::size_t;
+
+/// A robot from a URDF file. A URDF whose root link is called "world" is fixed to the world (an arm
+/// on a table); otherwise the base floats freely.
+struct RobotDescription {
+  std::string name;
+  std::filesystem::path urdf_file;
+  Pose base_pose;                               // pose of the URDF's root frame in the world (m)
+  std::vector<double> initial_joint_positions;  // rad (or m), in the order of joint_names(); empty = zeros
+};
+
+/// A tool rigidly attached to a robot link, e.g. a print nozzle: a frame (its z axis is the tool's
+/// axis, pointing out of the tool) and optionally a cylinder body from the link to just short of
+/// the frame's origin, which collides and is seen by the fluid.
+struct ToolDescription {
+  std::string name;
+  std::string link;                  // link of the robot it is fixed to
+  Pose offset;                       // tool frame in the link frame (m)
+  Real body_radius = 0;              // m; 0 = no body
+  Real body_clearance = 0;           // m between the body's end and the tool frame's origin
+  double body_mass = 0.5;            // kg
+};
+
+/// Where a tool should be at a time: position, and the direction its z axis should point.
+/// Rotation about that axis is left free (a round nozzle does not care).
+struct ToolTarget {
+  Vec3 position = Vec3::Zero();      // m, world
+  Vec3 axis = Vec3(0, 0, -1);        // unit, world
+};
+using ToolTrajectory = std::function<ToolTarget(double time)>;
+
+/// What the fluid needs to know of a movable link: its collision shapes in the link frame.
+struct LinkShapes {
+  std::string name;                  // "robot/link" or the body's name
+  std::vector<Shape> shapes;
+  std::vector<Pose> poses;           // of each shape, in the link frame
+};
+
+/// Contacts of one robot, summed over every world step so far.
+struct RobotContacts {
+  std::uint64_t with_robots = 0;           // contact points with another robot's links
+  std::uint64_t with_printed_material = 0; // with a printed-material mesh
+  std::uint64_t with_other = 0;            // static shapes, rigid bodies
+  std::uint64_t steps_in_contact = 0;      // world steps with at least one contact
+};
 
 class World {
  public:
@@ -29,11 +81,53 @@ class World {
 
   /// A body fixed in the world with one collision shape at `pose` (m, world frame).
   BodyIndex add_static_shape(const std::string& name, const Shape& shape, const Pose& pose);
-  /// A free rigid body: mass (kg) and its inertia from the shape, uniform density.
-  BodyIndex add_rigid_body(const std::string& name, const Shape& shape, double mass, const Pose& pose);
+  /// A free rigid body with one or more collision shapes (poses in the body frame). Mass in kg;
+  /// inertia about the body origin from the first shape at uniform density unless given (kg·m²).
+  BodyIndex add_rigid_body(const std::string& name, const std::vector<Shape>& shapes, const std::vector<Pose>& shape_poses,
+                           double mass, const Pose& pose, const std::optional<Mat3>& inertia = std::nullopt);
+  BodyIndex add_rigid_body(const std::string& name, const Shape& shape, double mass, const Pose& pose) {
+    return add_rigid_body(name, {shape}, {Pose{}}, mass, pose);
+  }
   /// Sets (first call) or replaces (later calls) the static collision mesh called `name`, e.g. the
   /// newest surface of the printed material. An empty mesh removes it.
   void set_static_mesh(const std::string& name, const TriangleMesh& mesh);
+
+  // ---- robots ----
+  /// Loads a URDF robot. Its joints track position targets (the initial positions until a tool
+  /// target or set_joint_targets says otherwise) through DART servo motors within the URDF's
+  /// velocity and effort limits. Throws InputError naming the file if the URDF cannot be loaded.
+  RobotIndex add_robot(const RobotDescription& description);
+  /// Fixes a tool to a robot link. Throws Error if the link does not exist.
+  ToolIndex add_tool(RobotIndex robot, const ToolDescription& tool);
+  /// From now on the robot's joints follow inverse kinematics (DART's IK, joint limits respected)
+  /// so that the tool follows `trajectory`: each world step asks for the target at the step's end.
+  void set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory);
+  /// Position targets (rad or m) for every joint in joint_names() order; velocities optional.
+  void set_joint_targets(RobotIndex robot, const std::vector<double>& positions);
+  [[nodiscard]] std::size_t robot_count() const;
+  [[nodiscard]] const std::string& robot_name(RobotIndex robot) const;
+  [[nodiscard]] std::vector<std::string> joint_names(RobotIndex robot) const;
+  [[nodiscard]] std::vector<std::string> link_names(RobotIndex robot) const;
+  [[nodiscard]] std::vector<double> joint_positions(RobotIndex robot) const;
+  [[nodiscard]] Pose tool_pose(ToolIndex tool) const;
+  [[nodiscard]] Vec3 tool_linear_velocity(ToolIndex tool) const;
+  [[nodiscard]] const RobotContacts& robot_contacts(RobotIndex robot) const;
+  /// Root-mean-square and largest distance (m) between tool and its target over the steps so far.
+  [[nodiscard]] double tool_tracking_rms(ToolIndex tool) const;
+  [[nodiscard]] double tool_tracking_max(ToolIndex tool) const;
+
+  // ---- movable links (what the fluid couples to) ----
+  /// Free rigid bodies and robot links that can move and have collision shapes.
+  [[nodiscard]] std::size_t link_count() const;
+  [[nodiscard]] LinkShapes link_shapes(LinkIndex link) const;
+  [[nodiscard]] Pose link_pose(LinkIndex link) const;
+  [[nodiscard]] Vec3 link_linear_velocity(LinkIndex link) const;   // m/s of the link frame's origin, world
+  [[nodiscard]] Vec3 link_angular_velocity(LinkIndex link) const;  // rad/s, world
+  /// A force (N, world) at the link origin and a torque (N·m, world) applied in every world step
+  /// until the next call: how the fluid pushes on bodies and robots.
+  void set_link_wrench(LinkIndex link, const Vec3& force, const Vec3& torque);
+  /// The link of a free rigid body.
+  [[nodiscard]] LinkIndex link_of_body(BodyIndex body) const;
 
   /// Steps at the fixed time step until the world's clock reaches `time` (s).
   void step_to(double time);
