@@ -69,6 +69,39 @@ TEST(NeighborSearch, QueriesAgainstAnotherSet) {
   }
 }
 
+TEST(NeighborSearch, TwoGridsOverSubsetsFindWhatOneGridFinds) {
+  // The solver's static and moving boundary grids: each over a subset of one point set. Points left
+  // out of both subsets (a body far from the fluid) must not be found.
+  std::mt19937 random(4);
+  std::uniform_real_distribution<float> coordinate(0, 1);
+  std::vector<Vec3> points(3000), queries(400);
+  for (auto& p : points) p = Vec3(coordinate(random), coordinate(random), coordinate(random));
+  for (auto& p : queries) p = Vec3(coordinate(random), coordinate(random), coordinate(random));
+  std::vector<Index> first, second;
+  std::vector<Vec3> kept;
+  std::vector<Index> kept_index;
+  for (Index k = 0; k < points.size(); ++k) {
+    if (k % 3 == 0) first.push_back(k);
+    if (k % 3 == 1) second.push_back(k);
+    if (k % 3 != 2) {
+      kept.push_back(points[k]);
+      kept_index.push_back(k);
+    }
+  }
+  SpatialHashGrid grid_a, grid_b;
+  grid_a.build(points, first, Real(0.1));
+  grid_b.build(points, second, Real(0.1));
+  const SpatialHashGrid* grids[] = {&grid_a, &grid_b};
+  NeighborLists lists;
+  find_neighbors(grids, queries, Real(0.1), false, lists);
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    std::vector<Index> expected;
+    for (const Index k : brute_force(kept, queries[i], Real(0.1), kept.size())) expected.push_back(kept_index[k]);
+    const auto span = lists.of(i);
+    EXPECT_EQ(std::vector<Index>(span.begin(), span.end()), expected) << "query " << i;
+  }
+}
+
 TEST(NeighborSearch, MortonCodeOrdersByOctant) {
   EXPECT_LT(morton_code(0, 0, 0), morton_code(1, 0, 0));
   EXPECT_LT(morton_code(1, 1, 1), morton_code(2, 0, 0));

@@ -19,9 +19,18 @@ std::size_t NeighborLists::total() const {
 }
 
 void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
+  build_points(positions, nullptr, positions.size(), cell_size);
+}
+
+void SpatialHashGrid::build(std::span<const Vec3> positions, std::span<const Index> subset, Real cell_size) {
+  build_points(positions, subset.data(), subset.size(), cell_size);
+}
+
+void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index* subset, std::size_t point_count,
+                                   Real cell_size) {
   cell_size_ = cell_size;
   inverse_cell_size_ = Real(1) / cell_size;
-  const std::size_t point_count = positions.size();
+  auto source = [&](std::size_t k) { return subset ? subset[k] : static_cast<Index>(k); };
   // About two buckets per point keeps collisions rare; power of two so the hash is a mask.
   const std::size_t bucket_count = std::bit_ceil(std::max<std::size_t>(2 * point_count, 64));
   bucket_mask_ = static_cast<std::uint32_t>(bucket_count - 1);
@@ -31,18 +40,18 @@ void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
   sorted_index_.resize(point_count);
   sorted_position_.resize(point_count);
 
-  parallel_for_each_index(point_count, [&](std::size_t i) {
-    const auto cell = cell_of(positions[i]);
-    point_bucket_[i] = bucket_of_cell(cell[0], cell[1], cell[2]);
+  parallel_for_each_index(point_count, [&](std::size_t k) {
+    const auto cell = cell_of(positions[source(k)]);
+    point_bucket_[k] = bucket_of_cell(cell[0], cell[1], cell[2]);
   }, 1024);
   // Counting sort: histogram, exclusive prefix sum, scatter. Sequential passes are memory-bound
   // and cheap next to the neighbour queries.
-  for (std::size_t i = 0; i < point_count; ++i) ++bucket_start_[point_bucket_[i] + 1];
+  for (std::size_t k = 0; k < point_count; ++k) ++bucket_start_[point_bucket_[k] + 1];
   for (std::size_t b = 0; b < bucket_count; ++b) bucket_start_[b + 1] += bucket_start_[b];
   // Scatter using bucket_start_ as cursors, then shift back.
-  for (std::size_t i = 0; i < point_count; ++i) {
-    const std::uint32_t slot = bucket_start_[point_bucket_[i]]++;
-    sorted_index_[slot] = static_cast<Index>(i);
+  for (std::size_t k = 0; k < point_count; ++k) {
+    const std::uint32_t slot = bucket_start_[point_bucket_[k]]++;
+    sorted_index_[slot] = source(k);
   }
   for (std::size_t b = bucket_count; b > 0; --b) bucket_start_[b] = bucket_start_[b - 1];
   bucket_start_[0] = 0;
@@ -52,6 +61,13 @@ void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
 
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
                     bool exclude_same_index, NeighborLists& out, bool sort_lists) {
+  const SpatialHashGrid* grids[] = {&grid};
+  find_neighbors(grids, query_positions, radius, exclude_same_index, out, sort_lists);
+}
+
+void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<const Vec3> query_positions, Real radius,
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists) {
+  const SpatialHashGrid& grid = *grids.front();
   const std::size_t query_count = query_positions.size();
   const Real radius_squared = radius * radius;
   out.counts.resize(query_count);
@@ -71,12 +87,14 @@ void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_pos
           buffer.x.clear();
           buffer.y.clear();
           buffer.z.clear();
-          grid.for_each_point_around_cell(cell, [&](Index j, const Vec3& position_j) {
-            buffer.index.push_back(j);
-            buffer.x.push_back(position_j.x());
-            buffer.y.push_back(position_j.y());
-            buffer.z.push_back(position_j.z());
-          });
+          for (const SpatialHashGrid* each : grids) {
+            each->for_each_point_around_cell(cell, [&](Index j, const Vec3& position_j) {
+              buffer.index.push_back(j);
+              buffer.x.push_back(position_j.x());
+              buffer.y.push_back(position_j.y());
+              buffer.z.push_back(position_j.z());
+            });
+          }
           buffer.distance_squared.resize(buffer.index.size());
           buffer.found.resize(buffer.index.size());
           buffer.cell = cell;

@@ -43,6 +43,9 @@ class SpatialHashGrid {
  public:
   /// Sorts `positions` into cells of size `cell_size` (m). Reuses its buffers between calls.
   void build(std::span<const Vec3> positions, Real cell_size);
+  /// Same over the points positions[subset[k]] only; candidates report the index into `positions`.
+  /// (The solver keeps static and moving boundaries in separate grids: static ones are sorted once.)
+  void build(std::span<const Vec3> positions, std::span<const Index> subset, Real cell_size);
 
   /// Calls visit(point_index, point_position) for every point in the 27 cells around `query`
   /// (each point once, even where hashed cells collide).
@@ -63,6 +66,8 @@ class SpatialHashGrid {
   }
 
  private:
+  /// Sorts positions[subset[k]] for k < point_count, or the first point_count positions if subset is null.
+  void build_points(std::span<const Vec3> positions, const Index* subset, std::size_t point_count, Real cell_size);
   [[nodiscard]] std::uint32_t bucket_of_cell(std::int32_t x, std::int32_t y, std::int32_t z) const {
     const auto hash = (static_cast<std::uint32_t>(x) * 73856093u) ^ (static_cast<std::uint32_t>(y) * 19349663u) ^
                       (static_cast<std::uint32_t>(z) * 83492791u);
@@ -83,6 +88,10 @@ class SpatialHashGrid {
 /// With `sort_lists` each list is in index order (memory order for the solver's sweeps); without,
 /// in grid order, which is as deterministic and cheaper for users that only sum over the list.
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists = true);
+/// Same over the points of several grids of one point set (same cell size), e.g. static and moving
+/// boundary particles: each list holds the neighbours from every grid.
+void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<const Vec3> query_positions, Real radius,
                     bool exclude_same_index, NeighborLists& out, bool sort_lists = true);
 
 /// 63-bit Morton (Z-order) code of a grid cell; used to reorder particles so neighbours sit near in memory.

@@ -73,6 +73,8 @@ struct BoundaryBody {
   Index first_particle = 0;
   Index particle_count = 0;
   Pose pose;                                  // body frame in world
+  Aabb local_bounds;                          // of its boundary particles, body frame
+  bool near_fluid = true;                     // moving bodies: its particles took part in the last step
   Vec3 linear_velocity = Vec3::Zero();        // m/s of the body-frame origin
   Vec3 angular_velocity = Vec3::Zero();       // rad/s, world frame
   Vec3 fluid_force = Vec3::Zero();            // N, fluid on body during the last step (world)

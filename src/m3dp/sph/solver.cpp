@@ -120,6 +120,7 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
   body.first_particle = static_cast<Index>(state_.boundary.size());
   body.particle_count = static_cast<Index>(local_points.size());
   body.pose = pose;
+  for (const Vec3& local : local_points) body.local_bounds.extend(local);
   state_.bodies.push_back(body);
 
   auto& boundary = state_.boundary;
@@ -149,7 +150,9 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
       boundary.volume[members[m]] = boundary_volume_scale_ / sum;
     }
   });
-  state_.boundary_grid_dirty = true;
+  state_.static_boundary_dirty = true;
+  state_.static_boundary_indices.reserve(boundary.size());
+  state_.moving_boundary_indices.reserve(boundary.size());
   return body_index;
 }
 
@@ -200,6 +203,7 @@ void Solver::set_body_motion(Index body, const Pose& pose, const Vec3& linear_ve
   target.pose = pose;
   target.linear_velocity = linear_velocity;
   target.angular_velocity = angular_velocity;
+  if (target.is_static) state_.static_boundary_dirty = true;  // it leaves the static grid
   target.is_static = false;
 }
 
@@ -301,15 +305,59 @@ const StepStats& Solver::step() {
 
 void Solver::update_bodies() {
   auto& boundary = state_.boundary;
-  for (const auto& body : state_.bodies) {
+  const Real support = support_radius();
+  if (state_.static_boundary_dirty) {
+    state_.static_boundary_indices.clear();
+    for (const auto& body : state_.bodies)
+      if (body.is_static)
+        for (Index k = 0; k < body.particle_count; ++k) state_.static_boundary_indices.push_back(body.first_particle + k);
+    state_.static_boundary_grid.build(boundary.position, state_.static_boundary_indices, support);
+    state_.static_boundary_dirty = false;
+  }
+  // Where fluid can be this step: around the particles and every nozzle that is extruding. A
+  // moving body outside it cannot have fluid neighbours, so its particles are neither moved nor sorted.
+  Aabb region = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, state_.fluid.size(), 4096), Aabb{},
+      [&](const tbb::blocked_range<std::size_t>& range, Aabb box) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) box.extend(state_.fluid.position[i]);
+        return box;
+      },
+      [](Aabb a, const Aabb& b) {
+        if (!b.empty()) {
+          a.extend(b.min);
+          a.extend(b.max);
+        }
+        return a;
+      });
+  for (std::size_t n = 0; n < state_.nozzles.size(); ++n)
+    if (state_.nozzles[n].extruding) region.extend(state_.nozzles[n].pose.position);
+  // A body within a support radius of that region may have fluid neighbours; a nozzle's disc reaches
+  // its radius further, and a particle moves less than a diameter in a step.
+  Real widest_nozzle = 0;
+  for (const auto& nozzle : parameters_.nozzles) widest_nozzle = std::max(widest_nozzle, nozzle.inner_diameter);
+  const Vec3 reach = Vec3::Constant(support + widest_nozzle / 2 + particle_diameter());
+
+  state_.moving_boundary_indices.clear();
+  for (auto& body : state_.bodies) {
     if (body.is_static) continue;
+    Aabb box;
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3 local((corner & 1) ? body.local_bounds.max.x() : body.local_bounds.min.x(),
+                       (corner & 2) ? body.local_bounds.max.y() : body.local_bounds.min.y(),
+                       (corner & 4) ? body.local_bounds.max.z() : body.local_bounds.min.z());
+      box.extend(body.pose.apply(local));
+    }
+    body.near_fluid = !region.empty() && (box.min.array() <= (region.max + reach).array()).all() &&
+                      (box.max.array() >= (region.min - reach).array()).all();
+    if (!body.near_fluid) continue;
     parallel_for_each_index(body.particle_count, [&](std::size_t k) {
       const Index b = body.first_particle + static_cast<Index>(k);
       boundary.position[b] = body.pose.apply(boundary.local_position[b]);
       boundary.velocity[b] = body.linear_velocity + body.angular_velocity.cross(boundary.position[b] - body.pose.position);
     }, 1024);
-    state_.boundary_grid_dirty = true;
+    for (Index k = 0; k < body.particle_count; ++k) state_.moving_boundary_indices.push_back(body.first_particle + k);
   }
+  state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, support);
 }
 
 void Solver::remove_out_of_bounds(StepStats& stats) {
@@ -379,7 +427,19 @@ void Solver::emit(StepStats& stats) {
             },
             std::logical_or<bool>());
       };
-      if (blocked_by(fluid.position, fluid_clearance_squared) || blocked_by(state_.boundary.position, boundary_clearance_squared)) {
+      auto blocked_by_boundary = [&] {
+        bool blocked = false;
+        for (const Vec3& offset : geometry.disc_offsets) {
+          const Vec3 point = centre + nozzle.pose.rotate(offset);
+          for (const SpatialHashGrid* grid : {&state_.static_boundary_grid, &state_.moving_boundary_grid})
+            grid->for_each_candidate(point, [&](Index, const Vec3& b) {
+              blocked |= (b - point).squaredNorm() < boundary_clearance_squared;
+            });
+          if (blocked) return true;
+        }
+        return false;
+      };
+      if (blocked_by(fluid.position, fluid_clearance_squared) || blocked_by_boundary()) {
         ++nozzle.blocked_layers;
         // Keep at most one layer pending so a blocked nozzle does not burst when it clears.
         nozzle.pending_time = std::min(nozzle.pending_time, geometry.layer_period);
@@ -451,11 +511,8 @@ void Solver::search_neighbors() {
   const Real support = support_radius();
   state_.fluid_grid.build(state_.fluid.position, support);
   find_neighbors(state_.fluid_grid, state_.fluid.position, support, true, state_.fluid_neighbors);
-  if (state_.boundary_grid_dirty) {
-    state_.boundary_grid.build(state_.boundary.position, support);
-    state_.boundary_grid_dirty = false;
-  }
-  find_neighbors(state_.boundary_grid, state_.fluid.position, support, false, state_.boundary_neighbors);
+  const SpatialHashGrid* boundary_grids[] = {&state_.static_boundary_grid, &state_.moving_boundary_grid};
+  find_neighbors(boundary_grids, state_.fluid.position, support, false, state_.boundary_neighbors);
 }
 
 void Solver::keep_out_of_boundaries() {

@@ -106,8 +106,14 @@ struct State {
   std::vector<NozzleState> nozzles;
 
   SpatialHashGrid fluid_grid;
-  SpatialHashGrid boundary_grid;
-  bool boundary_grid_dirty = true;
+  // Boundary particles in two grids: static bodies' sorted once (a large floor costs nothing per
+  // step), moving bodies' every step, and only those bodies near the fluid or a nozzle (a robot
+  // arm's upper links usually are not).
+  SpatialHashGrid static_boundary_grid;
+  SpatialHashGrid moving_boundary_grid;
+  bool static_boundary_dirty = true;
+  std::vector<Index> static_boundary_indices;
+  std::vector<Index> moving_boundary_indices;  // this step's: particles of the moving bodies near the fluid
   NeighborLists fluid_neighbors;     // fluid → fluid
   NeighborLists boundary_neighbors;  // fluid → boundary
   // Per neighbour pair (same slots as the lists), filled with the densities each step:
