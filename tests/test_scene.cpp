@@ -266,14 +266,82 @@ TEST(Scene, NozzleNarrowerThanAParticle) {
   expect_error_at(text, "<inner_diameter>", "the nozzle is narrower than one particle");
 }
 
-TEST(Scene, DynamicModelsAndIncludesAreNotSupportedYet) {
-  std::string text = replaced(valid_scene(), "<static>true</static>", "<static>false</static>");
-  text = replaced(text, "<plugin name=\"other\"",
-                  "<include><uri>model://robot</uri></include>\n    <plugin name=\"other\"");
+TEST(Scene, DynamicModelsAreReadAndChecked) {
+  // The tank made dynamic: its box moves, its plane cannot.
+  const std::string dynamic = replaced(valid_scene(), "<static>true</static>", "<static>false</static>");
+  expect_error_at(dynamic, "<geometry><plane>", "a <plane> cannot move: put it in a <static> model");
+  const auto scene = load_scene_from_string(erased(dynamic, "<collision name=\"ground\">", "</collision>"), "dynamic.sdf");
+  ASSERT_EQ(scene.dynamic_bodies.size(), 1u);
+  EXPECT_TRUE(scene.bodies.empty());
+  EXPECT_NEAR(scene.dynamic_bodies[0].mass, 1.0, 1e-12);
+  ASSERT_EQ(scene.dynamic_bodies[0].collisions.size(), 1u);
+  EXPECT_NEAR(scene.dynamic_bodies[0].collisions[0].pose.position.z(), -0.01, 1e-6);  // in the link frame
+  EXPECT_NEAR(scene.dynamic_bodies[0].pose.position.x(), 0, 1e-6);  // model (1 0 0, yaw 90°) ∘ link (0 1 0)
+
+  const std::string no_mass = erased(erased(dynamic, "<collision name=\"ground\">", "</collision>"), "<inertial>", "</inertial>");
+  expect_error_at(no_mass, "<link name=\"walls\">",
+                  "<link name=\"walls\"> of dynamic model 'tank' needs <inertial><mass>...</mass></inertial> (kg)");
+}
+
+namespace {
+/// The valid scene with the project's UR10 included, set up and carrying the print head.
+std::string robot_scene(const std::string& joint = "elbow_joint", const std::string& link = "tool0",
+                        const std::string& uri = "model://ur10") {
+  std::string text = replaced(valid_scene(), "<plugin name=\"other\"",
+                              "<include><uri>" + uri + "</uri><name>arm</name><pose>0 0 0.5 0 0 0</pose></include>\n"
+                              "    <plugin name=\"other\"");
+  text = replaced(text, "<print_head name=\"head\" material=\"water\">",
+                  "<robot name=\"arm\"><joint name=\"" + joint + "\" unit=\"deg\">90</joint></robot>\n"
+                  "      <print_head name=\"head\" material=\"water\">\n"
+                  "        <mount robot=\"arm\" link=\"" + link + "\"><pose>0 0 0.15 0 0 0</pose>"
+                  "<barrel_radius unit=\"mm\">20</barrel_radius></mount>");
+  return text;
+}
+}  // namespace
+
+TEST(Scene, RobotIncludesAreReadAndChecked) {
+  const auto scene = load_scene_from_string(robot_scene(), "robot.sdf");
+  ASSERT_EQ(scene.robots.size(), 1u);
+  const auto& robot = scene.robots[0];
+  EXPECT_EQ(robot.name, "arm");
+  EXPECT_EQ(robot.urdf_file.filename(), "ur10.urdf");
+  EXPECT_EQ(robot.joint_names.size(), 6u);
+  EXPECT_NEAR(robot.pose.position.z(), 0.5, 1e-6);
+  ASSERT_EQ(robot.initial_joint_positions.size(), 1u);
+  EXPECT_EQ(robot.initial_joint_positions[0].first, "elbow_joint");
+  EXPECT_NEAR(robot.initial_joint_positions[0].second, 3.14159265 / 2, 1e-6);
+  ASSERT_TRUE(scene.print_heads[0].mount.has_value());
+  EXPECT_EQ(scene.print_heads[0].mount->link, "tool0");
+  EXPECT_NEAR(scene.print_heads[0].mount->barrel_radius, 0.02, 1e-7);
+  EXPECT_NEAR(scene.print_heads[0].mount->offset.position.z(), 0.15, 1e-7);
+
+  expect_error_at(robot_scene("knee_joint"), "<joint name=\"knee_joint\"",
+                  "robot 'arm' has no movable joint 'knee_joint'; its joints: shoulder_pan_joint, shoulder_lift_joint, "
+                  "elbow_joint, wrist_1_joint, wrist_2_joint, wrist_3_joint");
+  expect_error_at(robot_scene("elbow_joint", "gripper"), "<mount robot=\"arm\"",
+                  "robot 'arm' has no link 'gripper'; its links: world, base_link");
+  const std::string missing = robot_scene("elbow_joint", "tool0", "model://no_such_robot");
+  const InputError error = load_error(missing);
+  EXPECT_CONTAINS(error.what(), location_of(missing, "<uri>model://no_such_robot") +
+                                    " error: 'model://no_such_robot' not found; looked for ");
+  EXPECT_CONTAINS(error.what(), "no_such_robot/no_such_robot.urdf");
+  const std::string unknown = replaced(robot_scene(), "<robot name=\"arm\">", "<robot name=\"crane\">");
+  EXPECT_CONTAINS(load_error(unknown).what(), location_of(unknown, "<robot name=\"crane\">") +
+                                                  " error: <robot name=\"crane\">: no robot of that name is included in "
+                                                  "the world (robots: arm)");
+}
+
+TEST(Scene, BrokenUrdfIsReportedAtItsOwnLine) {
+  const auto folder = std::filesystem::temp_directory_path() / ("m3dp_broken_urdf_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(folder);
+  {
+    std::ofstream urdf(folder / "broken.urdf");
+    urdf << "<?xml version=\"1.0\"?>\n<robot name=\"broken\">\n  <link name=\"a\">\n</robot>\n";
+  }
+  const std::string text = robot_scene("elbow_joint", "tool0", (folder / "broken.urdf").string());
   const InputError error = load_error(text);
-  EXPECT_CONTAINS(error.what(), location_of(text, "<model name=\"tank\">") + " error: <model name=\"tank\">: dynamic "
-                                                                              "bodies are not supported yet");
-  EXPECT_CONTAINS(error.what(), location_of(text, "<include>") + " error: <include> is not supported yet");
+  std::filesystem::remove_all(folder);
+  EXPECT_CONTAINS(error.what(), (folder / "broken.urdf").string() + ":4: error: the URDF is not well-formed XML");
 }
 
 TEST(Scene, MeshingBlockIsReadAndCheckedAtItsLine) {

@@ -1,11 +1,13 @@
 #include "m3dp/scene/scene.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <pugixml.hpp>
 
 #include <algorithm>
 #include <charconv>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <initializer_list>
 #include <iterator>
@@ -28,7 +30,7 @@ namespace fs = std::filesystem;
 
 constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
-enum class Quantity { plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle };
+enum class Quantity { plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass };
 
 struct Unit {
   std::string_view symbol;
@@ -52,7 +54,9 @@ QuantityInfo quantity_info(Quantity quantity) {
                                                {"cP", 1e-3},     {"P", 0.1}};
   static constexpr Unit kFraction[] = {{"1", 1}, {"%", 1e-2}};
   static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegree}};
+  static constexpr Unit kMass[] = {{"kg", 1}, {"g", 1e-3}};
   switch (quantity) {
+    case Quantity::mass: return {"mass", "kg", kMass};
     case Quantity::length: return {"length", "m", kLength};
     case Quantity::time: return {"time", "s", kTime};
     case Quantity::speed: return {"speed", "m/s", kSpeed};
@@ -256,6 +260,11 @@ class SceneReader {
   // ---- SDF world ----
   void read_world(const pugi::xml_node& world);
   void read_model(const pugi::xml_node& model);
+  void read_dynamic_model(const pugi::xml_node& model, const std::string& name);
+  void read_include(const pugi::xml_node& include);
+  std::optional<fs::path> resolve_model_uri(const pugi::xml_node& uri_element);
+  void read_robot_settings(const pugi::xml_node& element);
+  std::optional<NozzleMount> read_mount(const pugi::xml_node& element);
   void read_link(const pugi::xml_node& link, const Pose& model_pose, const std::string& model_name,
                  StaticBody& body);
   std::optional<Shape> read_geometry(const pugi::xml_node& geometry);
@@ -286,7 +295,7 @@ class SceneReader {
   std::optional<Aabb> bounds_;           // set when <bounds> was valid
   std::vector<DefinedMaterial> defined_materials_;
   std::vector<MaterialUse> material_uses_;
-  std::vector<std::pair<std::string, int>> model_names_, fluid_block_names_, print_head_names_;
+  std::vector<std::pair<std::string, int>> model_names_, fluid_block_names_, print_head_names_, robot_setting_names_;
 };
 
 // ---- structure checks ----
@@ -616,7 +625,7 @@ void SceneReader::read_world(const pugi::xml_node& world) {
     if (name == "model") {
       read_model(child);
     } else if (name == "include") {
-      report(child, "<include> is not supported yet; copy the model into the world");
+      read_include(child);
     } else if (name == "plugin" && is_m3dp_plugin(child)) {
       m3dp_plugins.push_back(child);
     }
@@ -642,9 +651,8 @@ void SceneReader::read_model(const pugi::xml_node& model) {
   body.where = where(model);
   if (!body.name.empty()) check_unique_name(model, body.name, model_names_);
   if (!read_bool(model, "static").value_or(false)) {
-    report(model, fmt::format("{}: dynamic bodies are not supported yet (they need the world module); mark the model "
-                              "<static>true</static>",
-                              describe(model)));
+    read_dynamic_model(model, body.name);
+    return;
   }
   const Pose model_pose = read_pose(model);
   for (const auto& child : model.children()) {
@@ -660,6 +668,195 @@ void SceneReader::read_model(const pugi::xml_node& model) {
     // Joints, plugins and the like are valid SDF with no meaning for a static boundary.
   }
   scene_.bodies.push_back(std::move(body));
+}
+
+void SceneReader::read_dynamic_model(const pugi::xml_node& model, const std::string& name) {
+  DynamicBody body;
+  body.name = name;
+  body.where = where(model);
+  const auto links = child_elements(model, "link");
+  if (links.size() != 1) {
+    report(model, fmt::format("{}: a dynamic (not <static>) model needs exactly one <link>, found {}; M3DP has no "
+                              "jointed SDF models yet (robots come from URDF through <include>)",
+                              describe(model), links.size()));
+    return;
+  }
+  for (const auto& child : model.children())
+    if (child.type() == pugi::node_element && (std::string_view(child.name()) == "model" || std::string_view(child.name()) == "include"))
+      report(child, fmt::format("<{}> inside a dynamic model is not supported", child.name()));
+  const pugi::xml_node link = links.front();
+  body.pose = read_pose(model) * read_pose(link);
+  const pugi::xml_node inertial = link.child("inertial");
+  if (!inertial) {
+    report(link, fmt::format("{} of dynamic model '{}' needs <inertial><mass>...</mass></inertial> (kg)", describe(link), name));
+  } else {
+    if (const auto mass = read_scalar(inertial, "mass", Quantity::mass, Limits::positive(), Presence::required))
+      body.mass = *mass;
+    if (inertial.child("pose")) report(inertial.child("pose"), "an <inertial><pose> is not supported yet: the centre of mass is the link origin");
+    if (const pugi::xml_node inertia = inertial.child("inertia")) {
+      Mat3 tensor = Mat3::Zero();
+      bool valid = true;
+      const char* names[3][3] = {{"ixx", "ixy", "ixz"}, {"ixy", "iyy", "iyz"}, {"ixz", "iyz", "izz"}};
+      for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c) {
+          const bool diagonal = r == c;
+          const auto value = read_scalar(inertia, names[r][c], Quantity::plain_number,
+                                         diagonal ? Limits::positive() : Limits::any(),
+                                         diagonal ? Presence::required : Presence::optional);
+          if (diagonal && !value) valid = false;
+          tensor(r, c) = Real(value.value_or(0));
+        }
+      if (valid) body.inertia = tensor;
+    }
+  }
+  for (const auto& collision : child_elements(link, "collision")) {
+    const std::string collision_name = read_attribute(collision, "name", Presence::required).value_or("");
+    const pugi::xml_node geometry = find_child(collision, "geometry", Presence::required);
+    if (!geometry) continue;
+    if (auto shape = read_geometry(geometry)) {
+      if (std::holds_alternative<PlaneShape>(*shape)) {
+        report(geometry, "a <plane> cannot move: put it in a <static> model");
+        continue;
+      }
+      body.collisions.push_back(CollisionShape{fmt::format("{}/{}/{}", name, link.attribute("name").value(), collision_name),
+                                               std::move(*shape), read_pose(collision), where(collision)});
+    }
+  }
+  if (body.collisions.empty() && link.child("collision").empty() && inertial) {
+    report(link, fmt::format("dynamic model '{}' has no <collision>: the world and the fluid would not see it", name));
+  }
+  scene_.dynamic_bodies.push_back(std::move(body));
+}
+
+std::optional<fs::path> SceneReader::resolve_model_uri(const pugi::xml_node& uri_element) {
+  const std::string uri(trim(uri_element.child_value()));
+  constexpr std::string_view kModel = "model://", kFile = "file://";
+  if (uri.starts_with(kModel)) {
+    const std::string name = uri.substr(kModel.size());
+    std::vector<std::string> looked;
+    for (const fs::path& folder : model_search_path(file_)) {
+      for (const fs::path& candidate : {folder / name / (name + ".urdf"), folder / name / "model.urdf"}) {
+        if (fs::exists(candidate)) return candidate;
+        looked.push_back(candidate.string());
+      }
+    }
+    report(uri_element, fmt::format("'{}' not found; looked for {}", uri, fmt::join(looked, ", ")));
+    return std::nullopt;
+  }
+  fs::path path(uri.starts_with(kFile) ? uri.substr(kFile.size()) : uri);
+  if (path.is_relative()) path = file_.parent_path() / path;
+  if (!fs::exists(path)) {
+    report(uri_element, fmt::format("'{}' not found (looked for {})", uri, path.string()));
+    return std::nullopt;
+  }
+  return path;
+}
+
+void SceneReader::read_include(const pugi::xml_node& include) {
+  check_children(include, {"uri", "name", "pose", "static", "placement_frame", "plugin"}, {"plugin"});
+  const pugi::xml_node uri_element = find_child(include, "uri", Presence::required);
+  if (!uri_element) return;
+  const auto file = resolve_model_uri(uri_element);
+  if (!file) return;
+  if (file->extension() != ".urdf") {
+    report(uri_element, fmt::format("'{}' is not a URDF file; <include> takes URDF robots for now (SDF models go "
+                                    "directly into the world as <model>)",
+                                    file->string()));
+    return;
+  }
+  RobotInclude robot;
+  robot.urdf_file = *file;
+  robot.pose = read_pose(include);
+  robot.where = where(include);
+  // The URDF is read here too, so that `m3dp validate` reports its XML errors with its own lines
+  // and the scene's checks (link and joint names) need no physics engine.
+  std::ifstream stream(*file, std::ios::binary);
+  const std::string text((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+  pugi::xml_document urdf;
+  const pugi::xml_parse_result parsed = urdf.load_buffer(text.data(), text.size());
+  if (!parsed) {
+    report(SourceLocation{file->string(), LineIndex(text).line_at(parsed.offset)},
+           fmt::format("the URDF is not well-formed XML: {}", parsed.description()));
+    return;
+  }
+  const pugi::xml_node root = urdf.document_element();
+  if (std::string_view(root.name()) != "robot") {
+    report(SourceLocation{file->string(), LineIndex(text).line_at(root.offset_debug())},
+           fmt::format("expected the root element <robot> in a URDF, got <{}>", root.name()));
+    return;
+  }
+  const std::string urdf_name = root.attribute("name").value();
+  if (const pugi::xml_node name_element = include.child("name")) {
+    robot.name = std::string(trim(name_element.child_value()));
+  } else {
+    robot.name = urdf_name;
+  }
+  if (robot.name.empty()) {
+    report(include, "the robot has no name: give the <include> a <name> or the URDF's <robot> a name=\"...\"");
+    return;
+  }
+  check_unique_name(include, robot.name, model_names_);
+  for (const auto& link : root.children("link")) robot.link_names.emplace_back(link.attribute("name").value());
+  for (const auto& joint : root.children("joint")) {
+    const std::string_view type = joint.attribute("type").value();
+    if (type == "revolute" || type == "continuous" || type == "prismatic") robot.joint_names.emplace_back(joint.attribute("name").value());
+  }
+  scene_.robots.push_back(std::move(robot));
+}
+
+void SceneReader::read_robot_settings(const pugi::xml_node& element) {
+  check_attributes(element, {"name"});
+  check_children(element, {"joint"}, {"joint"});
+  const auto name = read_attribute(element, "name", Presence::required);
+  if (!name) return;
+  check_unique_name(element, *name, robot_setting_names_);
+  auto robot = std::find_if(scene_.robots.begin(), scene_.robots.end(), [&](const RobotInclude& r) { return r.name == *name; });
+  if (robot == scene_.robots.end()) {
+    std::vector<std::string> names;
+    for (const auto& r : scene_.robots) names.push_back(r.name);
+    report(element, fmt::format("<robot name=\"{}\">: no robot of that name is included in the world{}", *name,
+                                names.empty() ? std::string("; add <include><uri>model://...</uri></include>")
+                                              : fmt::format(" (robots: {})", fmt::join(names, ", "))));
+    return;
+  }
+  for (const auto& joint : child_elements(element, "joint")) {
+    const auto joint_name = read_attribute(joint, "name", Presence::required);
+    if (!joint_name) continue;
+    if (std::find(robot->joint_names.begin(), robot->joint_names.end(), *joint_name) == robot->joint_names.end()) {
+      report(joint, fmt::format("robot '{}' has no movable joint '{}'; its joints: {}", robot->name, *joint_name,
+                                fmt::join(robot->joint_names, ", ")));
+      continue;
+    }
+    const auto text = leaf_text(joint, {"name", "unit"});
+    const auto factor = unit_factor(joint, Quantity::angle);
+    const auto value = parse_numbers(joint, text, 1, "an initial joint position (rad, or unit=\"deg\")");
+    if (value && factor) robot->initial_joint_positions.emplace_back(*joint_name, value->front() * *factor);
+  }
+}
+
+std::optional<NozzleMount> SceneReader::read_mount(const pugi::xml_node& element) {
+  check_attributes(element, {"robot", "link"});
+  check_children(element, {"pose", "barrel_radius"});
+  NozzleMount mount;
+  mount.where = where(element);
+  const auto robot_name = read_attribute(element, "robot", Presence::required);
+  const auto link = read_attribute(element, "link", Presence::required);
+  mount.offset = read_pose(element);
+  if (const auto radius = read_scalar(element, "barrel_radius", Quantity::length, Limits::non_negative(), Presence::optional))
+    mount.barrel_radius = Real(*radius);
+  if (!robot_name || !link) return std::nullopt;
+  const RobotInclude* robot = scene_.find_robot(*robot_name);
+  if (!robot) {
+    report(element, fmt::format("<mount robot=\"{}\">: no robot of that name is included in the world", *robot_name));
+    return std::nullopt;
+  }
+  if (std::find(robot->link_names.begin(), robot->link_names.end(), *link) == robot->link_names.end()) {
+    report(element, fmt::format("robot '{}' has no link '{}'; its links: {}", robot->name, *link, fmt::join(robot->link_names, ", ")));
+    return std::nullopt;
+  }
+  mount.robot = *robot_name;
+  mount.link = *link;
+  return mount;
 }
 
 void SceneReader::read_link(const pugi::xml_node& link, const Pose& model_pose, const std::string& model_name,
@@ -811,12 +1008,13 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
 // ---- the m3dp plugin ----
 
 void SceneReader::read_plugin(const pugi::xml_node& plugin) {
-  check_children(plugin, {"solver", "material", "fluid_block", "print_head", "output", "meshing"},
-                 {"material", "fluid_block", "print_head"});
+  check_children(plugin, {"solver", "material", "fluid_block", "print_head", "robot", "output", "meshing"},
+                 {"material", "fluid_block", "print_head", "robot"});
   // The solver comes first: other checks need the particle radius and the bounds.
   if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
   for (const auto& material : child_elements(plugin, "material")) read_material(material);
   for (const auto& block : child_elements(plugin, "fluid_block")) read_fluid_block(block);
+  for (const auto& robot : child_elements(plugin, "robot")) read_robot_settings(robot);
   for (const auto& head : child_elements(plugin, "print_head")) read_print_head(head);
   if (const pugi::xml_node output = plugin.child("output")) read_output(output);
   if (const pugi::xml_node meshing = plugin.child("meshing")) read_meshing(meshing);
@@ -942,7 +1140,7 @@ void SceneReader::read_fluid_block(const pugi::xml_node& element) {
 
 void SceneReader::read_print_head(const pugi::xml_node& element) {
   check_attributes(element, {"name", "material"});
-  check_children(element, {"nozzle", "path"});
+  check_children(element, {"nozzle", "path", "mount"});
   PrintHead head;
   head.name = read_attribute(element, "name", Presence::required).value_or("");
   head.material = read_attribute(element, "material", Presence::required).value_or("");
@@ -971,6 +1169,7 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
   if (const pugi::xml_node path = find_child(element, "path", Presence::required)) {
     if (auto trajectory = read_path(path)) head.trajectory = std::move(*trajectory);
   }
+  if (const pugi::xml_node mount = element.child("mount")) head.mount = read_mount(mount);
   scene_.print_heads.push_back(std::move(head));
 }
 
@@ -1237,6 +1436,29 @@ std::string read_text_file(const fs::path& file) {
 }
 
 }  // namespace
+
+const RobotInclude* Scene::find_robot(const std::string& name) const {
+  for (const auto& robot : robots)
+    if (robot.name == name) return &robot;
+  return nullptr;
+}
+
+std::vector<fs::path> model_search_path(const fs::path& scene_file) {
+  std::vector<fs::path> folders;
+  const fs::path scene_folder = scene_file.parent_path().empty() ? fs::path(".") : scene_file.parent_path();
+  folders.push_back(scene_folder / "models");
+  folders.push_back(scene_folder / ".." / "models");
+  if (const char* variable = std::getenv("M3DP_MODEL_PATH")) {
+    std::string_view rest(variable);
+    while (!rest.empty()) {
+      const auto colon = rest.find(':');
+      if (const auto folder = rest.substr(0, colon); !folder.empty()) folders.emplace_back(folder);
+      rest = colon == std::string_view::npos ? std::string_view{} : rest.substr(colon + 1);
+    }
+  }
+  folders.emplace_back(M3DP_PROJECT_MODELS);
+  return folders;
+}
 
 const MaterialEntry* Scene::find_material(const std::string& name) const {
   const auto entry = std::find_if(materials.begin(), materials.end(),

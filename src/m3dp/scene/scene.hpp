@@ -30,6 +30,36 @@ struct StaticBody {
   SourceLocation where;
 };
 
+/// A free rigid SDF <model> (not static, one <link>): it falls, floats and is pushed by the fluid.
+struct DynamicBody {
+  std::string name;
+  std::vector<CollisionShape> collisions;  // poses in the body (link) frame
+  Pose pose;                               // world pose of the link frame (m)
+  double mass = 1;                         // kg, <inertial><mass>
+  std::optional<Mat3> inertia;             // kg·m² about the link origin; none: from the first shape
+  SourceLocation where;
+};
+
+/// A robot: an SDF <include> of a URDF file, placed by the include's <pose>.
+struct RobotInclude {
+  std::string name;
+  std::filesystem::path urdf_file;                 // resolved, absolute or relative to the working directory
+  Pose pose;                                       // of the URDF root in the world
+  std::vector<std::string> joint_names;            // the URDF's movable joints, in file order
+  std::vector<std::string> link_names;
+  std::vector<std::pair<std::string, double>> initial_joint_positions;  // rad or m, from the plugin's <robot>
+  SourceLocation where;
+};
+
+/// A print head carried by a robot: the nozzle's exit frame on a link (z = the way material leaves).
+struct NozzleMount {
+  std::string robot;
+  std::string link;
+  Pose offset;                 // exit frame in the link frame (m)
+  Real barrel_radius = 0;      // m: a cylinder from the link to the exit that collides and displaces fluid; 0 = none
+  SourceLocation where;
+};
+
 struct MaterialEntry {
   material::NewtonianMaterial material;
   SourceLocation where;
@@ -52,6 +82,7 @@ struct PrintHead {
   Real exit_speed = Real(0.1);       // m/s
   Vec3 direction = Vec3(0, 0, -1);   // unit vector the material leaves along
   toolpath::Trajectory trajectory;
+  std::optional<NozzleMount> mount;  // none: an ideal gantry moves the nozzle exactly along the path
   SourceLocation where;
 };
 
@@ -79,6 +110,8 @@ struct Scene {
   sph::SolverSettings solver;   // includes gravity (from the world's <gravity>) and bounds
   std::vector<MaterialEntry> materials;
   std::vector<StaticBody> bodies;
+  std::vector<DynamicBody> dynamic_bodies;
+  std::vector<RobotInclude> robots;
   std::vector<FluidBlock> fluid_blocks;
   std::vector<PrintHead> print_heads;
   OutputSettings output;
@@ -86,7 +119,13 @@ struct Scene {
   std::vector<Diagnostic> warnings;  // not errors: e.g. G-code commands that were skipped (file:line)
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
+  [[nodiscard]] const RobotInclude* find_robot(const std::string& name) const;
 };
+
+/// Where `model://NAME` URIs are looked for, in order: models/ beside the scene file and one level
+/// up, each folder of the M3DP_MODEL_PATH environment variable (':'-separated), and the project's
+/// own models/ folder. NAME/NAME.urdf or NAME/model.urdf inside it is the robot.
+std::vector<std::filesystem::path> model_search_path(const std::filesystem::path& scene_file);
 
 /// Loads and validates a scene. Throws InputError listing every problem found, each with file:line.
 Scene load_scene(const std::filesystem::path& file);

@@ -62,6 +62,15 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                         {"particles", mesh.particles},
                         {"triangles", mesh.triangles},
                         {"seconds", mesh.seconds}});
+  nlohmann::json robots = nlohmann::json::array();
+  for (const auto& robot : summary.robots)
+    robots.push_back({{"name", robot.name},
+                      {"contacts_with_robots", robot.contacts.with_robots},
+                      {"contacts_with_printed_material", robot.contacts.with_printed_material},
+                      {"contacts_with_other", robot.contacts.with_other},
+                      {"world_steps_in_contact", robot.contacts.steps_in_contact},
+                      {"nozzle_tracking_rms_m", robot.tracking_rms},
+                      {"nozzle_tracking_max_m", robot.tracking_max}});
   return {
       {"scene", simulation.scene().file.string()},
       {"status", summary.status},
@@ -85,6 +94,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"bodies", bodies},
+      {"robots", robots},
       {"meshes", meshes},
       {"meshes_skipped", meshing ? meshing->skipped() : 0},
   };
@@ -92,7 +102,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
 
 constexpr const char* kTimingHeader =
     "step,time_s,dt_s,particles,density_iterations,divergence_iterations,density_error,ms_bodies,ms_remove,ms_emit,"
-    "ms_reorder,ms_neighbors,ms_density,ms_divergence,ms_forces,ms_pressure,ms_advect,ms_output,ms_total\n";
+    "ms_reorder,ms_neighbors,ms_density,ms_divergence,ms_forces,ms_pressure,ms_advect,ms_coupling,ms_world,ms_output,ms_total\n";
 
 }  // namespace
 
@@ -199,10 +209,12 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
       summary.max_density_error = std::max(summary.max_density_error, static_cast<double>(stats.density_error));
       if (timing) {
         const auto& ms = stats.stage_ms;
-        fmt::print(timing, "{},{:.8g},{:.6g},{},{},{},{:.4g},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n",
+        fmt::print(timing, "{},{:.8g},{:.6g},{},{},{},{:.4g},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n",
                    solver.state().step, solver.time(), stats.time_step, particles, stats.density_iterations,
                    stats.divergence_iterations, stats.density_error, ms.bodies, ms.remove, ms.emit, ms.reorder, ms.neighbors,
-                   ms.density, ms.divergence, ms.forces, ms.pressure, ms.advect, output_ms, ms.total() + output_ms);
+                   ms.density, ms.divergence, ms.forces, ms.pressure, ms.advect, simulation.last_coupling_ms(),
+                   simulation.last_world_ms(), output_ms,
+                   ms.total() + simulation.last_coupling_ms() + simulation.last_world_ms() + output_ms);
       }
       progress.update({solver.time(), end_time, solver.state().step, static_cast<long long>(particles), wall_seconds()});
     }
@@ -234,6 +246,18 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   summary.mass_final = solver.total_fluid_mass();
   summary.frames_written = frames ? frames->frames() : 0;
   for (const auto& nozzle : solver.state().nozzles) summary.particles_emitted += nozzle.particles_emitted;
+  for (std::size_t r = 0; r < simulation.robots().size(); ++r) {
+    RunSummary::Robot robot;
+    robot.name = simulation.world().robot_name(simulation.robots()[r]);
+    robot.contacts = simulation.world().robot_contacts(simulation.robots()[r]);
+    for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) {
+      const auto& mount = simulation.scene().print_heads[h].mount;
+      if (!mount || mount->robot != robot.name) continue;
+      robot.tracking_rms = simulation.world().tool_tracking_rms(*simulation.print_head_tool(h));
+      robot.tracking_max = simulation.world().tool_tracking_max(*simulation.print_head_tool(h));
+    }
+    summary.robots.push_back(robot);
+  }
   if (summary.steps > 0) {
     summary.mean_density_iterations = density_iterations_sum / static_cast<double>(summary.steps);
     summary.mean_divergence_iterations = divergence_iterations_sum / static_cast<double>(summary.steps);
@@ -264,6 +288,11 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
   if (!output_directory.empty())
     text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
                         summary.frames_written);
+  for (const auto& robot : summary.robots)
+    text += fmt::format("  robot       {}: nozzle {:.2f} mm rms from its path (max {:.2f} mm); contacts: {} with robots, {} "
+                        "with printed material, {} other\n",
+                        robot.name, 1e3 * robot.tracking_rms, 1e3 * robot.tracking_max, robot.contacts.with_robots,
+                        robot.contacts.with_printed_material, robot.contacts.with_other);
   if (summary.meshes_written + summary.meshes_skipped > 0)
     text += fmt::format("  meshes      {} written to meshes/ ({} skipped while the mesher was busy)\n", summary.meshes_written,
                         summary.meshes_skipped);

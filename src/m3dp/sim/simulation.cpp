@@ -1,5 +1,8 @@
 #include "m3dp/sim/simulation.hpp"
 
+#include <fmt/format.h>
+
+#include <chrono>
 #include <cmath>
 
 #include "m3dp/sph/boundary_sampling.hpp"
@@ -56,6 +59,18 @@ Simulation::Simulation(const scene::Scene& scene)
       world_.add_static_shape(collision.name, collision.shape, collision.pose);
     }
   }
+  for (const auto& body : scene_.dynamic_bodies) {
+    std::vector<Shape> shapes;
+    std::vector<Pose> poses;
+    for (const auto& collision : body.collisions) {
+      shapes.push_back(collision.shape);
+      poses.push_back(collision.pose);
+    }
+    if (!shapes.empty()) dynamic_bodies_.push_back(world_.add_rigid_body(body.name, shapes, poses, body.mass, body.pose, body.inertia));
+  }
+  add_robots();
+  // Every movable link (dynamic bodies, robot links, nozzle barrels) becomes a moving boundary.
+  coupling_ = std::make_unique<coupling::FluidBodyCoupling>(world_, solver_);
   std::size_t initial_particles = 0;
   for (const auto& block : scene_.fluid_blocks) {
     const auto points = lattice_in_box(block.box, spacing);
@@ -73,6 +88,57 @@ Simulation::Simulation(const scene::Scene& scene)
   update_print_heads();
 }
 
+void Simulation::add_robots() {
+  for (const auto& robot : scene_.robots) {
+    world::RobotDescription description;
+    description.name = robot.name;
+    description.urdf_file = robot.urdf_file;
+    description.base_pose = robot.pose;
+    world::RobotIndex index = 0;
+    try {
+      index = world_.add_robot(description);
+    } catch (const InputError& error) {
+      // Name the scene line that included the robot too.
+      std::vector<Diagnostic> diagnostics = error.diagnostics();
+      diagnostics.push_back(Diagnostic{robot.where, fmt::format("robot '{}' included here could not be loaded", robot.name)});
+      throw InputError(std::move(diagnostics));
+    }
+    if (!robot.initial_joint_positions.empty()) {
+      const auto names = world_.joint_names(index);
+      std::vector<double> positions = world_.joint_positions(index);
+      for (const auto& [joint, value] : robot.initial_joint_positions)
+        for (std::size_t k = 0; k < names.size(); ++k)
+          if (names[k] == joint) positions[k] = value;
+      world_.set_joint_positions(index, positions);
+    }
+    robots_.push_back(index);
+  }
+  const Real diameter = solver_.particle_diameter();
+  for (std::size_t h = 0; h < scene_.print_heads.size(); ++h) {
+    const auto& head = scene_.print_heads[h];
+    if (!head.mount) {
+      head_tools_.emplace_back();
+      continue;
+    }
+    std::size_t robot = 0;
+    while (scene_.robots[robot].name != head.mount->robot) ++robot;  // the scene loader checked that it exists
+    world::ToolDescription tool;
+    tool.name = head.name;
+    tool.link = head.mount->link;
+    tool.offset = head.mount->offset;
+    tool.body_radius = head.mount->barrel_radius;
+    // The barrel ends a particle diameter before the exit, so the first layer is never blocked by it.
+    tool.body_clearance = diameter;
+    const world::ToolIndex index = world_.add_tool(robots_[robot], tool);
+    const toolpath::Trajectory* trajectory = &head.trajectory;
+    const Vec3 axis = head.direction.normalized();
+    world_.set_tool_trajectory(index, [trajectory, axis](double time) {
+      return world::ToolTarget{trajectory->sample(time).position, axis};
+    });
+    head_tools_.emplace_back(index);
+  }
+}
+
 void Simulation::update_print_heads() {
   for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
     const auto& head = scene_.print_heads[i];
@@ -80,17 +146,36 @@ void Simulation::update_print_heads() {
     Pose pose;
     pose.position = sample.position;
     pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
+    Vec3 velocity = sample.velocity;
+    if (head_tools_[i]) {
+      // A robot carries it: material leaves where the nozzle really is, along the tool's z axis
+      // (the solver emits along its pose's −z: turn the tool frame over its x axis).
+      pose = world_.tool_pose(*head_tools_[i]) * Pose{Vec3::Zero(), Quat(Eigen::AngleAxis<Real>(Real(kPi), Vec3::UnitX()))};
+      velocity = world_.tool_linear_velocity(*head_tools_[i]);
+    }
     // A G-code move asks for its own flow (E over time); other paths use the nozzle's nominal one.
     const Real nominal_flow = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed;
     const Real flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
-    solver_.set_nozzle(static_cast<Index>(i), pose, sample.velocity, sample.extruding, flow_scale);
+    solver_.set_nozzle(static_cast<Index>(i), pose, velocity, sample.extruding, flow_scale);
   }
 }
 
 const sph::StepStats& Simulation::step() {
+  using Clock = std::chrono::steady_clock;
+  auto milliseconds_since = [](Clock::time_point start) {
+    return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
+  };
   update_print_heads();
+  auto start = Clock::now();
+  coupling_->push_link_motion();
+  last_coupling_ms_ = milliseconds_since(start);
   const sph::StepStats& stats = solver_.step();
+  start = Clock::now();
+  coupling_->pull_fluid_wrenches();
+  last_coupling_ms_ += milliseconds_since(start);
+  start = Clock::now();
   world_.step_to(solver_.time());
+  last_world_ms_ = milliseconds_since(start);
   return stats;
 }
 

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "m3dp/coupling/fluid_body_coupling.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sph/solver.hpp"
 #include "m3dp/world/world.hpp"
@@ -20,8 +21,9 @@ class Simulation {
  public:
   explicit Simulation(const scene::Scene& scene);
 
-  /// One step: print heads follow their paths, the fluid advances (adaptive dt), and the rigid
-  /// world is stepped to the same clock.
+  /// One step: print heads follow their paths (robots through their controllers), the links' motion
+  /// goes to the fluid, the fluid advances (adaptive dt), its forces go back to the links, and the
+  /// world is stepped to the fluid's clock.
   const sph::StepStats& step();
 
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
@@ -35,14 +37,31 @@ class Simulation {
   [[nodiscard]] double initial_fluid_mass() const { return initial_fluid_mass_; }
   /// The rigid world: the scene's static shapes, bodies added by the caller, printed meshes.
   [[nodiscard]] world::World& world() { return world_; }
+  [[nodiscard]] const world::World& world() const { return world_; }
+  /// The world's robot for each of the scene's robots, in scene order.
+  [[nodiscard]] const std::vector<world::RobotIndex>& robots() const { return robots_; }
+  /// The tool a print head is mounted as, if a robot carries it.
+  [[nodiscard]] std::optional<world::ToolIndex> print_head_tool(std::size_t head) const { return head_tools_.at(head); }
+  /// The world's body for each of the scene's dynamic bodies, in scene order.
+  [[nodiscard]] const std::vector<world::BodyIndex>& dynamic_bodies() const { return dynamic_bodies_; }
+  [[nodiscard]] const coupling::FluidBodyCoupling& coupling() const { return *coupling_; }
+  /// Wall-clock ms of the last step's coupling (both ways) and world steps.
+  [[nodiscard]] double last_coupling_ms() const { return last_coupling_ms_; }
+  [[nodiscard]] double last_world_ms() const { return last_world_ms_; }
 
  private:
+  void add_robots();
   void update_print_heads();
 
   scene::Scene scene_;
   sph::Solver solver_;
   world::World world_;
+  std::vector<world::RobotIndex> robots_;
+  std::vector<world::BodyIndex> dynamic_bodies_;
+  std::vector<std::optional<world::ToolIndex>> head_tools_;
+  std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;
+  double last_coupling_ms_ = 0, last_world_ms_ = 0;
 };
 
 struct RunOptions {
@@ -75,6 +94,12 @@ struct RunSummary {
   std::size_t meshes_written = 0;    // surface meshes in meshes/ (scene <meshing>)
   std::size_t meshes_skipped = 0;    // requests that came while the mesher was still busy
   std::size_t meshes_inserted = 0;   // meshes put into the world as the printed-material collision body
+  struct Robot {
+    std::string name;
+    world::RobotContacts contacts;
+    double tracking_rms = 0, tracking_max = 0;  // m, nozzle vs its path target (robots that carry a print head)
+  };
+  std::vector<Robot> robots;
   double particle_steps_per_second = 0;
   std::string output_directory;
 };

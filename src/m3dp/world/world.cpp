@@ -217,6 +217,7 @@ struct World::Impl {
   std::set<const dart::dynamics::Skeleton*> printed_skeletons;
   std::size_t replacements = 0;
   std::size_t rigid_bodies = 0;
+  double max_time_step = 1e-3;  // s
 
   void control(double step);
   void count_contacts();
@@ -227,6 +228,7 @@ World::World(const WorldSettings& settings) : impl_(std::make_unique<Impl>()) {
   impl_->world = dart::simulation::World::create("m3dp");
   impl_->world->setGravity(settings.gravity.cast<double>());
   impl_->world->setTimeStep(settings.time_step);
+  impl_->max_time_step = settings.time_step;
   // Bullet handles mesh–primitive contacts more robustly than DART's default FCL.
   impl_->world->getConstraintSolver()->setCollisionDetector(dart::collision::BulletCollisionDetector::create());
   impl_->world->getConstraintSolver()->getCollisionOption().collisionFilter =
@@ -417,6 +419,15 @@ void World::set_joint_targets(RobotIndex robot_index, const std::vector<double>&
   for (std::size_t k = 0; k < positions.size(); ++k) robot.position_targets[static_cast<Eigen::Index>(k)] = positions[k];
 }
 
+void World::set_joint_positions(RobotIndex robot_index, const std::vector<double>& positions) {
+  set_joint_targets(robot_index, positions);
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  for (std::size_t k = 0; k < positions.size(); ++k) {
+    robot.joint_dofs[k]->setPosition(positions[k]);
+    robot.joint_dofs[k]->setVelocity(0);
+  }
+}
+
 std::size_t World::robot_count() const { return impl_->robots.size(); }
 const std::string& World::robot_name(RobotIndex robot) const { return impl_->robots.at(robot).name; }
 
@@ -559,18 +570,26 @@ void World::Impl::record_tracking() {
 }
 
 void World::step_to(double time) {
-  const double step = impl_->world->getTimeStep();
+  const double remaining = time - impl_->world->getTime();
+  if (remaining <= 1e-12) return;
+  // Equal sub-steps no longer than the set time step that land exactly on `time`: the world and
+  // the fluid keep one clock, and a fluid step's force acts for exactly that step's duration.
+  const double longest = impl_->max_time_step;
+  const auto steps = static_cast<long>(std::ceil(remaining / longest - 1e-9));
+  const double step = remaining / static_cast<double>(steps);
   if (impl_->rigid_bodies == 0 && impl_->robots.empty()) {
     // Nothing can move: keep the clock, skip collision detection against static meshes.
-    while (impl_->world->getTime() + 0.5 * step <= time) impl_->world->setTime(impl_->world->getTime() + step);
+    impl_->world->setTime(time);
     return;
   }
-  while (impl_->world->getTime() + 0.5 * step <= time) {
+  impl_->world->setTimeStep(step);
+  for (long k = 0; k < steps; ++k) {
     impl_->control(step);
     impl_->world->step();  // clears the commands and external forces: control() sets them every step
     impl_->count_contacts();
     impl_->record_tracking();
   }
+  impl_->world->setTime(time);  // no rounding drift between the two clocks
 }
 
 double World::time() const { return impl_->world->getTime(); }
@@ -582,6 +601,14 @@ Pose World::pose(BodyIndex body) const {
 Vec3 World::linear_velocity(BodyIndex body) const {
   return impl_->bodies.at(body)->getRootBodyNode()->getLinearVelocity().cast<Real>();
 }
+
+void World::set_linear_velocity(BodyIndex body, const Vec3& velocity) {
+  auto* joint = dynamic_cast<dart::dynamics::FreeJoint*>(impl_->bodies.at(body)->getRootJoint());
+  if (!joint) throw Error("world: only a free rigid body can be given a velocity");
+  joint->setLinearVelocity(velocity.cast<double>());
+}
+
+double World::mass(BodyIndex body) const { return impl_->bodies.at(body)->getMass(); }
 
 std::size_t World::contact_count() const { return impl_->world->getLastCollisionResult().getNumContacts(); }
 

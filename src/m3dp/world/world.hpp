@@ -18,7 +18,7 @@ namespace m3dp::world {
 
 struct WorldSettings {
   Vec3 gravity = Vec3(0, 0, Real(-9.81));  // m/s²
-  double time_step = 1e-3;                 // s, fixed; the world sub-steps to the fluid's clock
+  double time_step = 1e-3;                 // s, longest step; the world sub-steps to the fluid's clock
 };
 
 /// A handle to a body of the world: its index in the order bodies were added.
@@ -102,8 +102,10 @@ class World {
   /// From now on the robot's joints follow inverse kinematics (DART's IK, joint limits respected)
   /// so that the tool follows `trajectory`: each world step asks for the target at the step's end.
   void set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory);
-  /// Position targets (rad or m) for every joint in joint_names() order; velocities optional.
+  /// Position targets (rad or m) for every joint in joint_names() order.
   void set_joint_targets(RobotIndex robot, const std::vector<double>& positions);
+  /// Puts the joints at these positions (rad or m, joint_names() order) at rest, and makes them the targets.
+  void set_joint_positions(RobotIndex robot, const std::vector<double>& positions);
   [[nodiscard]] std::size_t robot_count() const;
   [[nodiscard]] const std::string& robot_name(RobotIndex robot) const;
   [[nodiscard]] std::vector<std::string> joint_names(RobotIndex robot) const;
@@ -129,12 +131,15 @@ class World {
   /// The link of a free rigid body.
   [[nodiscard]] LinkIndex link_of_body(BodyIndex body) const;
 
-  /// Steps at the fixed time step until the world's clock reaches `time` (s).
+  /// Steps until the world's clock reaches `time` (s) exactly, in equal steps no longer than the set time step.
   void step_to(double time);
 
   [[nodiscard]] double time() const;
   [[nodiscard]] Pose pose(BodyIndex body) const;
   [[nodiscard]] Vec3 linear_velocity(BodyIndex body) const;  // m/s of the body's origin, world frame
+  /// Sets a free body's velocity (m/s of its origin, world frame), e.g. a thrown body's initial state.
+  void set_linear_velocity(BodyIndex body, const Vec3& velocity);
+  [[nodiscard]] double mass(BodyIndex body) const;  // kg
   /// Contacts found by the last world step.
   [[nodiscard]] std::size_t contact_count() const;
   /// How many times set_static_mesh replaced a mesh (0 after the first insertion).
