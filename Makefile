@@ -25,10 +25,11 @@ test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
 
 demo: build
-	$(M3DP) run scenes/particle_drop.sdf -o out/particle_drop
+	$(M3DP) run scenes/ur10_wall.sdf -o out/ur10_wall
 
 bench: build
 	$(M3DP) bench --particles 50000
+	$(M3DP) bench ur10_wall
 	$(BUILD_DIR)/bench/bench_sph
 
 clean:

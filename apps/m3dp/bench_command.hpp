@@ -4,6 +4,8 @@
 namespace m3dp::app {
 
 struct BenchOptions {
+  std::string scenario = "dam_break";  // dam_break or ur10_wall
+  std::string scene_file;              // ur10_wall: the scene (default: the project's scenes/ur10_wall.sdf)
   std::size_t particles = 50000;
   int steps = 100;
   int warmup_steps = 20;

@@ -88,7 +88,7 @@ int main(int argc, char** argv) {
   validate->add_option("scene", validate_file, "Scene file (.sdf)")->required()->check(CLI::ExistingFile);
 
   m3dp::app::BenchOptions bench_options;
-  auto* bench = app.add_subcommand("bench", "Measure speed: a dam break at a given particle count");
+  auto* bench = app.add_subcommand("bench", "Measure speed: the solver on a dam break, or the whole ur10_wall print");
   m3dp::app::add_bench_options(*bench, bench_options);
 
   m3dp::app::MeshOptions mesh_options;
