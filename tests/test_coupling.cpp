@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "m3dp/sim/presets.hpp"
+#include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/simulation.hpp"
 
 using namespace m3dp;
@@ -189,4 +190,69 @@ TEST(Coupling, RobotNozzleDippedIntoWaterFeelsItAndHoldsItsPath) {
   EXPECT_GT(descent_force_max, hold_force);  // drag while it moves
   EXPECT_LT(tracking_rms, 1e-3);
   EXPECT_EQ(simulation.solver().state().particles_removed_total, 0u);
+}
+
+TEST(Coupling, Ur10DepositsAlongItsPath) {
+  // The ur10_wall scene, shortened to two layers of a 0.16 m square: per layer, the deposited
+  // strand's centreline (centroid of the material laid along each side, corners excluded) stays
+  // within one particle diameter of the commanded path.
+  scene::Scene scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / "ur10_wall.sdf");
+  scene.output.write_particles = false;
+  scene.meshing.enabled = false;
+  auto& head = scene.print_heads.at(0);
+  const Real half = Real(0.08), layer_height = Real(0.008), speed = Real(0.1), z0 = Real(0.006);
+  const Vec3 centre(0.7f, 0, 0);
+  const Vec3 start(0.775f, 0.164f, 0.0867f);
+  std::vector<Vec3> wall;
+  for (int l = 0; l < 2; ++l)
+    for (const Vec3& corner : {Vec3(-half, -half, 0), Vec3(half, -half, 0), Vec3(half, half, 0), Vec3(-half, half, 0), Vec3(-half, -half, 0)})
+      wall.push_back(centre + corner + Vec3(0, 0, z0 + l * layer_height));
+  const Real approach_speed = Real(0.2);
+  const double approach = double((wall.front() - start).norm() / approach_speed);
+  head.trajectory = toolpath::Trajectory({toolpath::PathSegment{toolpath::PolylineCurve{{start, wall.front()}}, approach_speed, false},
+                                          toolpath::PathSegment{toolpath::PolylineCurve{wall}, speed, true}},
+                                         0.0);
+  const double layer_time = double(8 * half / speed);
+  scene.end_time = approach + 2 * layer_time + double(layer_height / speed) + 0.5;
+  sim::Simulation simulation(scene);
+  while (simulation.time() < scene.end_time) simulation.step();
+
+  const auto& fluid = simulation.solver().fluid();
+  const Real diameter = simulation.solver().particle_diameter();
+  double worst = 0;
+  for (int l = 0; l < 2; ++l) {
+    const double begin = approach + l * (layer_time + double(layer_height / speed)), end = begin + layer_time;
+    double layer_worst = 0;
+    std::size_t bins = 0;
+    for (int side = 0; side < 4; ++side) {
+      const Vec3 from = wall[std::size_t(side)], to = wall[std::size_t(side + 1)];
+      const Vec3 along = (to - from).normalized(), across = Vec3::UnitZ().cross(along);
+      // 4 cm stretches along the side (a strand is one or two particles wide: shorter ones count too
+      // few particles for a centroid), 2 cm clear of each corner.
+      const Real stretch = Real(0.04);
+      for (Real s = Real(0.02); s + stretch <= 2 * half - Real(0.02) + 1e-6f; s += stretch) {
+        double offset_sum = 0;
+        std::size_t count = 0;
+        for (std::size_t i = 0; i < fluid.size(); ++i) {
+          if (fluid.birth_time[i] < begin || fluid.birth_time[i] > end) continue;
+          const Vec3 relative = fluid.position[i] - from;
+          const Real a = relative.dot(along), c = relative.dot(across);
+          if (a < s || a >= s + stretch || std::abs(c) > Real(0.03)) continue;
+          offset_sum += c;
+          ++count;
+        }
+        if (count < 10) continue;
+        layer_worst = std::max(layer_worst, std::abs(offset_sum / double(count)));
+        ++bins;
+      }
+    }
+    std::printf("layer %d: %zu stretches along the sides, largest centreline offset %.2f mm (one particle diameter: %.1f mm)\n",
+                l + 1, bins, 1e3 * layer_worst, 1e3 * diameter);
+    EXPECT_EQ(bins, 12u);  // material really was laid along the whole path
+    worst = std::max(worst, layer_worst);
+  }
+  EXPECT_LE(worst, diameter);
+  const auto tool = *simulation.print_head_tool(0);
+  std::printf("nozzle tracking: %.3f mm rms, %.3f mm max\n", 1e3 * simulation.world().tool_tracking_rms(tool),
+              1e3 * simulation.world().tool_tracking_max(tool));
 }
