@@ -114,3 +114,101 @@ TEST(Robots, Ur10NozzleTracksAWallPathWithinAMillimetre) {
   EXPECT_GT(world.tool_pose(tool).rotate(Vec3::UnitZ()).dot(Vec3(0, 0, -1)), 0.999);
   EXPECT_EQ(world.robot_contacts(robot).with_robots, 0u);
 }
+
+namespace {
+const std::filesystem::path kTurtlebot = std::filesystem::path(M3DP_MODELS) / "turtlebot3_manipulator" / "turtlebot3_manipulator.urdf";
+
+world::RobotIndex add_turtlebot(world::World& world, const Pose& pose) {
+  world::RobotDescription description;
+  description.name = "turtlebot";
+  description.urdf_file = kTurtlebot;
+  description.base_pose = pose;
+  const auto robot = world.add_robot(description);
+  world.make_diff_drive(robot, world::DiffDriveDescription{"wheel_left_joint", "wheel_right_joint", 0.033, 0.287, 0});
+  return robot;
+}
+}  // namespace
+
+TEST(Robots, TurtlebotFollowsACurveAndItsOdometryKnowsWhereItIs) {
+  // A quarter circle of radius 0.4 m after a 0.2 m straight, at 0.1 m/s: the tracking controller
+  // keeps the base on it, and the wheel odometry agrees with the truth (ideal wheels: no slip).
+  world::World world;
+  world.add_static_shape("floor", PlaneShape{Vec3::UnitZ(), 4, 4}, Pose{});
+  const auto robot = add_turtlebot(world, Pose{});
+  std::vector<toolpath::PathSegment> segments;
+  segments.push_back(toolpath::PathSegment{toolpath::PolylineCurve{{Vec3(0, 0, 0), Vec3(0.2f, 0, 0)}}, Real(0.1), false});
+  segments.push_back(toolpath::PathSegment{toolpath::CircleCurve{Vec3(0.2f, 0.4f, 0), Real(0.4), Real(-kPi / 2), Real(0.25)},
+                                           Real(0.1), false});
+  const toolpath::Trajectory path(std::move(segments), 0.0);
+  world.set_base_trajectory(robot, [&](double time) { return path.sample(time).position; });
+  world.step_to(path.end_time() + 0.5);
+  const auto report = world.base_report(robot);
+  const Pose pose = world.base_pose(robot);
+  std::printf("base at (%.4f %.4f), path end (0.6000 0.4000); tracking rms %.2f mm, max %.2f mm; odometry off by %.3f mm "
+              "after %.3f m; contacts %llu\n",
+              pose.position.x(), pose.position.y(), 1e3 * report.tracking_rms, 1e3 * report.tracking_max,
+              1e3 * report.odometry_error, report.distance, (unsigned long long)world.robot_contacts(robot).with_other);
+  EXPECT_LT(report.tracking_rms, 0.005);
+  EXPECT_LT((pose.position - Vec3(0.6f, 0.4f, pose.position.z())).norm(), 0.005);
+  EXPECT_LT(report.odometry_error, 0.001);
+  EXPECT_NEAR(report.distance, 0.2 + kPi * 0.4 / 2, 0.01);
+  // It faces along the path's end: +y.
+  EXPECT_GT(pose.rotate(Vec3::UnitX()).y(), 0.99);
+}
+
+TEST(Robots, MobileManipulatorKeepsTheNozzleOnItsPathWhileDriving) {
+  // The TurtleBot drives 0.3 m along x at 0.05 m/s while its arm holds a nozzle 0.15 m to its right
+  // on a line 6 mm above the floor, pointing down: base and arm together.
+  world::World world;
+  world.add_static_shape("floor", PlaneShape{Vec3::UnitZ(), 4, 4}, Pose{});
+  const auto robot = add_turtlebot(world, Pose{});
+  world.set_joint_positions(robot, [&] {
+    std::vector<double> q = world.joint_positions(robot);
+    const auto names = world.joint_names(robot);
+    for (std::size_t k = 0; k < names.size(); ++k) {
+      // The arm starts with the nozzle at the line's start (the IK solution there).
+      if (names[k] == "joint1") q[k] = -1.5708;
+      if (names[k] == "joint2") q[k] = 0.516;
+      if (names[k] == "joint3") q[k] = 0.494;
+      if (names[k] == "joint4") q[k] = 0.561;
+    }
+    return q;
+  }());
+  // The nozzle: 40 mm beyond the fingertips, its axis along the gripper.
+  const auto tool = world.add_tool(robot, world::ToolDescription{"nozzle", "end_effector_link",
+                                                                 Pose::from_xyz_rpy(0.04f, 0, 0, 0, Real(kPi / 2), 0), 0.008f,
+                                                                 0.004f, 0.05});
+  // The line runs beside the arm's base (0.08 m behind the axle), 0.15 m to the right, 6 mm up;
+  // nozzle and base set off together once the nozzle has reached the line's start.
+  const Vec3 start = world.tool_pose(tool).position;
+  const Vec3 line_from(-0.08f, -0.15f, 0.006f), line_to(0.22f, -0.15f, 0.006f);
+  const double line_start = double((line_from - start).norm() / 0.05) + 0.5;
+  const toolpath::Trajectory base_path(
+      {toolpath::PathSegment{toolpath::PolylineCurve{{Vec3(0, 0, 0), Vec3(0.3f, 0, 0)}}, Real(0.05), false}}, line_start);
+  const toolpath::Trajectory nozzle_path(
+      {toolpath::PathSegment{toolpath::PolylineCurve{{start, line_from}}, Real(0.05), false},
+       toolpath::PathSegment{toolpath::PolylineCurve{{line_from, line_from}}, Real(0.05), false, Real(0.5)},
+       toolpath::PathSegment{toolpath::PolylineCurve{{line_from, line_to}}, Real(0.05), true}},
+      0.0);
+  std::printf("nozzle starts at (%.3f %.3f %.3f); the line starts at t = %.2f s\n", start.x(), start.y(), start.z(), line_start);
+  world.set_base_trajectory(robot, [&](double time) { return base_path.sample(time).position; });
+  world.set_tool_trajectory(tool, [&](double time) { return world::ToolTarget{nozzle_path.sample(time).position, Vec3(0, 0, -1)}; });
+  world.step_to(line_start);
+  std::vector<double> errors;
+  for (double time = line_start; time < nozzle_path.end_time(); time += 0.01) {
+    world.step_to(time);
+    errors.push_back((world.tool_pose(tool).position - nozzle_path.sample(time).position).norm());
+  }
+  double squared = 0, largest = 0;
+  for (const double e : errors) {
+    squared += e * e;
+    largest = std::max(largest, e);
+  }
+  const double rms = std::sqrt(squared / double(errors.size()));
+  std::printf("while driving: nozzle %.3f mm rms, %.3f mm max from its line; base %.2f mm rms from its path; axis·down %.4f\n",
+              1e3 * rms, 1e3 * largest, 1e3 * world.base_report(robot).tracking_rms,
+              world.tool_pose(tool).rotate(Vec3::UnitZ()).dot(Vec3(0, 0, -1)));
+  EXPECT_LE(rms, 1e-3);
+  EXPECT_GT(world.tool_pose(tool).rotate(Vec3::UnitZ()).dot(Vec3(0, 0, -1)), 0.99);
+  EXPECT_GT(world.base_pose(robot).position.x(), 0.29);
+}

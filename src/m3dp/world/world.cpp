@@ -152,8 +152,9 @@ const BodyNode* body_node_of(const dart::collision::CollisionObject* object) {
 /// - a print nozzle and the printed material: the nozzle sits in the strand it is laying.
 class WorldCollisionFilter : public dart::collision::CollisionFilter {
  public:
-  WorldCollisionFilter(const std::set<const BodyNode*>* nozzles, const std::set<const dart::dynamics::Skeleton*>* printed)
-      : nozzles_(nozzles), printed_(printed) {}
+  WorldCollisionFilter(const std::set<const BodyNode*>* nozzles, const std::set<const dart::dynamics::Skeleton*>* printed,
+                       const std::set<const BodyNode*>* wheels)
+      : nozzles_(nozzles), printed_(printed), wheels_(wheels) {}
 
   bool ignoresCollision(const dart::collision::CollisionObject* object1,
                         const dart::collision::CollisionObject* object2) const override {
@@ -165,13 +166,19 @@ class WorldCollisionFilter : public dart::collision::CollisionFilter {
     auto nozzle_in_print = [&](const BodyNode* nozzle, const BodyNode* other) {
       return nozzles_->count(nozzle) > 0 && printed_->count(other->getSkeleton().get()) > 0;
     };
-    return nozzle_in_print(node1, node2) || nozzle_in_print(node2, node1);
+    if (nozzle_in_print(node1, node2) || nozzle_in_print(node2, node1)) return true;
+    // A diff-drive wheel on the floor: the planar joint carries the base (printed material still counts).
+    auto wheel_on_floor = [&](const BodyNode* wheel, const BodyNode* other) {
+      return wheels_->count(wheel) > 0 && is_immobile(other) && printed_->count(other->getSkeleton().get()) == 0;
+    };
+    return wheel_on_floor(node1, node2) || wheel_on_floor(node2, node1);
   }
 
  private:
   dart::collision::BodyNodeCollisionFilter body_node_filter_;
   const std::set<const BodyNode*>* nozzles_;
   const std::set<const dart::dynamics::Skeleton*>* printed_;
+  const std::set<const BodyNode*>* wheels_;
 };
 
 constexpr std::size_t kNoRobot = std::numeric_limits<std::size_t>::max();
@@ -203,6 +210,25 @@ struct World::Impl {
     Eigen::VectorXd position_targets;
     std::vector<ToolIndex> tools;
     RobotContacts contacts;
+    struct DiffDrive {
+      DiffDriveDescription description;
+      dart::dynamics::DegreeOfFreedom* left = nullptr;
+      dart::dynamics::DegreeOfFreedom* right = nullptr;
+      dart::dynamics::Joint* planar = nullptr;  // x, y, heading of the base in the floor plane
+      double max_wheel_speed = 0;
+      double odometry_x = 0, odometry_y = 0, odometry_heading = 0;
+      double last_left = 0, last_right = 0;  // wheel angles at the last odometry update (rad)
+      double reference_heading = 0;
+      BaseTrajectory trajectory;
+      Vec3 last_target = Vec3::Zero();
+      double error_squared_sum = 0, error_max = 0, distance = 0;
+      std::size_t error_count = 0;
+    };
+    std::optional<DiffDrive> drive;
+    /// The joints the robot's own position loop drives (not the wheels).
+    [[nodiscard]] bool is_wheel(const dart::dynamics::DegreeOfFreedom* dof) const {
+      return drive && (dof == drive->left || dof == drive->right);
+    }
   };
 
   dart::simulation::WorldPtr world;
@@ -214,12 +240,15 @@ struct World::Impl {
   std::vector<Tool> tools;
   std::map<const dart::dynamics::Skeleton*, RobotIndex> robot_of_skeleton;
   std::set<const BodyNode*> nozzle_nodes;
+  std::set<const BodyNode*> wheel_nodes;
   std::set<const dart::dynamics::Skeleton*> printed_skeletons;
   std::size_t replacements = 0;
   std::size_t rigid_bodies = 0;
   double max_time_step = 1e-3;  // s
 
   void control(double step);
+  void drive_base(Robot& robot, double step, double next_time);
+  void update_odometry(Robot& robot);
   void count_contacts();
   void record_tracking();
 };
@@ -232,7 +261,7 @@ World::World(const WorldSettings& settings) : impl_(std::make_unique<Impl>()) {
   // Bullet handles mesh–primitive contacts more robustly than DART's default FCL.
   impl_->world->getConstraintSolver()->setCollisionDetector(dart::collision::BulletCollisionDetector::create());
   impl_->world->getConstraintSolver()->getCollisionOption().collisionFilter =
-      std::make_shared<WorldCollisionFilter>(&impl_->nozzle_nodes, &impl_->printed_skeletons);
+      std::make_shared<WorldCollisionFilter>(&impl_->nozzle_nodes, &impl_->printed_skeletons, &impl_->wheel_nodes);
 }
 
 World::~World() = default;
@@ -369,9 +398,19 @@ ToolIndex World::add_tool(RobotIndex robot_index, const ToolDescription& descrip
   // about that axis free (the error is measured in the target's frame; its z rotation is unbounded).
   auto ik = tool.end_effector->getIK(true);
   ik->setTarget(tool.target);
-  ik->useWholeBody();
+  // The arm's joints only: a floating or driven base moves by its own controller.
+  std::vector<std::size_t> arm_dofs;
+  for (const auto* dof : robot.joint_dofs)
+    if (!robot.is_wheel(dof)) arm_dofs.push_back(dof->getIndexInSkeleton());
+  ik->setDofs(arm_dofs);
   auto& error_method = ik->getErrorMethod();
-  if (auto* region = dynamic_cast<InverseKinematics::TaskSpaceRegion*>(&error_method)) region->setReferenceFrame(tool.target);
+  if (auto* region = dynamic_cast<InverseKinematics::TaskSpaceRegion*>(&error_method)) {
+    region->setReferenceFrame(tool.target);
+    // Errors from the region's edge, not its centre: from the centre, the free rotation would still
+    // be pulled to zero, which an arm with fewer than six joints (OpenManipulator-X) cannot do
+    // while it reaches the point, and the solver would trade position for it.
+    region->setComputeFromCenter(false);
+  }
   error_method.setLinearBounds(Eigen::Vector3d::Constant(-1e-6), Eigen::Vector3d::Constant(1e-6));
   error_method.setAngularBounds(Eigen::Vector3d(-1e-5, -1e-5, -kPi), Eigen::Vector3d(1e-5, 1e-5, kPi));
   ik->getSolver()->setNumMaxIterations(50);
@@ -406,6 +445,155 @@ ToolIndex World::add_tool(RobotIndex robot_index, const ToolDescription& descrip
   impl_->tools.push_back(std::move(tool));
   robot.tools.push_back(impl_->tools.size() - 1);
   return impl_->tools.size() - 1;
+}
+
+void World::make_diff_drive(RobotIndex robot_index, const DiffDriveDescription& description) {
+  using namespace dart::dynamics;
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  auto* free_joint = dynamic_cast<FreeJoint*>(robot.skeleton->getRootJoint());
+  if (!free_joint)
+    throw Error(fmt::format("robot '{}': a differential drive needs a floating base (its URDF root is fixed)", robot.name));
+  auto wheel = [&](const std::string& name) {
+    Joint* joint = robot.skeleton->getJoint(name);
+    if (!joint || joint->getNumDofs() != 1)
+      throw Error(fmt::format("robot '{}' has no one-axis joint '{}' for a wheel; its joints: {}", robot.name, name,
+                              fmt::join(joint_names(robot_index), ", ")));
+    return joint->getDof(0);
+  };
+  Impl::Robot::DiffDrive drive;
+  drive.description = description;
+  drive.left = wheel(description.left_wheel_joint);
+  drive.right = wheel(description.right_wheel_joint);
+  drive.max_wheel_speed = description.max_wheel_speed > 0
+                              ? description.max_wheel_speed
+                              : std::min(drive.left->getVelocityUpperLimit(), drive.right->getVelocityUpperLimit());
+  // The base's pose now: keep its height and tilt in the planar joint's parent transform.
+  const Eigen::Isometry3d base = robot.skeleton->getRootBodyNode()->getWorldTransform();
+  const double heading = std::atan2(base.linear()(1, 0), base.linear()(0, 0));
+  BodyNode* root = robot.skeleton->getRootBodyNode();
+  auto* planar = root->changeParentJointType<PlanarJoint>();
+  Eigen::Isometry3d lift = Eigen::Isometry3d::Identity();
+  lift.translation().z() = base.translation().z();
+  planar->setTransformFromParentBodyNode(lift);
+  planar->setXYPlane();
+  planar->setPositions(Eigen::Vector3d(base.translation().x(), base.translation().y(), heading));
+  planar->setActuatorType(Joint::SERVO);
+  for (std::size_t k = 0; k < 3; ++k) {
+    planar->setForceLowerLimit(k, -1e3);
+    planar->setForceUpperLimit(k, 1e3);
+  }
+  drive.planar = planar;
+  drive.odometry_x = base.translation().x();
+  drive.odometry_y = base.translation().y();
+  drive.odometry_heading = heading;
+  drive.reference_heading = heading;
+  drive.last_left = drive.left->getPosition();
+  drive.last_right = drive.right->getPosition();
+  impl_->wheel_nodes.insert(drive.left->getChildBodyNode());
+  impl_->wheel_nodes.insert(drive.right->getChildBodyNode());
+  robot.drive = drive;
+}
+
+void World::set_base_trajectory(RobotIndex robot, BaseTrajectory trajectory) {
+  auto& drive = impl_->robots.at(robot).drive;
+  if (!drive) throw Error(fmt::format("robot '{}' has no mobile base", impl_->robots.at(robot).name));
+  drive->trajectory = std::move(trajectory);
+}
+
+bool World::has_diff_drive(RobotIndex robot) const { return impl_->robots.at(robot).drive.has_value(); }
+
+Pose World::base_pose(RobotIndex robot) const {
+  return pose_of(impl_->robots.at(robot).skeleton->getRootBodyNode()->getWorldTransform());
+}
+
+Pose World::base_odometry(RobotIndex robot) const {
+  const auto& drive = impl_->robots.at(robot).drive;
+  if (!drive) return base_pose(robot);
+  Pose pose;
+  pose.position = Vec3(Real(drive->odometry_x), Real(drive->odometry_y), base_pose(robot).position.z());
+  pose.orientation = Quat(Eigen::AngleAxis<Real>(Real(drive->odometry_heading), Vec3::UnitZ()));
+  return pose;
+}
+
+BaseReport World::base_report(RobotIndex robot) const {
+  BaseReport report;
+  const auto& drive = impl_->robots.at(robot).drive;
+  if (!drive) return report;
+  report.tracking_rms = drive->error_count ? std::sqrt(drive->error_squared_sum / double(drive->error_count)) : 0.0;
+  report.tracking_max = drive->error_max;
+  const Vec3 truth = base_pose(robot).position;
+  report.odometry_error = std::hypot(truth.x() - drive->odometry_x, truth.y() - drive->odometry_y);
+  report.distance = drive->distance;
+  return report;
+}
+
+void World::Impl::drive_base(Robot& robot, double step, double next_time) {
+  auto& drive = *robot.drive;
+  const auto& description = drive.description;
+  double v = 0, w = 0;  // m/s, rad/s asked of the base
+  if (drive.trajectory) {
+    // Reference pose and velocities from the path (heading along its tangent; held while it stops).
+    constexpr double kDelta = 0.01;  // s, for the path's derivatives
+    const Vec3 target = drive.trajectory(next_time);
+    const Vec3 ahead = drive.trajectory(next_time + kDelta), behind = drive.trajectory(next_time - kDelta);
+    const double dx = double(ahead.x() - behind.x()) / (2 * kDelta), dy = double(ahead.y() - behind.y()) / (2 * kDelta);
+    const double reference_speed = std::hypot(dx, dy);
+    double reference_turn = 0;
+    if (reference_speed > 1e-4) {
+      const double heading = std::atan2(dy, dx);
+      const Vec3 further = drive.trajectory(next_time + 2 * kDelta);
+      const double heading_ahead = std::atan2(double(further.y() - target.y()), double(further.x() - target.x()));
+      reference_turn = std::remainder(heading_ahead - heading, 2 * kPi) / (1.5 * kDelta);
+      drive.reference_heading = heading;
+    }
+    drive.last_target = target;
+    // Kanayama et al. 1990 tracking law on the odometry pose.
+    constexpr double kx = 4.0, ky = 400.0, ktheta = 20.0;  // 1/s, 1/m², 1/m
+    const double cos_h = std::cos(drive.odometry_heading), sin_h = std::sin(drive.odometry_heading);
+    const double ex = cos_h * (target.x() - drive.odometry_x) + sin_h * (target.y() - drive.odometry_y);
+    const double ey = -sin_h * (target.x() - drive.odometry_x) + cos_h * (target.y() - drive.odometry_y);
+    const double etheta = std::remainder(drive.reference_heading - drive.odometry_heading, 2 * kPi);
+    v = reference_speed * std::cos(etheta) + kx * ex;
+    w = reference_turn + reference_speed * (ky * ey + ktheta * std::sin(etheta));
+  }
+  // Wheel speeds, both scaled down together when one would exceed its limit.
+  const double radius = description.wheel_radius, half_track = description.wheel_separation / 2;
+  double right = (v + w * half_track) / radius, left = (v - w * half_track) / radius;
+  const double fastest = std::max(std::abs(left), std::abs(right));
+  if (fastest > drive.max_wheel_speed) {
+    left *= drive.max_wheel_speed / fastest;
+    right *= drive.max_wheel_speed / fastest;
+  }
+  drive.left->setCommand(left);
+  drive.right->setCommand(right);
+  // The base rolls as the wheels turn (no slip).
+  const double speed = radius * (right + left) / 2, turn = radius * (right - left) / description.wheel_separation;
+  const double heading = drive.planar->getPosition(2);
+  drive.planar->setCommand(0, speed * std::cos(heading + turn * step / 2));
+  drive.planar->setCommand(1, speed * std::sin(heading + turn * step / 2));
+  drive.planar->setCommand(2, turn);
+}
+
+void World::Impl::update_odometry(Robot& robot) {
+  auto& drive = *robot.drive;
+  const double left = drive.left->getPosition(), right = drive.right->getPosition();
+  const double left_step = left - drive.last_left, right_step = right - drive.last_right;
+  drive.last_left = left;
+  drive.last_right = right;
+  const double radius = drive.description.wheel_radius;
+  const double distance = radius * (left_step + right_step) / 2;
+  const double turn = radius * (right_step - left_step) / drive.description.wheel_separation;
+  drive.odometry_x += distance * std::cos(drive.odometry_heading + turn / 2);
+  drive.odometry_y += distance * std::sin(drive.odometry_heading + turn / 2);
+  drive.odometry_heading += turn;
+  drive.distance += std::abs(distance);
+  if (drive.trajectory) {
+    const Eigen::Vector3d truth = robot.skeleton->getRootBodyNode()->getWorldTransform().translation();
+    const double error = std::hypot(truth.x() - drive.last_target.x(), truth.y() - drive.last_target.y());
+    drive.error_squared_sum += error * error;
+    ++drive.error_count;
+    drive.error_max = std::max(drive.error_max, error);
+  }
 }
 
 void World::set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory) {
@@ -513,16 +701,23 @@ void World::Impl::control(double step) {
       const ToolTarget target = tool.trajectory(next_time);
       Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
       transform.translation() = target.position.cast<double>();
-      transform.linear() = Eigen::Quaterniond::FromTwoVectors(Eigen::Vector3d::UnitZ(), target.axis.cast<double>().normalized())
-                               .toRotationMatrix();
+      // The target's rotation about its axis is free; take the tool's own, turned by the least
+      // rotation that brings its axis onto the target axis. (An arbitrary choice can leave the two
+      // frames near half a turn apart about the axis, where the IK's rotation error is ill-conditioned.)
+      const Eigen::Matrix3d current = tool.end_effector->getWorldTransform().linear();
+      transform.linear() =
+          Eigen::Quaterniond::FromTwoVectors(current.col(2), target.axis.cast<double>().normalized()).toRotationMatrix() * current;
       tool.target->setTransform(transform);
+      // The best solution found is used even when it misses the (tight) bounds: it is close.
       tool.end_effector->getIK()->findSolution(tool.solution);
       for (std::size_t k = 0; k < tool.target_slot.size(); ++k)
         if (tool.target_slot[k] >= 0) robot.position_targets[tool.target_slot[k]] = tool.solution[static_cast<Eigen::Index>(k)];
     }
     // Servo velocity that reaches the target in one step, within the joint's speed limits.
+    if (robot.drive) drive_base(robot, step, next_time);
     for (std::size_t k = 0; k < robot.joint_dofs.size(); ++k) {
       auto* dof = robot.joint_dofs[k];
+      if (robot.is_wheel(dof)) continue;
       double velocity = (robot.position_targets[static_cast<Eigen::Index>(k)] - dof->getPosition()) / step;
       velocity = std::clamp(velocity, dof->getVelocityLowerLimit(), dof->getVelocityUpperLimit());
       dof->setCommand(velocity);
@@ -588,6 +783,8 @@ void World::step_to(double time) {
     impl_->world->step();  // clears the commands and external forces: control() sets them every step
     impl_->count_contacts();
     impl_->record_tracking();
+    for (auto& robot : impl_->robots)
+      if (robot.drive) impl_->update_odometry(robot);
   }
   impl_->world->setTime(time);  // no rounding drift between the two clocks
 }

@@ -57,6 +57,27 @@ struct ToolTarget {
 };
 using ToolTrajectory = std::function<ToolTarget(double time)>;
 
+/// A differential-drive mobile base (a TurtleBot): the robot's floating root becomes a planar joint
+/// (x, y, heading) driven by its two wheel speeds without slip. Wheels do not touch the floor in
+/// the collision world (the planar joint carries the base), so rolling adds no contact noise.
+struct DiffDriveDescription {
+  std::string left_wheel_joint;
+  std::string right_wheel_joint;
+  double wheel_radius = 0.033;      // m
+  double wheel_separation = 0.287;  // m between the wheels' contact points
+  double max_wheel_speed = 0;       // rad/s; 0 = the wheel joints' URDF velocity limit
+};
+/// Where the base's reference point (the root frame's origin) should be at a time (z is ignored).
+using BaseTrajectory = std::function<Vec3(double time)>;
+
+/// How a mobile base did: its path following (truth against the reference) and its odometry
+/// (wheel encoders integrated, against the truth), over the world steps so far.
+struct BaseReport {
+  double tracking_rms = 0, tracking_max = 0;  // m
+  double odometry_error = 0;                  // m, now
+  double distance = 0;                        // m driven
+};
+
 /// What the fluid needs to know of a movable link: its collision shapes in the link frame.
 struct LinkShapes {
   std::string name;                  // "robot/link" or the body's name
@@ -102,6 +123,15 @@ class World {
   /// From now on the robot's joints follow inverse kinematics (DART's IK, joint limits respected)
   /// so that the tool follows `trajectory`: each world step asks for the target at the step's end.
   void set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory);
+  /// Makes the robot's floating base a differential drive (see DiffDriveDescription). Throws Error
+  /// if a wheel joint does not exist or the base is not floating.
+  void make_diff_drive(RobotIndex robot, const DiffDriveDescription& drive);
+  /// The base follows `trajectory` (a tracking controller on odometry, Kanayama et al. 1990).
+  void set_base_trajectory(RobotIndex robot, BaseTrajectory trajectory);
+  [[nodiscard]] Pose base_pose(RobotIndex robot) const;
+  [[nodiscard]] Pose base_odometry(RobotIndex robot) const;
+  [[nodiscard]] BaseReport base_report(RobotIndex robot) const;
+  [[nodiscard]] bool has_diff_drive(RobotIndex robot) const;
   /// Position targets (rad or m) for every joint in joint_names() order.
   void set_joint_targets(RobotIndex robot, const std::vector<double>& positions);
   /// Puts the joints at these positions (rad or m, joint_names() order) at rest, and makes them the targets.
