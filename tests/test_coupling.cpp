@@ -256,3 +256,37 @@ TEST(Coupling, Ur10DepositsAlongItsPath) {
   std::printf("nozzle tracking: %.3f mm rms, %.3f mm max\n", 1e3 * simulation.world().tool_tracking_rms(tool),
               1e3 * simulation.world().tool_tracking_max(tool));
 }
+
+TEST(Coupling, ThreeMobileRobotsPrintOneStrandWithoutTouching) {
+  // scenes/multi_robot.sdf: three TurtleBots drive in a row, each printing a third of one strand.
+  scene::Scene scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / "multi_robot.sdf");
+  scene.output.write_particles = false;
+  scene.meshing.enabled = false;
+  sim::Simulation simulation(scene);
+  while (simulation.time() < scene.end_time) simulation.step();
+  const auto& world = simulation.world();
+  ASSERT_EQ(simulation.robots().size(), 3u);
+  for (std::size_t r = 0; r < 3; ++r) {
+    const auto robot = simulation.robots()[r];
+    const auto tool = *simulation.print_head_tool(r);
+    const auto base = world.base_report(robot);
+    std::printf("%s: robot contacts %llu, nozzle %.3f mm rms, base %.3f mm rms over %.3f m\n", world.robot_name(robot).c_str(),
+                (unsigned long long)world.robot_contacts(robot).with_robots, 1e3 * world.tool_tracking_rms(tool),
+                1e3 * base.tracking_rms, base.distance);
+    EXPECT_EQ(world.robot_contacts(robot).with_robots, 0u);
+    EXPECT_LE(world.tool_tracking_rms(tool), 1e-3);
+    EXPECT_NEAR(base.distance, 0.35, 0.005);
+  }
+  // One strand from x = -0.08 to 0.97 m along y = -0.2: material in every 3 cm of it.
+  const auto& fluid = simulation.solver().fluid();
+  int empty = 0;
+  for (Real x = Real(-0.08); x < Real(0.97); x += Real(0.03)) {
+    int count = 0;
+    for (std::size_t i = 0; i < fluid.size(); ++i)
+      if (fluid.position[i].x() >= x && fluid.position[i].x() < x + Real(0.03) && std::abs(fluid.position[i].y() + Real(0.2)) < Real(0.02))
+        ++count;
+    if (count == 0) ++empty;
+  }
+  std::printf("strand: %zu particles, %d empty 3 cm stretches along 1.05 m\n", fluid.size(), empty);
+  EXPECT_EQ(empty, 0);
+}

@@ -325,6 +325,11 @@ TEST(Scene, RobotIncludesAreReadAndChecked) {
   EXPECT_CONTAINS(error.what(), location_of(missing, "<uri>model://no_such_robot") +
                                     " error: 'model://no_such_robot' not found; looked for ");
   EXPECT_CONTAINS(error.what(), "no_such_robot/no_such_robot.urdf");
+  const std::string wheels = replaced(robot_scene(), "</robot>",
+                                      "<mobile_base><left_wheel>wheel_left_joint</left_wheel><right_wheel>elbow_joint"
+                                      "</right_wheel><wheel_radius unit=\"mm\">33</wheel_radius><wheel_separation>0.287"
+                                      "</wheel_separation></mobile_base></robot>");
+  expect_error_at(wheels, "<left_wheel>", "robot 'arm' has no movable joint 'wheel_left_joint' for a wheel; its joints: ");
   const std::string unknown = replaced(robot_scene(), "<robot name=\"arm\">", "<robot name=\"crane\">");
   EXPECT_CONTAINS(load_error(unknown).what(), location_of(unknown, "<robot name=\"crane\">") +
                                                   " error: <robot name=\"crane\">: no robot of that name is included in "

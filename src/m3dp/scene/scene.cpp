@@ -806,7 +806,7 @@ void SceneReader::read_include(const pugi::xml_node& include) {
 
 void SceneReader::read_robot_settings(const pugi::xml_node& element) {
   check_attributes(element, {"name"});
-  check_children(element, {"joint"}, {"joint"});
+  check_children(element, {"joint", "mobile_base"}, {"joint"});
   const auto name = read_attribute(element, "name", Presence::required);
   if (!name) return;
   check_unique_name(element, *name, robot_setting_names_);
@@ -831,6 +831,39 @@ void SceneReader::read_robot_settings(const pugi::xml_node& element) {
     const auto factor = unit_factor(joint, Quantity::angle);
     const auto value = parse_numbers(joint, text, 1, "an initial joint position (rad, or unit=\"deg\")");
     if (value && factor) robot->initial_joint_positions.emplace_back(*joint_name, value->front() * *factor);
+  }
+  if (const pugi::xml_node base = element.child("mobile_base")) {
+    check_attributes(base, {});
+    check_children(base, {"left_wheel", "right_wheel", "wheel_radius", "wheel_separation", "path"});
+    MobileBase mobile;
+    mobile.where = where(base);
+    bool valid = true;
+    for (const auto& [tag, target] : {std::pair{"left_wheel", &mobile.left_wheel_joint}, std::pair{"right_wheel", &mobile.right_wheel_joint}}) {
+      const pugi::xml_node wheel = find_child(base, tag, Presence::required);
+      if (!wheel) {
+        valid = false;
+        continue;
+      }
+      *target = std::string(leaf_text(wheel, {}));
+      if (std::find(robot->joint_names.begin(), robot->joint_names.end(), *target) == robot->joint_names.end()) {
+        report(wheel, fmt::format("robot '{}' has no movable joint '{}' for a wheel; its joints: {}", robot->name, *target,
+                                  fmt::join(robot->joint_names, ", ")));
+        valid = false;
+      }
+    }
+    if (const auto radius = read_scalar(base, "wheel_radius", Quantity::length, Limits::positive(), Presence::required))
+      mobile.wheel_radius = Real(*radius);
+    else
+      valid = false;
+    if (const auto separation = read_scalar(base, "wheel_separation", Quantity::length, Limits::positive(), Presence::required))
+      mobile.wheel_separation = Real(*separation);
+    else
+      valid = false;
+    if (const pugi::xml_node path = base.child("path")) {
+      mobile.path = read_path(path);
+      if (!mobile.path) valid = false;
+    }
+    if (valid) robot->mobile_base = std::move(mobile);
   }
 }
 

@@ -40,6 +40,17 @@ struct DynamicBody {
   SourceLocation where;
 };
 
+/// A differential-drive base (the plugin's <robot><mobile_base>): wheel joints and geometry, and
+/// optionally a path for the base to follow (z ignored).
+struct MobileBase {
+  std::string left_wheel_joint;
+  std::string right_wheel_joint;
+  Real wheel_radius = Real(0.033);      // m
+  Real wheel_separation = Real(0.287);  // m
+  std::optional<toolpath::Trajectory> path;
+  SourceLocation where;
+};
+
 /// A robot: an SDF <include> of a URDF file, placed by the include's <pose>.
 struct RobotInclude {
   std::string name;
@@ -48,6 +59,7 @@ struct RobotInclude {
   std::vector<std::string> joint_names;            // the URDF's movable joints, in file order
   std::vector<std::string> link_names;
   std::vector<std::pair<std::string, double>> initial_joint_positions;  // rad or m, from the plugin's <robot>
+  std::optional<MobileBase> mobile_base;
   SourceLocation where;
 };
 

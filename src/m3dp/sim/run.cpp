@@ -71,6 +71,12 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                       {"world_steps_in_contact", robot.contacts.steps_in_contact},
                       {"nozzle_tracking_rms_m", robot.tracking_rms},
                       {"nozzle_tracking_max_m", robot.tracking_max}});
+  for (std::size_t r = 0; r < summary.robots.size(); ++r)
+    if (const auto& base = summary.robots[r].base)
+      robots[r]["base"] = {{"tracking_rms_m", base->tracking_rms},
+                           {"tracking_max_m", base->tracking_max},
+                           {"odometry_error_m", base->odometry_error},
+                           {"distance_m", base->distance}};
   return {
       {"scene", simulation.scene().file.string()},
       {"status", summary.status},
@@ -250,6 +256,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     RunSummary::Robot robot;
     robot.name = simulation.world().robot_name(simulation.robots()[r]);
     robot.contacts = simulation.world().robot_contacts(simulation.robots()[r]);
+    if (simulation.world().has_diff_drive(simulation.robots()[r])) robot.base = simulation.world().base_report(simulation.robots()[r]);
     for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) {
       const auto& mount = simulation.scene().print_heads[h].mount;
       if (!mount || mount->robot != robot.name) continue;
@@ -293,6 +300,11 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         "with printed material, {} other\n",
                         robot.name, 1e3 * robot.tracking_rms, 1e3 * robot.tracking_max, robot.contacts.with_robots,
                         robot.contacts.with_printed_material, robot.contacts.with_other);
+  for (const auto& robot : summary.robots)
+    if (robot.base)
+      text += fmt::format("  base        {}: drove {:.3f} m, {:.2f} mm rms from its path (max {:.2f} mm), odometry off by {:.2f} mm\n",
+                          robot.name, robot.base->distance, 1e3 * robot.base->tracking_rms, 1e3 * robot.base->tracking_max,
+                          1e3 * robot.base->odometry_error);
   if (summary.meshes_written + summary.meshes_skipped > 0)
     text += fmt::format("  meshes      {} written to meshes/ ({} skipped while the mesher was busy)\n", summary.meshes_written,
                         summary.meshes_skipped);

@@ -103,6 +103,15 @@ void Simulation::add_robots() {
       diagnostics.push_back(Diagnostic{robot.where, fmt::format("robot '{}' included here could not be loaded", robot.name)});
       throw InputError(std::move(diagnostics));
     }
+    if (robot.mobile_base) {
+      const auto& base = *robot.mobile_base;
+      world_.make_diff_drive(index, world::DiffDriveDescription{base.left_wheel_joint, base.right_wheel_joint,
+                                                                base.wheel_radius, base.wheel_separation, 0});
+      if (base.path) {
+        const toolpath::Trajectory* path = &*base.path;
+        world_.set_base_trajectory(index, [path](double time) { return path->sample(time).position; });
+      }
+    }
     if (!robot.initial_joint_positions.empty()) {
       const auto names = world_.joint_names(index);
       std::vector<double> positions = world_.joint_positions(index);

@@ -98,6 +98,7 @@ struct RunSummary {
     std::string name;
     world::RobotContacts contacts;
     double tracking_rms = 0, tracking_max = 0;  // m, nozzle vs its path target (robots that carry a print head)
+    std::optional<world::BaseReport> base;      // mobile bases: path following and odometry
   };
   std::vector<Robot> robots;
   double particle_steps_per_second = 0;

@@ -355,7 +355,13 @@ void Solver::update_bodies() {
       boundary.position[b] = body.pose.apply(boundary.local_position[b]);
       boundary.velocity[b] = body.linear_velocity + body.angular_velocity.cross(boundary.position[b] - body.pose.position);
     }, 1024);
-    for (Index k = 0; k < body.particle_count; ++k) state_.moving_boundary_indices.push_back(body.first_particle + k);
+    // Only its particles within reach join the grid: a robot's base beside a strand is mostly far from it.
+    const Vec3 low = region.min - reach, high = region.max + reach;
+    for (Index k = 0; k < body.particle_count; ++k) {
+      const Vec3& position = boundary.position[body.first_particle + k];
+      if ((position.array() >= low.array()).all() && (position.array() <= high.array()).all())
+        state_.moving_boundary_indices.push_back(body.first_particle + k);
+    }
   }
   state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, support);
 }

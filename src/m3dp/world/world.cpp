@@ -413,7 +413,9 @@ ToolIndex World::add_tool(RobotIndex robot_index, const ToolDescription& descrip
   }
   error_method.setLinearBounds(Eigen::Vector3d::Constant(-1e-6), Eigen::Vector3d::Constant(1e-6));
   error_method.setAngularBounds(Eigen::Vector3d(-1e-5, -1e-5, -kPi), Eigen::Vector3d(1e-5, 1e-5, kPi));
-  ik->getSolver()->setNumMaxIterations(50);
+  // Few iterations: each world step starts from the last solution, a millisecond away. (An arm
+  // with fewer than six joints rarely meets the tight bounds exactly; its best is within 0.1 mm.)
+  ik->getSolver()->setNumMaxIterations(10);
   for (const std::size_t dof : ik->getDofs()) {
     const auto found = std::find(robot.joint_dofs.begin(), robot.joint_dofs.end(), robot.skeleton->getDof(dof));
     tool.target_slot.push_back(found == robot.joint_dofs.end() ? -1 : static_cast<Eigen::Index>(found - robot.joint_dofs.begin()));
@@ -472,6 +474,7 @@ void World::make_diff_drive(RobotIndex robot_index, const DiffDriveDescription& 
   const double heading = std::atan2(base.linear()(1, 0), base.linear()(0, 0));
   BodyNode* root = robot.skeleton->getRootBodyNode();
   auto* planar = root->changeParentJointType<PlanarJoint>();
+  planar->setName(robot.name + "_planar_base");
   Eigen::Isometry3d lift = Eigen::Isometry3d::Identity();
   lift.translation().z() = base.translation().z();
   planar->setTransformFromParentBodyNode(lift);
