@@ -496,3 +496,31 @@ TEST_F(SceneWithMesh, MissingMeshAndModelUriAreReportedAtTheUri) {
 }
 
 }  // namespace
+
+TEST(Scene, WallAndWaypointPathsAreRead) {
+  const auto folder = std::filesystem::temp_directory_path() / ("m3dp_waypoints_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(folder);
+  {
+    std::ofstream csv(folder / "path.csv");
+    csv << "x,y,z,speed,extrude\n0 0 0.1 0.1 0\n0.1 0 0.1 0.05 1\n";
+    std::ofstream bad(folder / "bad.csv");
+    bad << "0 0 0.1 0.1 0\n0.1 0 0.1 fast 1\n";
+  }
+  std::string text = replaced(valid_scene(), "<line><start>0 0 0.1</start><end>0.1 0 0.1</end></line>",
+                              "<wall><corner>0 0 0.01</corner><size>0.2 0.1</size><layers>2</layers>"
+                              "<layer_height unit=\"mm\">8</layer_height></wall>\n"
+                              "          <waypoints file=\"" + (folder / "path.csv").string() + "\"><pose>0 0 0.5 0 0 0</pose></waypoints>");
+  const auto scene = load_scene_from_string(text, "paths.sdf");
+  const auto& trajectory = scene.print_heads.at(0).trajectory;
+  // Starts at the wall's corner (after the start time) and the waypoints are lifted by the pose.
+  EXPECT_TRUE(trajectory.sample(0.5).position.isApprox(Vec3(0, 0, Real(0.01))));
+  EXPECT_GT(trajectory.end_time(), 0.5 + (2 * 0.6 + 0.008) / 0.05);
+
+  std::string bad = replaced(text, "path.csv", "bad.csv");
+  const InputError error = load_error(bad);
+  std::filesystem::remove_all(folder);
+  EXPECT_CONTAINS(error.what(), (folder / "bad.csv").string() + ":2: error: field 4 ('fast') is not a number");
+  expect_error_at(replaced(valid_scene(), "<line><start>0 0 0.1</start><end>0.1 0 0.1</end></line>",
+                           "<wall><corner>0 0 0</corner><size>0.2 0.1</size><layer_height>0.01</layer_height></wall>"),
+                  "<wall>", "missing required <layers> in <wall>");
+}

@@ -2,7 +2,9 @@
 
 #include <cmath>
 
+#include "m3dp/core/error.hpp"
 #include "m3dp/toolpath/parametric.hpp"
+#include "m3dp/toolpath/waypoints.hpp"
 
 using namespace m3dp;
 using namespace m3dp::toolpath;
@@ -40,4 +42,42 @@ TEST(Toolpath, GapsBetweenSegmentsAreTravelledWithoutExtrusion) {
   EXPECT_FALSE(travel.extruding);
   EXPECT_NEAR((travel.position - Vec3(1, 0.5f, 0)).norm(), 0, 1e-6);
   EXPECT_TRUE(trajectory.sample(2.5).extruding);
+}
+
+TEST(Toolpath, RectangleWallLaysClosedLoopsLayerAboveLayer) {
+  const auto wall = m3dp::toolpath::rectangle_wall(Vec3(1, 2, 0.01f), Real(0.3), Real(0.2), 3, Real(0.008));
+  ASSERT_EQ(wall.points.size(), 15u);
+  // Three loops of perimeter 1 m plus two rises of 8 mm.
+  EXPECT_NEAR(m3dp::toolpath::curve_length(wall), 3 * 1.0 + 2 * 0.008, 1e-5);
+  EXPECT_TRUE(wall.points[2].isApprox(Vec3(1.3f, 2.2f, 0.01f)));
+  EXPECT_TRUE(wall.points.back().isApprox(Vec3(1, 2, 0.026f)));
+  EXPECT_THROW(m3dp::toolpath::rectangle_wall(Vec3::Zero(), 1, 1, 0, Real(0.01)), m3dp::Error);
+}
+
+TEST(Toolpath, WaypointFileBecomesStraightMoves) {
+  const std::string text =
+      "# made by hand\n"
+      "x,y,z,speed,extrude\n"
+      "0, 0, 0.01, 0.1, 0\n"
+      "0.1 0 0.01 0.05 1   # first strand\n"
+      "0.1,0.1,0.01,0.05,true\n";
+  const Pose placement = Pose::from_xyz_rpy(1, 0, 0, 0, 0, 0);
+  const auto segments = m3dp::toolpath::parse_waypoints(text, "path.csv", placement);
+  ASSERT_EQ(segments.size(), 2u);
+  EXPECT_TRUE(segments[0].extrude);
+  EXPECT_NEAR(segments[0].speed, 0.05, 1e-7);
+  const m3dp::toolpath::Trajectory trajectory(segments, 0.0);
+  EXPECT_NEAR(trajectory.end_time(), 4.0, 1e-6);  // 0.2 m at 0.05 m/s
+  EXPECT_TRUE(trajectory.sample(0).position.isApprox(Vec3(1, 0, 0.01f)));
+  EXPECT_TRUE(trajectory.sample(3).position.isApprox(Vec3(1.1f, 0.05f, 0.01f)));
+
+  try {
+    m3dp::toolpath::parse_waypoints("0 0 0 0.1 0\n0 0 oops 0.1 1\n0 0 0 -1 1\n1 2 3\n", "bad.csv");
+    FAIL() << "no error";
+  } catch (const m3dp::InputError& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find("bad.csv:2: error: field 3 ('oops') is not a number"), std::string::npos) << message;
+    EXPECT_NE(message.find("bad.csv:3: error: the speed must be > 0 m/s, got -1"), std::string::npos) << message;
+    EXPECT_NE(message.find("bad.csv:4: error: expected 5 fields"), std::string::npos) << message;
+  }
 }

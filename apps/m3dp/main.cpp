@@ -17,6 +17,7 @@
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/simulation.hpp"
+#include "m3dp/world/world.hpp"
 
 namespace {
 
@@ -57,11 +58,23 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
 int validate_command(const std::filesystem::path& scene_file) {
   const m3dp::scene::Scene scene = m3dp::scene::load_scene(scene_file);
   for (const auto& warning : scene.warnings) fmt::print(stderr, "{}: warning: {}\n", warning.location.str(), warning.message);
+  // Robots are loaded by DART's URDF loader too, which may reject what the XML check let through.
+  m3dp::world::World world;
+  for (const auto& robot : scene.robots) {
+    try {
+      world.add_robot(m3dp::world::RobotDescription{robot.name, robot.urdf_file, robot.pose, {}});
+    } catch (const m3dp::InputError& error) {
+      std::vector<m3dp::Diagnostic> diagnostics = error.diagnostics();
+      diagnostics.push_back(m3dp::Diagnostic{robot.where, fmt::format("robot '{}' included here could not be loaded", robot.name)});
+      throw m3dp::InputError(std::move(diagnostics));
+    }
+  }
   std::size_t collisions = 0;
   for (const auto& body : scene.bodies) collisions += body.collisions.size();
-  fmt::print("{}: OK — world '{}', {} bodies ({} collision shapes), {} materials, {} fluid blocks, {} print heads, {} s\n",
-             scene_file.string(), scene.world_name, scene.bodies.size(), collisions, scene.materials.size(),
-             scene.fluid_blocks.size(), scene.print_heads.size(), scene.end_time);
+  fmt::print("{}: OK — world '{}', {} static bodies ({} collision shapes), {} dynamic bodies, {} robots, {} materials, {} fluid "
+             "blocks, {} print heads, {} s\n",
+             scene_file.string(), scene.world_name, scene.bodies.size(), collisions, scene.dynamic_bodies.size(),
+             scene.robots.size(), scene.materials.size(), scene.fluid_blocks.size(), scene.print_heads.size(), scene.end_time);
   return 0;
 }
 

@@ -17,6 +17,7 @@
 
 #include "m3dp/io/mesh_io.hpp"
 #include "m3dp/toolpath/gcode.hpp"
+#include "m3dp/toolpath/waypoints.hpp"
 
 namespace m3dp::scene {
 
@@ -279,6 +280,7 @@ class SceneReader {
   std::optional<toolpath::Trajectory> read_path(const pugi::xml_node& path);
   std::optional<toolpath::PathSegment> read_path_segment(const pugi::xml_node& element, Real path_speed);
   std::optional<std::vector<toolpath::PathSegment>> read_gcode_segments(const pugi::xml_node& element);
+  std::optional<std::vector<toolpath::PathSegment>> read_waypoint_segments(const pugi::xml_node& element);
   std::optional<toolpath::Curve> read_curve(const pugi::xml_node& element);
   pugi::xml_node find_centre(const pugi::xml_node& curve);
   void read_output(const pugi::xml_node& output);
@@ -1208,7 +1210,8 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
 
 std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node& path) {
   check_attributes(path, {"start_time", "speed"});
-  check_children(path, {"line", "polyline", "circle", "helix", "gcode"}, {"line", "polyline", "circle", "helix", "gcode"});
+  check_children(path, {"line", "polyline", "circle", "helix", "wall", "gcode", "waypoints"},
+                 {"line", "polyline", "circle", "helix", "wall", "gcode", "waypoints"});
   const auto start_time = read_number_attribute(path, "start_time", Quantity::time, Limits::non_negative());
   const auto speed = read_number_attribute(path, "speed", Quantity::speed, Limits::positive());
   const bool attributes_valid = (start_time || !path.attribute("start_time")) && (speed || !path.attribute("speed"));
@@ -1218,6 +1221,14 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
   for (const auto& child : path.children()) {
     if (child.type() != pugi::node_element) continue;
     const std::string_view kind = child.name();
+    if (kind == "waypoints") {
+      if (auto waypoints = read_waypoint_segments(child)) {
+        segments.insert(segments.end(), std::make_move_iterator(waypoints->begin()), std::make_move_iterator(waypoints->end()));
+      } else {
+        segments_valid = false;
+      }
+      continue;
+    }
     if (kind == "gcode") {
       if (auto gcode = read_gcode_segments(child)) {
         segments.insert(segments.end(), std::make_move_iterator(gcode->begin()), std::make_move_iterator(gcode->end()));
@@ -1226,7 +1237,7 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
       }
       continue;
     }
-    if (kind != "line" && kind != "polyline" && kind != "circle" && kind != "helix") continue;  // reported above
+    if (kind != "line" && kind != "polyline" && kind != "circle" && kind != "helix" && kind != "wall") continue;  // reported above
     if (auto segment = read_path_segment(child, Real(speed.value_or(toolpath::PathSegment{}.speed)))) {
       segments.push_back(std::move(*segment));
     } else {
@@ -1234,7 +1245,7 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
     }
   }
   if (segments.empty() && segments_valid) {
-    report(path, "<path> has no segments; expected one or more of: line, polyline, circle, helix, gcode");
+    report(path, "<path> has no segments; expected one or more of: line, polyline, circle, helix, wall, gcode, waypoints");
     return std::nullopt;
   }
   if (!segments_valid || !attributes_valid) return std::nullopt;
@@ -1274,6 +1285,25 @@ std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segmen
   }
 }
 
+std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_waypoint_segments(const pugi::xml_node& element) {
+  check_attributes(element, {"file"});
+  check_children(element, {"pose"});
+  const auto file = read_attribute(element, "file", Presence::required);
+  if (!file) return std::nullopt;
+  fs::path waypoint_path(*file);
+  if (waypoint_path.is_relative()) waypoint_path = file_.parent_path() / waypoint_path;
+  if (!fs::exists(waypoint_path)) {
+    report(element, fmt::format("waypoint file '{}' not found (looked for {})", *file, waypoint_path.string()));
+    return std::nullopt;
+  }
+  try {
+    return toolpath::read_waypoints(waypoint_path, read_pose(element));
+  } catch (const InputError& error) {
+    for (const auto& diagnostic : error.diagnostics()) report(diagnostic.location, diagnostic.message);
+    return std::nullopt;
+  }
+}
+
 std::optional<toolpath::PathSegment> SceneReader::read_path_segment(const pugi::xml_node& element, Real path_speed) {
   check_attributes(element, {"speed", "extrude"});
   const auto speed = read_number_attribute(element, "speed", Quantity::speed, Limits::positive());
@@ -1305,6 +1335,23 @@ std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& ele
     const auto end = read_vector(element, "end", Quantity::length, Presence::required);
     if (!start || !end) return std::nullopt;
     return toolpath::LineCurve{*start, *end};
+  }
+  if (kind == "wall") {
+    check_children(element, {"corner", "size", "layers", "layer_height"});
+    const auto corner = read_vector(element, "corner", Quantity::length, Presence::required);
+    std::optional<std::vector<double>> size;
+    if (const pugi::xml_node size_element = find_child(element, "size", Presence::required)) {
+      size = read_numbers(size_element, 2, Quantity::length, "x y");
+      if (size && ((*size)[0] <= 0 || (*size)[1] <= 0)) {
+        report(size_element, fmt::format("<size> of a <wall> must be > 0 m on both axes, got '{}'", trim(size_element.child_value())));
+        size.reset();
+      }
+    }
+    const auto layers = read_int(element, "layers", 1);
+    const auto layer_height = read_scalar(element, "layer_height", Quantity::length, Limits::positive(), Presence::required);
+    if (!element.child("layers")) report(element, "missing required <layers> in <wall>");
+    if (!corner || !size || !layers || !layer_height) return std::nullopt;
+    return toolpath::rectangle_wall(*corner, Real((*size)[0]), Real((*size)[1]), *layers, Real(*layer_height));
   }
   if (kind == "polyline") {
     check_children(element, {"point"}, {"point"});
