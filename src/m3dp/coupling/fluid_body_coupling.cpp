@@ -12,6 +12,7 @@ void FluidBodyCoupling::sample_new_links() {
   const auto& settings = solver_.parameters().settings;
   const Real spacing = settings.boundary_spacing_factor * solver_.particle_diameter();
   for (; links_seen_ < world_.link_count(); ++links_seen_) {
+    if (!world_.link_feels_fluid(links_seen_)) continue;
     const world::LinkShapes link = world_.link_shapes(links_seen_);
     // One boundary body per link: all its shapes, sampled like static walls (the layer a particle
     // radius inside the solid) and placed in the link frame.

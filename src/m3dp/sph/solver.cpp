@@ -273,7 +273,9 @@ const StepStats& Solver::step() {
   Real max_viscosity = 0;
   for (const auto& phase : parameters_.phases)
     max_viscosity = std::max({max_viscosity, phase.kinematic_viscosity, phase.boundary_kinematic_viscosity});
-  if (max_viscosity > 0) time_step = std::min(time_step, Real(0.1) * diameter * diameter / max_viscosity);
+  // Morris et al. 1997's explicit-viscosity limit Δt ≤ 0.125 h²/ν, with the smoothing length h = half
+  // the support radius = one particle diameter for our kernels.
+  if (max_viscosity > 0) time_step = std::min(time_step, Real(0.125) * diameter * diameter / max_viscosity);
   // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
   // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
   // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).

@@ -191,6 +191,7 @@ struct World::Impl {
     std::string name;
     Vec3 force = Vec3::Zero();   // N, world, at the link origin
     Vec3 torque = Vec3::Zero();  // N·m, world
+    bool feels_fluid = true;
   };
   struct Tool {
     std::string name;
@@ -686,6 +687,10 @@ void World::set_link_wrench(LinkIndex link, const Vec3& force, const Vec3& torqu
   record.force = force;
   record.torque = torque;
 }
+
+bool World::link_feels_fluid(LinkIndex link) const { return impl_->links.at(link).feels_fluid; }
+
+void World::set_feels_fluid(LinkIndex link, bool feels_fluid) { impl_->links.at(link).feels_fluid = feels_fluid; }
 
 LinkIndex World::link_of_body(BodyIndex body) const {
   const LinkIndex link = impl_->body_links.at(body);

@@ -104,6 +104,7 @@ class World {
   BodyIndex add_static_shape(const std::string& name, const Shape& shape, const Pose& pose);
   /// A free rigid body with one or more collision shapes (poses in the body frame). Mass in kg;
   /// inertia about the body origin from the first shape at uniform density unless given (kg·m²).
+  /// Every body feels the fluid (see link_feels_fluid) unless switched off with set_feels_fluid.
   BodyIndex add_rigid_body(const std::string& name, const std::vector<Shape>& shapes, const std::vector<Pose>& shape_poses,
                            double mass, const Pose& pose, const std::optional<Mat3>& inertia = std::nullopt);
   BodyIndex add_rigid_body(const std::string& name, const Shape& shape, double mass, const Pose& pose) {
@@ -160,6 +161,10 @@ class World {
   void set_link_wrench(LinkIndex link, const Vec3& force, const Vec3& torque);
   /// The link of a free rigid body.
   [[nodiscard]] LinkIndex link_of_body(BodyIndex body) const;
+  /// Whether the fluid coupling turns the link into boundary particles (default true). False: the
+  /// link only collides in the world (e.g. a test that wants the printed mesh alone to hold a body).
+  [[nodiscard]] bool link_feels_fluid(LinkIndex link) const;
+  void set_feels_fluid(LinkIndex link, bool feels_fluid);
 
   /// Steps until the world's clock reaches `time` (s) exactly, in equal steps no longer than the set time step.
   void step_to(double time);
