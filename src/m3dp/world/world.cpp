@@ -333,7 +333,13 @@ RobotIndex World::add_robot(const RobotDescription& description) {
   const std::string file = description.urdf_file.string();
   if (!std::filesystem::exists(description.urdf_file))
     throw InputError(SourceLocation{file, 0}, "URDF file not found");
-  dart::utils::DartLoader loader;
+  // A URDF link without <inertial> is a frame (tool0, an end-effector point), not a body: DART's
+  // default would give it 1 kg, which hung a phantom kilogram on the UR10's flange and on the
+  // OpenManipulator's fingertips (enough to make its 4.1 N m servos sag).
+  Inertia frame_inertia;
+  frame_inertia.setMass(1e-6);
+  frame_inertia.setMoment(Eigen::Matrix3d::Identity() * 1e-12);
+  dart::utils::DartLoader loader(dart::utils::DartLoader::Options(nullptr, dart::utils::DartLoader::RootJointType::FLOATING, frame_inertia));
   SkeletonPtr skeleton = loader.parseSkeleton(dart::common::Uri::createFromPath(std::filesystem::absolute(description.urdf_file).string()));
   if (!skeleton)
     throw InputError(SourceLocation{file, 0},
