@@ -209,6 +209,7 @@ struct World::Impl {
     SkeletonPtr skeleton;
     std::vector<dart::dynamics::DegreeOfFreedom*> joint_dofs;  // the actuated joints, in joint_names() order
     Eigen::VectorXd position_targets;
+    Eigen::VectorXd chunk_start_targets, chunk_end_targets;  // joint targets at the ends of the current IK chunk
     std::vector<ToolIndex> tools;
     RobotContacts contacts;
     struct DiffDrive {
@@ -246,8 +247,12 @@ struct World::Impl {
   std::size_t replacements = 0;
   std::size_t rigid_bodies = 0;
   double max_time_step = 1e-3;  // s
+  double ik_period = 4e-3;      // s of world time between IK solutions (joint targets are interpolated between)
 
-  void control(double step);
+  /// IK for every tool with a trajectory at `end_time`: the joint targets at the end of a chunk of world steps.
+  void solve_tool_targets(double end_time);
+  /// Servo commands for one world step; `chunk_fraction` (0, 1] says how far into the chunk its end is.
+  void control(double step, double chunk_fraction);
   void drive_base(Robot& robot, double step, double next_time);
   void update_odometry(Robot& robot);
   void count_contacts();
@@ -704,15 +709,16 @@ LinkIndex World::link_of_body(BodyIndex body) const {
   return link;
 }
 
-void World::Impl::control(double step) {
-  const double next_time = world->getTime() + step;
+void World::Impl::solve_tool_targets(double end_time) {
   for (Robot& robot : robots) {
-    // A tool with a trajectory drives its robot: the joint targets are the IK solution for the
-    // tool's target at the end of this step, seeded with the current joint positions.
+    robot.chunk_start_targets = robot.position_targets;
+    robot.chunk_end_targets = robot.position_targets;
+    // A tool with a trajectory drives its robot: the joint targets at the chunk's end are the IK
+    // solution for the tool's target then, seeded with the current joint positions.
     for (const ToolIndex t : robot.tools) {
       Tool& tool = tools[t];
       if (!tool.trajectory) continue;
-      const ToolTarget target = tool.trajectory(next_time);
+      const ToolTarget target = tool.trajectory(end_time);
       Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
       transform.translation() = target.position.cast<double>();
       // The target's rotation about its axis is free; take the tool's own, turned by the least
@@ -725,8 +731,17 @@ void World::Impl::control(double step) {
       // The best solution found is used even when it misses the (tight) bounds: it is close.
       tool.end_effector->getIK()->findSolution(tool.solution);
       for (std::size_t k = 0; k < tool.target_slot.size(); ++k)
-        if (tool.target_slot[k] >= 0) robot.position_targets[tool.target_slot[k]] = tool.solution[static_cast<Eigen::Index>(k)];
+        if (tool.target_slot[k] >= 0) robot.chunk_end_targets[tool.target_slot[k]] = tool.solution[static_cast<Eigen::Index>(k)];
     }
+  }
+}
+
+void World::Impl::control(double step, double chunk_fraction) {
+  const double next_time = world->getTime() + step;
+  for (Robot& robot : robots) {
+    // Joint space is smooth over a few milliseconds: the targets between IK solutions are interpolated.
+    if (robot.chunk_end_targets.size() == robot.position_targets.size())
+      robot.position_targets = robot.chunk_start_targets + chunk_fraction * (robot.chunk_end_targets - robot.chunk_start_targets);
     // Servo velocity that reaches the target in one step, within the joint's speed limits.
     if (robot.drive) drive_base(robot, step, next_time);
     for (std::size_t k = 0; k < robot.joint_dofs.size(); ++k) {
@@ -792,13 +807,23 @@ void World::step_to(double time) {
     return;
   }
   impl_->world->setTimeStep(step);
-  for (long k = 0; k < steps; ++k) {
-    impl_->control(step);
-    impl_->world->step();  // clears the commands and external forces: control() sets them every step
-    impl_->count_contacts();
-    impl_->record_tracking();
-    for (auto& robot : impl_->robots)
-      if (robot.drive) impl_->update_odometry(robot);
+  // A driving base moves the arm's frame during a chunk, which the IK (solved where the base is at
+  // the chunk's start) cannot know: mobile manipulators solve every step.
+  bool mobile_arm = false;
+  for (const auto& robot : impl_->robots) mobile_arm |= robot.drive.has_value() && !robot.tools.empty();
+  const long steps_per_chunk =
+      mobile_arm ? 1L : std::max(1L, static_cast<long>(std::floor(impl_->ik_period / step + 1e-9)));
+  for (long chunk_begin = 0; chunk_begin < steps; chunk_begin += steps_per_chunk) {
+    const long chunk_steps = std::min(steps_per_chunk, steps - chunk_begin);
+    impl_->solve_tool_targets(impl_->world->getTime() + static_cast<double>(chunk_steps) * step);
+    for (long k = 1; k <= chunk_steps; ++k) {
+      impl_->control(step, static_cast<double>(k) / static_cast<double>(chunk_steps));
+      impl_->world->step();  // clears the commands and external forces: control() sets them every step
+      impl_->count_contacts();
+      for (auto& robot : impl_->robots)
+        if (robot.drive) impl_->update_odometry(robot);
+    }
+    impl_->record_tracking();  // at the chunk's end, where the IK target is
   }
   impl_->world->setTime(time);  // no rounding drift between the two clocks
 }
