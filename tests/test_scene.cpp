@@ -524,3 +524,13 @@ TEST(Scene, WallAndWaypointPathsAreRead) {
                            "<wall><corner>0 0 0</corner><size>0.2 0.1</size><layer_height>0.01</layer_height></wall>"),
                   "<wall>", "missing required <layers> in <wall>");
 }
+
+TEST(Scene, MissingSceneFileIsNamed) {
+  try {
+    m3dp::scene::load_scene("no_such_scene.sdf");
+    FAIL() << "no error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), "no_such_scene.sdf");
+    EXPECT_CONTAINS(error.what(), "cannot read the scene (expected an SDF world file, e.g. scenes/dam_break.sdf): no such file");
+  }
+}

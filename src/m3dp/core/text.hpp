@@ -1,7 +1,14 @@
 #pragma once
-// Small helpers for the text file readers (meshes, G-code): lines with their numbers, for
-// messages that name file:line.
+// Small helpers for the text file readers (scenes, meshes, G-code, waypoints): whole files, lines
+// with their numbers (for messages that name file:line), and words.
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
 #include <string_view>
+#include <vector>
+
+#include "m3dp/core/error.hpp"
 
 namespace m3dp {
 
@@ -17,6 +24,28 @@ void for_each_line(std::string_view text, Visitor&& visit) {
     visit(text.substr(start, end - start), line_number);
     start = end + 1;
   }
+}
+
+/// The words of `text`, split at any of `separators` (by default white space).
+inline std::vector<std::string_view> split_words(std::string_view text, std::string_view separators = " \t\r\n\v\f") {
+  std::vector<std::string_view> words;
+  std::size_t position = text.find_first_not_of(separators);
+  while (position != std::string_view::npos) {
+    const std::size_t end = std::min(text.find_first_of(separators, position), text.size());
+    words.push_back(text.substr(position, end - position));
+    position = text.find_first_not_of(separators, end);
+  }
+  return words;
+}
+
+/// The whole file as text. Throws InputError naming the file ("cannot open the <what>").
+inline std::string read_text_file(const std::filesystem::path& file, std::string_view what) {
+  std::error_code error;
+  if (!std::filesystem::is_regular_file(file, error))
+    throw InputError(SourceLocation{file.string(), 0}, "cannot read the " + std::string(what) + ": no such file");
+  std::ifstream stream(file, std::ios::binary);
+  if (!stream) throw InputError(SourceLocation{file.string(), 0}, "cannot open the " + std::string(what) + " for reading");
+  return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
 }
 
 }  // namespace m3dp

@@ -34,18 +34,6 @@ namespace fs = std::filesystem;
 
 bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\v' || c == '\f'; }
 
-std::vector<std::string_view> split_words(std::string_view line) {
-  std::vector<std::string_view> words;
-  std::size_t position = 0;
-  while (position < line.size()) {
-    while (position < line.size() && is_blank(line[position])) ++position;
-    const std::size_t start = position;
-    while (position < line.size() && !is_blank(line[position])) ++position;
-    if (position > start) words.push_back(line.substr(start, position - start));
-  }
-  return words;
-}
-
 /// A finite decimal number, the whole word. Accepts a leading '+', which from_chars does not.
 std::optional<Real> parse_real(std::string_view word) {
   if (!word.empty() && word.front() == '+') word.remove_prefix(1);

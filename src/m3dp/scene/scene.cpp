@@ -15,6 +15,7 @@
 #include <string_view>
 #include <utility>
 
+#include "m3dp/core/text.hpp"
 #include "m3dp/io/mesh_io.hpp"
 #include "m3dp/toolpath/gcode.hpp"
 #include "m3dp/toolpath/waypoints.hpp"
@@ -115,18 +116,6 @@ std::string_view trim(std::string_view text) {
   if (first == std::string_view::npos) return {};
   const auto last = text.find_last_not_of(kBlank);
   return text.substr(first, last - first + 1);
-}
-
-std::vector<std::string_view> split_words(std::string_view text) {
-  std::vector<std::string_view> words;
-  constexpr std::string_view kBlank = " \t\r\n";
-  std::size_t position = text.find_first_not_of(kBlank);
-  while (position != std::string_view::npos) {
-    const std::size_t end = std::min(text.find_first_of(kBlank, position), text.size());
-    words.push_back(text.substr(position, end - position));
-    position = text.find_first_not_of(kBlank, end);
-  }
-  return words;
 }
 
 /// A finite number, the whole word (from_chars does not take a leading '+', SDF files sometimes have one).
@@ -772,8 +761,7 @@ void SceneReader::read_include(const pugi::xml_node& include) {
   robot.where = where(include);
   // The URDF is read here too, so that `m3dp validate` reports its XML errors with its own lines
   // and the scene's checks (link and joint names) need no physics engine.
-  std::ifstream stream(*file, std::ios::binary);
-  const std::string text((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
+  const std::string text = read_text_file(*file, "URDF file");
   pugi::xml_document urdf;
   const pugi::xml_parse_result parsed = urdf.load_buffer(text.data(), text.size());
   if (!parsed) {
@@ -1221,17 +1209,10 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
   for (const auto& child : path.children()) {
     if (child.type() != pugi::node_element) continue;
     const std::string_view kind = child.name();
-    if (kind == "waypoints") {
-      if (auto waypoints = read_waypoint_segments(child)) {
-        segments.insert(segments.end(), std::make_move_iterator(waypoints->begin()), std::make_move_iterator(waypoints->end()));
-      } else {
-        segments_valid = false;
-      }
-      continue;
-    }
-    if (kind == "gcode") {
-      if (auto gcode = read_gcode_segments(child)) {
-        segments.insert(segments.end(), std::make_move_iterator(gcode->begin()), std::make_move_iterator(gcode->end()));
+    if (kind == "waypoints" || kind == "gcode") {
+      // Files that hold a whole path.
+      if (auto read = kind == "gcode" ? read_gcode_segments(child) : read_waypoint_segments(child)) {
+        segments.insert(segments.end(), std::make_move_iterator(read->begin()), std::make_move_iterator(read->end()));
       } else {
         segments_valid = false;
       }
@@ -1504,17 +1485,6 @@ void SceneReader::check_materials() {
   }
 }
 
-std::string read_text_file(const fs::path& file) {
-  std::error_code error;
-  if (!fs::is_regular_file(file, error)) {
-    throw InputError(SourceLocation{file.string(), 0},
-                     "cannot read the scene: no such file (expected an SDF world file, e.g. scenes/dam_break.sdf)");
-  }
-  std::ifstream stream(file, std::ios::binary);
-  if (!stream) throw InputError(SourceLocation{file.string(), 0}, "cannot open the scene file for reading");
-  return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
-}
-
 }  // namespace
 
 const RobotInclude* Scene::find_robot(const std::string& name) const {
@@ -1546,7 +1516,9 @@ const MaterialEntry* Scene::find_material(const std::string& name) const {
   return entry == materials.end() ? nullptr : &*entry;
 }
 
-Scene load_scene(const std::filesystem::path& file) { return load_scene_from_string(read_text_file(file), file); }
+Scene load_scene(const std::filesystem::path& file) {
+  return load_scene_from_string(read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)"), file);
+}
 
 Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name) {
   return SceneReader(text, file_name).read();

@@ -6,10 +6,8 @@
 #include <array>
 #include <charconv>
 #include <cmath>
-#include <fstream>
 #include <map>
 #include <optional>
-#include <sstream>
 
 #include "m3dp/core/text.hpp"
 
@@ -336,11 +334,7 @@ GcodeProgram parse_gcode(std::string_view text, const fs::path& file, const Gcod
 }
 
 GcodeProgram read_gcode(const fs::path& file, const GcodeSettings& settings) {
-  std::ifstream stream(file, std::ios::binary);
-  if (!stream) throw InputError(SourceLocation{file.string(), 0}, "cannot open the G-code file");
-  std::stringstream buffer;
-  buffer << stream.rdbuf();
-  return parse_gcode(buffer.str(), file, settings);
+  return parse_gcode(read_text_file(file, "G-code file"), file, settings);
 }
 
 }  // namespace m3dp::toolpath

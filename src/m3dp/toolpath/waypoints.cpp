@@ -2,11 +2,8 @@
 
 #include <fmt/format.h>
 
-#include <cctype>
 #include <charconv>
-#include <fstream>
 #include <optional>
-#include <sstream>
 
 #include "m3dp/core/text.hpp"
 
@@ -25,19 +22,6 @@ PolylineCurve rectangle_wall(const Vec3& corner, Real size_x, Real size_y, int l
 }
 
 namespace {
-std::vector<std::string_view> fields_of(std::string_view line) {
-  std::vector<std::string_view> fields;
-  std::size_t position = 0;
-  auto separator = [](char c) { return c == ',' || c == ';' || std::isspace(static_cast<unsigned char>(c)); };
-  while (position < line.size()) {
-    while (position < line.size() && separator(line[position])) ++position;
-    const std::size_t begin = position;
-    while (position < line.size() && !separator(line[position])) ++position;
-    if (position > begin) fields.push_back(line.substr(begin, position - begin));
-  }
-  return fields;
-}
-
 std::optional<double> number_of(std::string_view field) {
   double value = 0;
   const auto [end, error] = std::from_chars(field.data(), field.data() + field.size(), value);
@@ -57,7 +41,7 @@ std::vector<PathSegment> parse_waypoints(std::string_view text, const std::files
   bool seen_data = false;
   for_each_line(text, [&](std::string_view line, int line_number) {
     if (const auto hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
-    const auto fields = fields_of(line);
+    const auto fields = split_words(line, " \t\r,;");
     if (fields.empty()) return;
     auto problem = [&](std::string message) { problems.push_back(Diagnostic{SourceLocation{file.string(), line_number}, std::move(message)}); };
     // A header of words before the first waypoint.
@@ -103,11 +87,7 @@ std::vector<PathSegment> parse_waypoints(std::string_view text, const std::files
 }
 
 std::vector<PathSegment> read_waypoints(const std::filesystem::path& file, const Pose& placement) {
-  std::ifstream stream(file, std::ios::binary);
-  if (!stream) throw InputError(SourceLocation{file.string(), 0}, "cannot open the waypoint file");
-  std::stringstream buffer;
-  buffer << stream.rdbuf();
-  return parse_waypoints(buffer.str(), file, placement);
+  return parse_waypoints(read_text_file(file, "waypoint file"), file, placement);
 }
 
 }  // namespace m3dp::toolpath
