@@ -248,6 +248,7 @@ struct World::Impl {
   std::size_t rigid_bodies = 0;
   double max_time_step = 1e-3;  // s
   double ik_period = 4e-3;      // s of world time between IK solutions (joint targets are interpolated between)
+  std::vector<char> touched;    // per robot, scratch of count_contacts
 
   /// IK for every tool with a trajectory at `end_time`: the joint targets at the end of a chunk of world steps.
   void solve_tool_targets(double end_time);
@@ -761,7 +762,7 @@ void World::Impl::control(double step, double chunk_fraction) {
 
 void World::Impl::count_contacts() {
   if (robots.empty()) return;
-  std::vector<bool> touched(robots.size(), false);
+  touched.assign(robots.size(), 0);  // sized once: no allocation per step
   for (const auto& contact : world->getLastCollisionResult().getContacts()) {
     const BodyNode* nodes[2] = {body_node_of(contact.collisionObject1), body_node_of(contact.collisionObject2)};
     for (int side = 0; side < 2; ++side) {
