@@ -181,3 +181,30 @@ TEST(Outputs, ProgressLineShowsTimeSpeedParticlesAndEta) {
   EXPECT_NE(line.find("1234 particles"), std::string::npos) << line;
   EXPECT_NE(line.find("ETA 00:30"), std::string::npos) << line;
 }
+
+TEST(Outputs, RobotRunsReportRobotsNozzlesAndWorldTimes) {
+  // The first 3 s of the demo: the UR10 travels to the wall's corner and starts laying material.
+  scene::Scene scene = scene::load_scene(fs::path(M3DP_SCENES) / "ur10_wall.sdf");
+  scene.output.write_particles = false;
+  scene.meshing.enabled = false;
+  scene.end_time = 3;
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("robot_run");
+  const auto summary = run_into(simulation, directory);
+  ASSERT_EQ(summary.status, "completed");
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  ASSERT_EQ(json["robots"].size(), 1u);
+  const auto& robot = json["robots"][0];
+  EXPECT_EQ(robot["name"], "ur10");
+  EXPECT_EQ(robot["contacts_with_robots"].get<std::uint64_t>(), 0u);
+  EXPECT_GT(robot["nozzle_tracking_max_m"].get<double>(), 0.0);
+  EXPECT_LT(robot["nozzle_tracking_rms_m"].get<double>(), 1e-3);
+  EXPECT_FALSE(robot.contains("base"));  // a fixed arm has no mobile base report
+  ASSERT_EQ(json["nozzles"].size(), 1u);
+  EXPECT_EQ(json["nozzles"][0]["particles_emitted"].get<std::uint64_t>(), summary.particles_emitted);
+  EXPECT_GT(summary.particles_emitted, 0u);
+  // The robot's stages have their own columns in the timing table.
+  const std::string timing = read_text(directory / "timing.csv");
+  EXPECT_NE(timing.find(",ms_coupling,ms_world,"), std::string::npos);
+  fs::remove_all(directory);
+}

@@ -62,6 +62,15 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                         {"particles", mesh.particles},
                         {"triangles", mesh.triangles},
                         {"seconds", mesh.seconds}});
+  nlohmann::json nozzles = nlohmann::json::array();
+  const auto& solver = simulation.solver();
+  for (std::size_t n = 0; n < solver.state().nozzles.size(); ++n) {
+    const auto& nozzle = solver.state().nozzles[n];
+    nozzles.push_back({{"name", solver.parameters().nozzles[n].name},
+                       {"layers_emitted", nozzle.layers_emitted},
+                       {"particles_emitted", nozzle.particles_emitted},
+                       {"steps_blocked", nozzle.blocked_layers}});
+  }
   nlohmann::json robots = nlohmann::json::array();
   for (const auto& robot : summary.robots)
     robots.push_back({{"name", robot.name},
@@ -100,6 +109,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"bodies", bodies},
+      {"nozzles", nozzles},
       {"robots", robots},
       {"meshes", meshes},
       {"meshes_skipped", meshing ? meshing->skipped() : 0},
@@ -251,7 +261,10 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   summary.mass_lost = solver.state().mass_removed_total;
   summary.mass_final = solver.total_fluid_mass();
   summary.frames_written = frames ? frames->frames() : 0;
-  for (const auto& nozzle : solver.state().nozzles) summary.particles_emitted += nozzle.particles_emitted;
+  for (const auto& nozzle : solver.state().nozzles) {
+    summary.particles_emitted += nozzle.particles_emitted;
+    summary.blocked_layers += nozzle.blocked_layers;
+  }
   for (std::size_t r = 0; r < simulation.robots().size(); ++r) {
     RunSummary::Robot robot;
     robot.name = simulation.world().robot_name(simulation.robots()[r]);
@@ -288,6 +301,10 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                       summary.particle_steps_per_second);
   text += fmt::format("  particles   {} now, {} emitted, {} left the bounds\n", summary.particles, summary.particles_emitted,
                       summary.particles_removed);
+  if (summary.blocked_layers > 0)
+    text += fmt::format("  nozzles     a due layer found no room in front of its nozzle in {} steps (material backing up "
+                        "under it; it left later)\n",
+                        summary.blocked_layers);
   text += fmt::format("  mass        {:.6g} kg initial + {:.6g} emitted - {:.6g} lost = {:.6g} kg\n", summary.mass_initial,
                       summary.mass_emitted, summary.mass_lost, summary.mass_final);
   text += fmt::format("  solver      {:.2f} density + {:.2f} divergence iterations per step, max mean density error {:.3f} %\n",

@@ -86,6 +86,7 @@ struct RunSummary {
   std::size_t particles = 0;
   std::uint64_t particles_emitted = 0;
   std::uint64_t particles_removed = 0;
+  std::uint64_t blocked_layers = 0;  // steps in which a due nozzle layer found no room (summed over nozzles)
   double mass_initial = 0, mass_emitted = 0, mass_lost = 0, mass_final = 0;  // kg
   double max_density_error = 0;      // largest mean relative density error after a density solve
   double mean_density_iterations = 0;

@@ -70,7 +70,7 @@ struct NozzleState {
   double pending_time = 0;            // s of nominal extrusion not yet emitted as a layer
   std::uint64_t layers_emitted = 0;
   std::uint64_t particles_emitted = 0;
-  std::uint64_t blocked_layers = 0;   // layers delayed because the space in front was occupied
+  std::uint64_t blocked_layers = 0;   // steps in which a due layer was delayed: the space in front was occupied
 };
 
 /// Wall-clock time per stage of the last step (ms).
