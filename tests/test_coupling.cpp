@@ -200,7 +200,7 @@ TEST(Coupling, Ur10DepositsAlongItsPath) {
   scene.output.write_particles = false;
   scene.meshing.enabled = false;
   auto& head = scene.print_heads.at(0);
-  const Real half = Real(0.08), layer_height = Real(0.008), speed = Real(0.1), z0 = Real(0.006);
+  const Real half = Real(0.08), layer_height = Real(0.008), speed = Real(0.1), z0 = Real(0.008);
   const Vec3 centre(0.7f, 0, 0);
   const Vec3 start(0.775f, 0.164f, 0.0867f);
   std::vector<Vec3> wall;
@@ -252,6 +252,12 @@ TEST(Coupling, Ur10DepositsAlongItsPath) {
     worst = std::max(worst, layer_worst);
   }
   EXPECT_LE(worst, diameter);
+  // All the material the path asks for left the nozzle (π D²/4 · U while extruding).
+  const double extruding_time = 2 * layer_time + double(layer_height / speed);
+  const double asked = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed * extruding_time;
+  const double emitted = double(fluid.size()) * std::pow(double(diameter), 3);
+  std::printf("emitted %.4g m^3 of the %.4g m^3 the path asks for (%+.2f %%)\n", emitted, asked, 100 * (emitted / asked - 1));
+  EXPECT_NEAR(emitted, asked, 0.02 * asked);
   const auto tool = *simulation.print_head_tool(0);
   std::printf("nozzle tracking: %.3f mm rms, %.3f mm max\n", 1e3 * simulation.world().tool_tracking_rms(tool),
               1e3 * simulation.world().tool_tracking_max(tool));
