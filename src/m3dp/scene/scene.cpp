@@ -270,6 +270,8 @@ class SceneReader {
   std::optional<toolpath::PathSegment> read_path_segment(const pugi::xml_node& element, Real path_speed);
   std::optional<std::vector<toolpath::PathSegment>> read_gcode_segments(const pugi::xml_node& element);
   std::optional<std::vector<toolpath::PathSegment>> read_waypoint_segments(const pugi::xml_node& element);
+  /// A file named in the scene (relative paths from the scene's folder); reported at `element` if missing.
+  std::optional<fs::path> find_input_file(const pugi::xml_node& element, const std::string& file, std::string_view what);
   std::optional<toolpath::Curve> read_curve(const pugi::xml_node& element);
   pugi::xml_node find_centre(const pugi::xml_node& curve);
   void read_output(const pugi::xml_node& output);
@@ -1246,14 +1248,10 @@ std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segmen
   if (const auto volumetric = read_bool(element, "volumetric_extrusion")) settings.volumetric_extrusion = *volumetric;
   if (const auto scale = read_scalar(element, "scale", Quantity::plain_number, Limits::positive(), Presence::optional))
     settings.geometry_scale = Real(*scale);
-  fs::path gcode_path(*file);
-  if (gcode_path.is_relative()) gcode_path = file_.parent_path() / gcode_path;
-  if (!fs::exists(gcode_path)) {
-    report(element, fmt::format("G-code file '{}' not found (looked for {})", *file, gcode_path.string()));
-    return std::nullopt;
-  }
+  const auto gcode_path = find_input_file(element, *file, "G-code file");
+  if (!gcode_path) return std::nullopt;
   try {
-    toolpath::GcodeProgram program = toolpath::read_gcode(gcode_path, settings);
+    toolpath::GcodeProgram program = toolpath::read_gcode(*gcode_path, settings);
     for (auto& warning : program.warnings) scene_.warnings.push_back(std::move(warning));
     if (program.moves.empty()) {
       report(element, fmt::format("G-code file '{}' has no moves", *file));
@@ -1266,19 +1264,26 @@ std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segmen
   }
 }
 
+std::optional<fs::path> SceneReader::find_input_file(const pugi::xml_node& element, const std::string& file,
+                                                     std::string_view what) {
+  fs::path path(file);
+  if (path.is_relative()) path = file_.parent_path() / path;  // relative to the scene file
+  if (!fs::exists(path)) {
+    report(element, fmt::format("{} '{}' not found (looked for {})", what, file, path.string()));
+    return std::nullopt;
+  }
+  return path;
+}
+
 std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_waypoint_segments(const pugi::xml_node& element) {
   check_attributes(element, {"file"});
   check_children(element, {"pose"});
   const auto file = read_attribute(element, "file", Presence::required);
   if (!file) return std::nullopt;
-  fs::path waypoint_path(*file);
-  if (waypoint_path.is_relative()) waypoint_path = file_.parent_path() / waypoint_path;
-  if (!fs::exists(waypoint_path)) {
-    report(element, fmt::format("waypoint file '{}' not found (looked for {})", *file, waypoint_path.string()));
-    return std::nullopt;
-  }
+  const auto waypoint_path = find_input_file(element, *file, "waypoint file");
+  if (!waypoint_path) return std::nullopt;
   try {
-    return toolpath::read_waypoints(waypoint_path, read_pose(element));
+    return toolpath::read_waypoints(*waypoint_path, read_pose(element));
   } catch (const InputError& error) {
     for (const auto& diagnostic : error.diagnostics()) report(diagnostic.location, diagnostic.message);
     return std::nullopt;

@@ -316,6 +316,12 @@ void Solver::update_bodies() {
     state_.static_boundary_grid.build(boundary.position, state_.static_boundary_indices, support);
     state_.static_boundary_dirty = false;
   }
+  state_.moving_boundary_indices.clear();
+  const bool any_moving = std::any_of(state_.bodies.begin(), state_.bodies.end(), [](const BoundaryBody& body) { return !body.is_static; });
+  if (!any_moving) {
+    state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, support);
+    return;
+  }
   // Where fluid can be this step: around the particles and every nozzle that is extruding. A
   // moving body outside it cannot have fluid neighbours, so its particles are neither moved nor sorted.
   Aabb region = tbb::parallel_reduce(
@@ -339,7 +345,6 @@ void Solver::update_bodies() {
   for (const auto& nozzle : parameters_.nozzles) widest_nozzle = std::max(widest_nozzle, nozzle.inner_diameter);
   const Vec3 reach = Vec3::Constant(support + widest_nozzle / 2 + particle_diameter());
 
-  state_.moving_boundary_indices.clear();
   for (auto& body : state_.bodies) {
     if (body.is_static) continue;
     Aabb box;
