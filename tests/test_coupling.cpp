@@ -86,7 +86,7 @@ TEST(Coupling, MomentumOfFluidAndBodyIsConserved) {
   scene.solver.gravity = Vec3::Zero();
   scene.solver.bounds.min = Vec3::Constant(-1);
   scene.solver.bounds.max = Vec3::Constant(1);
-  scene.materials.push_back(scene::MaterialEntry{material::NewtonianMaterial{"water", 1000, Real(1e-3), 0}, {}});
+  scene.materials.push_back(scene::MaterialEntry{material::newtonian("water", 1000, Real(1e-3)), {}});
   scene::FluidBlock block;
   block.name = "water";
   block.material = "water";

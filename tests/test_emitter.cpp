@@ -17,7 +17,7 @@ sph::Parameters nozzle_parameters(Real inner_diameter, Real exit_speed) {
   parameters.settings.particle_radius = Real(0.002);
   parameters.settings.bounds.min = Vec3(-0.2f, -0.2f, -0.05f);
   parameters.settings.bounds.max = Vec3(0.2f, 0.2f, 0.3f);
-  parameters.phases.push_back(sph::FluidPhase{"paste", 1500, Real(0.05) / 1500, 0});
+  parameters.phases.push_back(material::newtonian("paste", 1500, Real(0.05)));
   parameters.nozzles.push_back(sph::NozzleSettings{"nozzle", inner_diameter, exit_speed, 0});
   return parameters;
 }

@@ -175,7 +175,7 @@ TEST(Scene, ValidSceneLoadsInSiUnits) {
   ASSERT_NE(water, nullptr);
   EXPECT_EQ(scene.find_material("clay"), nullptr);
   EXPECT_FLOAT_EQ(water->material.density, 1000.0f);
-  EXPECT_FLOAT_EQ(water->material.dynamic_viscosity, 0.001f);  // 1 mPa*s
+  EXPECT_FLOAT_EQ(water->material.rheology.viscosity, 0.001f);  // 1 mPa*s
   EXPECT_FLOAT_EQ(water->material.boundary_viscosity, 0.002f); // 2 cP
   EXPECT_EQ(water->where.line, line_of(valid_scene(), "<material name=\"water\">"));
 

@@ -32,7 +32,10 @@ namespace fs = std::filesystem;
 
 constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
-enum class Quantity { plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass };
+enum class Quantity {
+  plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass, stress, stress_rate, rate,
+  consistency
+};
 
 struct Unit {
   std::string_view symbol;
@@ -57,6 +60,10 @@ QuantityInfo quantity_info(Quantity quantity) {
   static constexpr Unit kFraction[] = {{"1", 1}, {"%", 1e-2}};
   static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegree}};
   static constexpr Unit kMass[] = {{"kg", 1}, {"g", 1e-3}};
+  static constexpr Unit kStress[] = {{"Pa", 1}, {"kPa", 1e3}};
+  static constexpr Unit kStressRate[] = {{"Pa/s", 1}, {"Pa/min", 1.0 / 60}};
+  static constexpr Unit kRate[] = {{"1/s", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
+  static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
   switch (quantity) {
     case Quantity::mass: return {"mass", "kg", kMass};
     case Quantity::length: return {"length", "m", kLength};
@@ -67,6 +74,10 @@ QuantityInfo quantity_info(Quantity quantity) {
     case Quantity::dynamic_viscosity: return {"dynamic viscosity", "Pa*s", kDynamicViscosity};
     case Quantity::fraction: return {"fraction", "", kFraction};
     case Quantity::angle: return {"angle", "rad", kAngle};
+    case Quantity::stress: return {"stress", "Pa", kStress};
+    case Quantity::stress_rate: return {"stress rate", "Pa/s", kStressRate};
+    case Quantity::rate: return {"rate", "1/s", kRate};
+    case Quantity::consistency: return {"consistency", "Pa*s^n", kConsistency};
     case Quantity::plain_number: break;
   }
   return {"plain number", "", {}};
@@ -194,6 +205,8 @@ class SceneReader {
   SceneReader(const std::string& text, fs::path file) : text_(text), file_(std::move(file)), lines_(text) {}
 
   Scene read();
+  /// Reads a <materials> file of <material> definitions (the presets). Throws InputError listing every problem.
+  std::vector<MaterialEntry> read_material_library();
 
  private:
   // A <material> as defined, for the checks that need all of them.
@@ -264,6 +277,13 @@ class SceneReader {
   void read_plugin(const pugi::xml_node& plugin);
   void read_solver(const pugi::xml_node& solver);
   void read_material(const pugi::xml_node& material);
+  /// A material's values over `base` (a preset) or, without one, from scratch (then density and a
+  /// viscosity or rheology are required).
+  std::optional<material::Material> read_material_values(const pugi::xml_node& element, const material::Material* base);
+  std::optional<material::Rheology> read_rheology(const pugi::xml_node& element, const material::Rheology* base);
+  void read_ageing(const pugi::xml_node& element, material::Ageing& ageing);
+  /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
+  const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
   void read_print_head(const pugi::xml_node& head);
   std::optional<toolpath::Trajectory> read_path(const pugi::xml_node& path);
@@ -288,6 +308,7 @@ class SceneReader {
   std::optional<Aabb> bounds_;           // set when <bounds> was valid
   std::vector<DefinedMaterial> defined_materials_;
   std::vector<MaterialUse> material_uses_;
+  std::optional<std::vector<MaterialEntry>> material_presets_;
   std::vector<std::pair<std::string, int>> model_names_, fluid_block_names_, print_head_names_, robot_setting_names_;
 };
 
@@ -598,8 +619,11 @@ Scene SceneReader::read() {
   }
 
   if (!diagnostics_.empty()) {
-    std::stable_sort(diagnostics_.begin(), diagnostics_.end(),
-                     [](const Diagnostic& a, const Diagnostic& b) { return a.location.line < b.location.line; });
+    // The scene's own problems first, by line; then those of other files (presets) it uses.
+    std::stable_sort(diagnostics_.begin(), diagnostics_.end(), [&](const Diagnostic& a, const Diagnostic& b) {
+      const bool a_elsewhere = a.location.file != file_.string(), b_elsewhere = b.location.file != file_.string();
+      return a_elsewhere != b_elsewhere ? b_elsewhere : a.location.line < b.location.line;
+    });
     throw InputError(std::move(diagnostics_));
   }
   return std::move(scene_);
@@ -1114,14 +1138,25 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
 }
 
 void SceneReader::read_material(const pugi::xml_node& element) {
-  check_attributes(element, {"name"});
-  check_children(element, {"density", "viscosity", "boundary_viscosity"});
+  check_attributes(element, {"name", "preset"});
   const auto name = read_attribute(element, "name", Presence::required);
-  const auto density = read_scalar(element, "density", Quantity::density, Limits::positive(), Presence::required);
-  const auto viscosity = read_scalar(element, "viscosity", Quantity::dynamic_viscosity, Limits::non_negative(),
-                                     Presence::required);
-  const auto boundary_viscosity = read_scalar(element, "boundary_viscosity", Quantity::dynamic_viscosity,
-                                              Limits::non_negative(), Presence::optional);
+  const auto preset_name = read_attribute(element, "preset", Presence::optional);
+  const MaterialEntry* preset = nullptr;
+  if (preset_name) {
+    const auto& presets = material_presets();
+    const auto found = std::find_if(presets.begin(), presets.end(),
+                                    [&](const MaterialEntry& entry) { return entry.material.name == *preset_name; });
+    if (found == presets.end()) {
+      std::string known;
+      for (const auto& entry : presets) known += (known.empty() ? "" : ", ") + entry.material.name;
+      report(element, fmt::format("unknown material preset '{}'; the presets ({}) are: {}", *preset_name,
+                                  material_presets_file().string(), known.empty() ? "none" : known));
+      if (name) defined_materials_.push_back(DefinedMaterial{*name, std::nullopt, where(element)});
+      return;
+    }
+    preset = &*found;
+  }
+  auto material = read_material_values(element, preset ? &preset->material : nullptr);
   if (!name) return;
 
   const auto earlier = std::find_if(defined_materials_.begin(), defined_materials_.end(),
@@ -1130,14 +1165,186 @@ void SceneReader::read_material(const pugi::xml_node& element) {
     report(element, fmt::format("material '{}' is defined twice; the first is at line {}", *name, earlier->where.line));
     return;
   }
-  defined_materials_.push_back(DefinedMaterial{*name, density, where(element)});
+  defined_materials_.push_back(
+      DefinedMaterial{*name, material ? std::optional<double>(material->density) : std::nullopt, where(element)});
+  if (!material) return;
+  material->name = *name;
+  if (preset) material->preset = preset->material.name;
+  scene_.materials.push_back(MaterialEntry{std::move(*material), where(element)});
+}
 
-  material::NewtonianMaterial material;
-  material.name = *name;
-  if (density) material.density = Real(*density);
-  if (viscosity) material.dynamic_viscosity = Real(*viscosity);
-  material.boundary_viscosity = Real(boundary_viscosity.value_or(0));
-  scene_.materials.push_back(MaterialEntry{std::move(material), where(element)});
+std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
+                                                                   const material::Material* base) {
+  check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "source"});
+  const Presence required = base ? Presence::optional : Presence::required;
+  material::Material material = base ? *base : material::Material{};
+  bool valid = true;
+  if (const auto density = read_scalar(element, "density", Quantity::density, Limits::positive(), required)) {
+    material.density = Real(*density);
+  } else if (!base) {
+    valid = false;
+  }
+  const pugi::xml_node viscosity = element.child("viscosity");
+  const pugi::xml_node rheology = element.child("rheology");
+  if (viscosity && rheology) {
+    report(viscosity, fmt::format("{} has both <viscosity> (a Newtonian fluid) and <rheology> (line {}); give one",
+                                  describe(element), where(rheology).line));
+    valid = false;
+  } else if (viscosity) {
+    if (const auto value = read_scalar(element, "viscosity", Quantity::dynamic_viscosity, Limits::non_negative(),
+                                       Presence::required)) {
+      material.rheology = material::Rheology{};
+      material.rheology.viscosity = Real(*value);
+    } else {
+      valid = false;
+    }
+  } else if (rheology) {
+    if (auto read = read_rheology(rheology, base ? &base->rheology : nullptr)) material.rheology = *read;
+    else valid = false;
+  } else if (!base) {
+    report(element, fmt::format("missing <viscosity> (Pa*s, a Newtonian fluid) or <rheology model=\"...\"> in {}",
+                                describe(element)));
+    valid = false;
+  }
+  if (const pugi::xml_node ageing = element.child("ageing")) read_ageing(ageing, material.ageing);
+  if (const auto value = read_scalar(element, "boundary_viscosity", Quantity::dynamic_viscosity, Limits::non_negative(),
+                                     Presence::optional)) {
+    material.boundary_viscosity = Real(*value);
+  }
+  if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
+  if (!valid) return std::nullopt;
+  return material;
+}
+
+std::optional<material::Rheology> SceneReader::read_rheology(const pugi::xml_node& element,
+                                                             const material::Rheology* base) {
+  using material::RheologyModel;
+  check_attributes(element, {"model"});
+  constexpr RheologyModel kModels[] = {RheologyModel::newtonian, RheologyModel::power_law, RheologyModel::cross,
+                                       RheologyModel::carreau,   RheologyModel::bingham,   RheologyModel::herschel_bulkley};
+  // The model: as written, or the preset's when the scene only changes some of its values.
+  std::optional<RheologyModel> model;
+  if (const auto written = read_attribute(element, "model", base ? Presence::optional : Presence::required)) {
+    for (const RheologyModel candidate : kModels)
+      if (material::to_string(candidate) == *written) model = candidate;
+    if (!model) {
+      report(element, fmt::format("unknown rheology model '{}'; expected one of: newtonian, power_law, cross, carreau, "
+                                  "bingham, herschel_bulkley",
+                                  *written));
+      return std::nullopt;
+    }
+  } else if (base) {
+    model = base->model;
+  } else {
+    return std::nullopt;
+  }
+  // Over the preset's values when the model is the same; a different model starts from scratch.
+  const bool over_base = base && base->model == *model;
+  material::Rheology rheology = over_base ? *base : material::Rheology{};
+  rheology.model = *model;
+  const Presence required = over_base ? Presence::optional : Presence::required;
+  const Limits positive = Limits::positive();
+  const Limits non_negative = Limits::non_negative();
+  bool valid = true;
+  auto read = [&](const char* name, Quantity quantity, const Limits& limits, Presence presence, Real& field) {
+    if (const auto value = read_scalar(element, name, quantity, limits, presence)) {
+      field = Real(*value);
+    } else if (presence == Presence::required || element.child(name)) {
+      valid = false;
+    }
+  };
+  switch (*model) {
+    case RheologyModel::newtonian:
+      check_children(element, {"viscosity"});
+      read("viscosity", Quantity::dynamic_viscosity, non_negative, required, rheology.viscosity);
+      break;
+    case RheologyModel::power_law:
+      check_children(element, {"consistency", "flow_index", "max_viscosity"});
+      read("consistency", Quantity::consistency, positive, required, rheology.consistency);
+      read("flow_index", Quantity::plain_number, Limits::positive_up_to(2), required, rheology.flow_index);
+      break;
+    case RheologyModel::cross:
+    case RheologyModel::carreau:
+      check_children(element, {"zero_shear_viscosity", "infinite_shear_viscosity", "time_constant", "flow_index", "max_viscosity"});
+      read("zero_shear_viscosity", Quantity::dynamic_viscosity, positive, required, rheology.viscosity);
+      read("infinite_shear_viscosity", Quantity::dynamic_viscosity, non_negative, Presence::optional,
+           rheology.infinite_shear_viscosity);
+      read("time_constant", Quantity::time, positive, required, rheology.time_constant);
+      read("flow_index", Quantity::plain_number, Limits::positive_up_to(2), required, rheology.flow_index);
+      if (valid && rheology.infinite_shear_viscosity > rheology.viscosity) {
+        report(element.child("infinite_shear_viscosity"),
+               fmt::format("<infinite_shear_viscosity> ({} Pa*s) must not exceed <zero_shear_viscosity> ({} Pa*s)",
+                           rheology.infinite_shear_viscosity, rheology.viscosity));
+        valid = false;
+      }
+      break;
+    case RheologyModel::bingham:
+      check_children(element, {"yield_stress", "plastic_viscosity", "regularization", "max_viscosity"});
+      read("yield_stress", Quantity::stress, non_negative, required, rheology.yield_stress);
+      read("plastic_viscosity", Quantity::dynamic_viscosity, positive, required, rheology.viscosity);
+      break;
+    case RheologyModel::herschel_bulkley:
+      check_children(element, {"yield_stress", "consistency", "flow_index", "regularization", "max_viscosity"});
+      read("yield_stress", Quantity::stress, non_negative, required, rheology.yield_stress);
+      read("consistency", Quantity::consistency, positive, required, rheology.consistency);
+      read("flow_index", Quantity::plain_number, Limits::positive_up_to(2), required, rheology.flow_index);
+      break;
+  }
+  if (material::has_yield_stress(*model))
+    read("regularization", Quantity::time, positive, Presence::optional, rheology.regularization);
+  if (*model != RheologyModel::newtonian)
+    read("max_viscosity", Quantity::dynamic_viscosity, positive, Presence::optional, rheology.max_viscosity);
+  if (!valid) return std::nullopt;
+  return rheology;
+}
+
+void SceneReader::read_ageing(const pugi::xml_node& element, material::Ageing& ageing) {
+  check_attributes(element, {});
+  check_children(element, {"structuration_rate", "viscosity_growth"});
+  if (const auto rate = read_scalar(element, "structuration_rate", Quantity::stress_rate, Limits::non_negative(),
+                                    Presence::optional))
+    ageing.structuration_rate = Real(*rate);
+  if (const auto growth = read_scalar(element, "viscosity_growth", Quantity::rate, Limits::non_negative(), Presence::optional))
+    ageing.viscosity_growth = Real(*growth);
+}
+
+const std::vector<MaterialEntry>& SceneReader::material_presets() {
+  if (!material_presets_) {
+    const fs::path file = material_presets_file();
+    try {
+      material_presets_ = SceneReader(read_text_file(file, "material presets"), file).read_material_library();
+    } catch (const InputError& error) {
+      for (const auto& diagnostic : error.diagnostics()) diagnostics_.push_back(diagnostic);
+      material_presets_.emplace();
+    }
+  }
+  return *material_presets_;
+}
+
+std::vector<MaterialEntry> SceneReader::read_material_library() {
+  pugi::xml_document document;
+  const pugi::xml_parse_result parsed =
+      document.load_buffer(text_.data(), text_.size(), pugi::parse_default, pugi::encoding_utf8);
+  if (!parsed) {
+    throw InputError(SourceLocation{file_.string(), lines_.line_at(parsed.offset)},
+                     fmt::format("the file is not well-formed XML: {}", parsed.description()));
+  }
+  const pugi::xml_node root = document.document_element();
+  if (std::string_view(root.name()) != "materials") {
+    throw InputError(where(root), fmt::format("expected the root element <materials>, got <{}>", root.name()));
+  }
+  check_children(root, {"material"}, {"material"});
+  std::vector<MaterialEntry> entries;
+  for (const auto& element : child_elements(root, "material")) {
+    check_attributes(element, {"name"});
+    const auto name = read_attribute(element, "name", Presence::required);
+    auto material = read_material_values(element, nullptr);
+    if (!name || !material) continue;
+    material->name = *name;
+    entries.push_back(MaterialEntry{std::move(*material), where(element)});
+  }
+  if (!diagnostics_.empty()) throw InputError(std::move(diagnostics_));
+  return entries;
 }
 
 void SceneReader::read_fluid_block(const pugi::xml_node& element) {
@@ -1519,6 +1726,16 @@ const MaterialEntry* Scene::find_material(const std::string& name) const {
   const auto entry = std::find_if(materials.begin(), materials.end(),
                                   [&](const MaterialEntry& candidate) { return candidate.material.name == name; });
   return entry == materials.end() ? nullptr : &*entry;
+}
+
+std::filesystem::path material_presets_file() {
+  if (const char* variable = std::getenv("M3DP_MATERIALS"); variable && *variable) return variable;
+  return fs::path(M3DP_PROJECT_DATA) / "materials.xml";
+}
+
+std::vector<MaterialEntry> load_material_presets() {
+  const fs::path file = material_presets_file();
+  return SceneReader(read_text_file(file, "material presets"), file).read_material_library();
 }
 
 Scene load_scene(const std::filesystem::path& file) {

@@ -8,7 +8,7 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/geometry.hpp"
-#include "m3dp/material/newtonian.hpp"
+#include "m3dp/material/material.hpp"
 #include "m3dp/sph/solver.hpp"
 #include "m3dp/surface/surface.hpp"
 #include "m3dp/toolpath/parametric.hpp"
@@ -73,7 +73,7 @@ struct NozzleMount {
 };
 
 struct MaterialEntry {
-  material::NewtonianMaterial material;
+  material::Material material;
   SourceLocation where;
 };
 
@@ -141,6 +141,10 @@ std::vector<std::filesystem::path> model_search_path(const std::filesystem::path
 
 /// Loads and validates a scene. Throws InputError listing every problem found, each with file:line.
 Scene load_scene(const std::filesystem::path& file);
+/// The material presets file: $M3DP_MATERIALS if set, else the project's data/materials.xml.
+std::filesystem::path material_presets_file();
+/// Every preset of that file, with its line (InputError naming the file and line if it is wrong).
+std::vector<MaterialEntry> load_material_presets();
 /// Same, from text in memory; `file_name` is used in messages and to resolve relative mesh paths.
 Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name);
 

@@ -16,7 +16,7 @@ scene::CollisionShape box_between(const std::string& name, const Vec3& min, cons
 
 scene::MaterialEntry water(Real viscosity) {
   scene::MaterialEntry entry;
-  entry.material = material::NewtonianMaterial{"water", 1000, viscosity, 0};
+  entry.material = material::newtonian("water", 1000, viscosity);
   entry.where = SourceLocation{"<built in code>", 0};
   return entry;
 }

@@ -12,11 +12,7 @@ namespace m3dp::sim {
 sph::Parameters make_solver_parameters(const scene::Scene& scene) {
   sph::Parameters parameters;
   parameters.settings = scene.solver;
-  for (const auto& entry : scene.materials) {
-    const auto& material = entry.material;
-    parameters.phases.push_back(sph::FluidPhase{material.name, material.density, material.kinematic_viscosity(),
-                                                material.boundary_kinematic_viscosity()});
-  }
+  for (const auto& entry : scene.materials) parameters.phases.push_back(entry.material);
   auto phase_of = [&](const std::string& name) {
     for (std::size_t i = 0; i < scene.materials.size(); ++i)
       if (scene.materials[i].material.name == name) return static_cast<std::uint16_t>(i);

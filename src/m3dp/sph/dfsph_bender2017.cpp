@@ -71,7 +71,7 @@ SolverView view_of(State& state) {
                     state.boundary_neighbors.stride};
 }
 
-Real rest_density_of(const Parameters& parameters) { return parameters.phases.front().rest_density; }
+Real rest_density_of(const Parameters& parameters) { return parameters.phases.front().density; }
 
 template <class Body>
 void for_each_particle_range(std::size_t count, Body&& body) {

@@ -24,6 +24,8 @@ struct FluidParticles {
   std::vector<std::uint16_t> neighbor_count;  // (n) fluid neighbours + boundary ones weighted as fluid, this step
   std::vector<std::uint64_t> id;         // (n) stable id for tracking across reorders
   std::vector<Real> birth_time;          // (n) s, simulated time the particle appeared
+  std::vector<Real> viscosity;           // (n) Pa·s, effective dynamic viscosity of this step (rheology, age)
+  std::vector<Real> shear_rate;          // (n) 1/s, √(2 D:D) of this step (non-Newtonian phases only)
 
   [[nodiscard]] std::size_t size() const { return position.size(); }
 
@@ -42,6 +44,8 @@ struct FluidParticles {
     visit(neighbor_count);
     visit(id);
     visit(birth_time);
+    visit(viscosity);
+    visit(shear_rate);
   }
   void reserve(std::size_t capacity) {
     for_each_field([&](auto& field) { field.reserve(capacity); });

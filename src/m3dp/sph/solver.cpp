@@ -88,11 +88,11 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   if (!(settings.particle_radius > 0)) throw Error("sph::Solver: particle_radius must be > 0");
   if (parameters_.phases.empty()) throw Error("sph::Solver: at least one fluid phase is needed");
   for (const auto& phase : parameters_.phases)
-    if (phase.rest_density != parameters_.phases.front().rest_density)
+    if (phase.density != parameters_.phases.front().density)
       throw Error(fmt::format("sph::Solver: phase '{}' has rest density {} kg/m³ but '{}' has {}; one scene uses one "
                               "rest density for now",
-                              phase.name, phase.rest_density, parameters_.phases.front().name,
-                              parameters_.phases.front().rest_density));
+                              phase.name, phase.density, parameters_.phases.front().name,
+                              parameters_.phases.front().density));
   for (const auto& nozzle : parameters_.nozzles) {
     if (nozzle.phase >= parameters_.phases.size()) throw Error("sph::Solver: nozzle '" + nozzle.name + "' has no phase");
     nozzle_geometry_.push_back(make_nozzle_geometry(nozzle, particle_diameter()));
@@ -109,7 +109,7 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
 
 Real Solver::particle_mass(std::uint16_t phase) const {
   const Real diameter = particle_diameter();
-  return parameters_.phases[phase].rest_density * diameter * diameter * diameter;
+  return parameters_.phases[phase].density * diameter * diameter * diameter;
 }
 
 Index Solver::add_body(const std::string& name, std::span<const Vec3> local_points, const Pose& pose, bool is_static) {
@@ -174,10 +174,12 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.velocity[i] = velocity;
     fluid.acceleration[i] = Vec3::Zero();
     fluid.mass[i] = particle_mass(phase);
-    fluid.density[i] = parameters_.phases[phase].rest_density;
+    fluid.density[i] = parameters_.phases[phase].density;
     fluid.phase[i] = phase;
     fluid.id[i] = state_.next_particle_id++;
     fluid.birth_time[i] = static_cast<Real>(state_.time);
+    fluid.viscosity[i] = parameters_.phases[phase].rheology.viscosity;
+    fluid.shear_rate[i] = 0;
     ++added;
   }
   return added;
@@ -196,6 +198,12 @@ void Solver::reserve(std::size_t capacity) {
   state_.fluid_neighbors.indices.reserve(capacity * state_.fluid_neighbors.stride);
   state_.boundary_neighbors.counts.reserve(capacity);
   state_.boundary_neighbors.indices.reserve(capacity * state_.boundary_neighbors.stride);
+  auto& system = state_.viscosity_system;
+  system.fluid_pair_coefficient.reserve(capacity * state_.fluid_neighbors.stride);
+  system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);
+  system.inverse_diagonal.reserve(capacity);
+  for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product})
+    vector->reserve(capacity);
 }
 
 void Solver::set_body_motion(Index body, const Pose& pose, const Vec3& linear_velocity, const Vec3& angular_velocity) {
@@ -255,8 +263,10 @@ const StepStats& Solver::step() {
   stats.stage_ms.divergence = elapsed_ms(start);
 
   start = Clock::now();
+  // Each particle's viscosity from its rheology and age, then gravity (and explicit viscosity).
+  const Real largest_kinematic_viscosity = stages::update_effective_viscosity(parameters_, state_);
   stages::compute_non_pressure_accelerations(parameters_, state_);
-  // CFL (Courant) condition on the velocity after the non-pressure forces, plus the explicit viscosity limit.
+  // CFL (Courant) condition on the velocity after the non-pressure forces.
   const Real previous_step = state_.time_step;
   const Real max_speed_squared = tbb::parallel_reduce(
       tbb::blocked_range<std::size_t>(0, count, 1024), Real(0),
@@ -270,12 +280,11 @@ const StepStats& Solver::step() {
   Real time_step = settings.max_time_step;
   if (max_speed_squared > Real(1e-18))
     time_step = std::min(time_step, settings.cfl_factor * Real(0.4) * diameter / std::sqrt(max_speed_squared));
-  Real max_viscosity = 0;
-  for (const auto& phase : parameters_.phases)
-    max_viscosity = std::max({max_viscosity, phase.kinematic_viscosity, phase.boundary_kinematic_viscosity});
-  // Morris et al. 1997's explicit-viscosity limit Δt ≤ 0.125 h²/ν, with the smoothing length h = half
-  // the support radius = one particle diameter for our kernels.
-  if (max_viscosity > 0) time_step = std::min(time_step, Real(0.125) * diameter * diameter / max_viscosity);
+  // Explicit viscosity: Morris et al. 1997's limit Δt ≤ 0.125 h²/ν, with the smoothing length h =
+  // half the support radius = one particle diameter for our kernels. The implicit solver has none.
+  const bool explicit_viscosity = settings.viscosity_solver == ViscositySolver::explicit_morris1997;
+  if (explicit_viscosity && largest_kinematic_viscosity > 0)
+    time_step = std::min(time_step, Real(0.125) * diameter * diameter / largest_kinematic_viscosity);
   // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
   // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
   // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
@@ -285,6 +294,11 @@ const StepStats& Solver::step() {
   state_.time_step = time_step;
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.velocity[i] += time_step * state_.fluid.acceleration[i]; }, 1024);
   stats.stage_ms.forces = elapsed_ms(start);
+
+  start = Clock::now();
+  if (!explicit_viscosity) stats.viscosity_iterations = stages::solve_implicit_viscosity(parameters_, state_, time_step);
+  stages::apply_xsph(parameters_, state_);
+  stats.stage_ms.viscosity = elapsed_ms(start);
 
   start = Clock::now();
   stats.density_iterations = stages::solve_density(parameters_, state_, time_step, stats.density_error);
@@ -467,7 +481,7 @@ void Solver::emit(StepStats& stats) {
         fluid.velocity[i] = exit_velocity;
         fluid.acceleration[i] = Vec3::Zero();
         fluid.mass[i] = mass;
-        fluid.density[i] = parameters_.phases[settings.phase].rest_density;
+        fluid.density[i] = parameters_.phases[settings.phase].density;
         fluid.dfsph_factor[i] = 0;
         fluid.density_advected[i] = 1;
         fluid.kappa_density[i] = 0;
@@ -476,6 +490,8 @@ void Solver::emit(StepStats& stats) {
         fluid.neighbor_count[i] = 0;
         fluid.id[i] = state_.next_particle_id++;
         fluid.birth_time[i] = static_cast<Real>(state_.time);
+        fluid.viscosity[i] = parameters_.phases[settings.phase].rheology.viscosity;
+        fluid.shear_rate[i] = 0;
         state_.mass_emitted_total += mass;
       }
       nozzle.pending_time -= geometry.layer_period;
@@ -605,7 +621,7 @@ void Solver::check_state() const {
 
 Real Solver::pressure(std::size_t i) const {
   const auto& fluid = state_.fluid;
-  const Real rest_density = parameters_.phases.front().rest_density;
+  const Real rest_density = parameters_.phases.front().density;
   // κ = ρ0 p / ρ² summed over both solvers' updates of the last step.
   return (fluid.kappa_density[i] + fluid.kappa_divergence[i]) * fluid.density[i] * fluid.density[i] / rest_density;
 }

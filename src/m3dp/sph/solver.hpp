@@ -12,18 +12,21 @@
 #include <vector>
 
 #include "m3dp/core/types.hpp"
+#include "m3dp/material/material.hpp"
 #include "m3dp/sph/kernels.hpp"
 #include "m3dp/sph/neighbor_search.hpp"
 #include "m3dp/sph/particles.hpp"
 
 namespace m3dp::sph {
 
-/// A fluid as the solver sees it. All phases of one scene share the rest density (for now).
-struct FluidPhase {
-  std::string name;
-  Real rest_density = 1000;                  // kg/m³
-  Real kinematic_viscosity = 1e-6;           // m²/s (= dynamic viscosity / density)
-  Real boundary_kinematic_viscosity = 0;     // m²/s, friction against walls and bodies; 0 = free slip
+/// A fluid as the solver sees it: a material (density, rheology, ageing, boundary viscosity).
+/// All phases of one scene share the rest density (for now).
+using FluidPhase = material::Material;
+
+/// How viscous forces are integrated.
+enum class ViscositySolver {
+  implicit_weiler2018,  // Weiler et al. 2018: stable at any viscosity and time step (conjugate gradients)
+  explicit_morris1997,  // Morris et al. 1997: cheaper for water, but Δt ≤ 0.125 d²ρ/μ
 };
 
 struct SolverSettings {
@@ -46,6 +49,10 @@ struct SolverSettings {
   Aabb bounds;                                // particles leaving it are removed (m)
   Real max_speed = 100;                       // m/s; faster means the state exploded
   int reorder_interval = 32;                  // steps between Z-order reorderings
+  ViscositySolver viscosity_solver = ViscositySolver::implicit_weiler2018;
+  Real viscosity_tolerance = Real(1e-3);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
+  int max_viscosity_iterations = 100;
+  Real xsph_factor = 0;                       // XSPH velocity smoothing ε (Monaghan 1989), 0 = none
 };
 
 /// A circular nozzle that emits whole disc layers of particles (Issue: volume flux π D²/4 · U).
@@ -76,9 +83,9 @@ struct NozzleState {
 /// Wall-clock time per stage of the last step (ms).
 struct StageTimes {
   double bodies = 0, remove = 0, emit = 0, reorder = 0, neighbors = 0, density = 0, divergence = 0, forces = 0,
-         pressure = 0, advect = 0;
+         viscosity = 0, pressure = 0, advect = 0;
   [[nodiscard]] double total() const {
-    return bodies + remove + emit + reorder + neighbors + density + divergence + forces + pressure + advect;
+    return bodies + remove + emit + reorder + neighbors + density + divergence + forces + viscosity + pressure + advect;
   }
 };
 
@@ -86,6 +93,7 @@ struct StepStats {
   double time_step = 0;                 // s
   int density_iterations = 0;
   int divergence_iterations = 0;
+  int viscosity_iterations = 0;         // conjugate-gradient iterations of the implicit viscosity solve
   Real density_error = 0;               // mean relative density error after the density solve
   Real max_density_error = 0;           // max over particles of (ρ/ρ0 − 1) at the start of the step
   std::size_t particles_emitted = 0;
@@ -141,6 +149,13 @@ struct State {
   std::vector<Real> scratch_real;
   std::vector<std::uint16_t> scratch_u16;
   std::vector<std::uint64_t> scratch_u64;
+  // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.
+  struct ViscositySystem {
+    std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)
+    std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
+    std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
+    std::vector<Vec3> rhs, residual, direction, preconditioned, product;  // (n) each
+  } viscosity_system;
 };
 
 /// Derived, immutable data of a nozzle: disc sample offsets and layer period.
@@ -215,8 +230,17 @@ Real compute_density_and_factor(const Parameters& parameters, State& state);
 int solve_divergence(const Parameters& parameters, State& state, Real time_step);
 /// Constant-density solver (Bender & Koschier 2017, Algorithm 3). Returns iterations; sets mean error.
 int solve_density(const Parameters& parameters, State& state, Real time_step, Real& mean_density_error);
-/// Gravity plus laminar viscosity (Morris et al. 1997 form, as in Monaghan 2005) into state.fluid.acceleration.
+/// Gravity, plus laminar viscosity (Morris et al. 1997 form, as in Monaghan 2005) when the viscosity
+/// solver is the explicit one, into state.fluid.acceleration.
 void compute_non_pressure_accelerations(const Parameters& parameters, State& state);
+/// Each particle's shear rate (1/s) and effective dynamic viscosity (Pa·s) from its phase's rheology
+/// and its age (viscosity_weiler2018.cpp). Returns the largest μ/ρ (m²/s).
+Real update_effective_viscosity(const Parameters& parameters, State& state);
+/// Implicit viscosity (Weiler et al. 2018) on state.fluid.velocity over `time_step`; adds the
+/// boundary friction to the body wrenches. Returns conjugate-gradient iterations.
+int solve_implicit_viscosity(const Parameters& parameters, State& state, Real time_step);
+/// XSPH (Monaghan 1989): v_i += ε Σ_j V_j (v_j − v_i) W_ij.
+void apply_xsph(const Parameters& parameters, State& state);
 /// Clears the per-thread wrench accumulators (sized to the bodies).
 void reset_body_wrenches(State& state);
 /// This thread's wrench accumulator, one entry per body (sized on a thread's first use only).

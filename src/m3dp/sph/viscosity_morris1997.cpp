@@ -1,24 +1,31 @@
 // Non-pressure accelerations: gravity and laminar viscosity.
 // Viscosity: J. P. Morris, P. J. Fox, Y. Zhu, "Modeling Low Reynolds Number Incompressible Flows
 // Using SPH", J. Comput. Phys. 136, 1997, in the form of Monaghan 2005 (eq. 6.19) used by SPlisHSPlasH:
-//   a_i += 2(d+2) ν Σ_j (m_j/ρ_j) (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij
-// ν is the kinematic viscosity (m²/s) = dynamic viscosity (Pa·s) / density. Explicit: the time
-// step is bounded by the viscous limit in Solver::step. Uses the pair gradients of the density pass. Implicit viscosity comes with the materials issue.
+//   a_i += 2(d+2)/ρ_i Σ_j μ_ij (m_j/ρ_j) (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij,  μ_ij = (μ_i + μ_j)/2
+// with each particle's dynamic viscosity μ (Pa·s, from the rheology). Explicit: the time step is
+// bounded by the viscous limit in Solver::step. Uses the pair gradients of the density pass.
+// The default is the implicit solver (viscosity_weiler2018.cpp); this one is the cheaper option for water.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include "m3dp/core/parallel.hpp"
 #include "m3dp/sph/solver.hpp"
 
 namespace m3dp::sph::stages {
 
 void compute_non_pressure_accelerations(const Parameters& parameters, State& state) {
+  const bool explicit_viscosity = parameters.settings.viscosity_solver == ViscositySolver::explicit_morris1997;
   const auto& settings = parameters.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const Real support_radius = settings.support_radius_factor * settings.particle_radius;
   const Real regularisation = Real(0.01) * support_radius * support_radius;
   constexpr Real kDimensionFactor = 2 * (3 + 2);
-  const Real rest_density = parameters.phases.front().rest_density;
+  const Real rest_density = parameters.phases.front().density;
+  if (!explicit_viscosity) {
+    parallel_for_each_index(fluid.size(), [&](std::size_t i) { fluid.acceleration[i] = settings.gravity; }, 1024);
+    return;
+  }
 
   // V_j ∇W_ij = pair_gradient · x_ij (filled with the densities this step), so
   // (m_j/ρ_j) ∇W_ij = (ρ0/ρ_j) · pair_gradient · x_ij.
@@ -31,25 +38,27 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
       const Vec3 position_i = fluid.position[i];
       const Vec3 velocity_i = fluid.velocity[i];
       Vec3 acceleration = settings.gravity;
-      if (phase.kinematic_viscosity > 0) {
+      const Real inverse_density_i = Real(1) / fluid.density[i];
+      {
         Vec3 viscous = Vec3::Zero();
+        const Real mu_i = fluid.viscosity[i];
         const std::size_t first = i * fluid_lists.stride;
         for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
           const Index j = fluid_lists.indices[first + k];
           const Vec3 r = position_i - fluid.position[j];
-          viscous += (rest_density / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
+          const Real mu_ij = Real(0.5) * (mu_i + fluid.viscosity[j]);
+          viscous += mu_ij * (rest_density / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
                      (velocity_i - fluid.velocity[j]).dot(r) / (r.squaredNorm() + regularisation) * r;
         }
-        acceleration += kDimensionFactor * phase.kinematic_viscosity * viscous;
+        acceleration += kDimensionFactor * inverse_density_i * viscous;
       }
-      if (phase.boundary_kinematic_viscosity > 0) {
+      if (phase.boundary_viscosity > 0) {
         const Real mass_i = fluid.mass[i];
         const std::size_t first = i * boundary_lists.stride;
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[first + k];
           const Vec3 r = position_i - boundary.position[b];
-          const Vec3 a = kDimensionFactor * phase.boundary_kinematic_viscosity *
-                         (rest_density / fluid.density[i]) * state.boundary_pair_gradient[first + k] *
+          const Vec3 a = kDimensionFactor * phase.boundary_viscosity * inverse_density_i * state.boundary_pair_gradient[first + k] *
                          (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * r;
           acceleration += a;
           const Vec3 force = -mass_i * a;

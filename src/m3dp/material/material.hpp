@@ -1,0 +1,31 @@
+#pragma once
+// A printable material as a user looks it up: density in kg/m³, viscosities in Pa·s (dynamic
+// viscosity, never kinematic: water at 20 °C is 998 kg/m³ and 1.0e-3 Pa·s), stresses in Pa.
+#include <string>
+
+#include "m3dp/core/types.hpp"
+#include "m3dp/material/ageing/roussel2006.hpp"
+#include "m3dp/material/rheology/generalized_newtonian.hpp"
+
+namespace m3dp::material {
+
+struct Material {
+  std::string name;
+  std::string preset;                  // the preset it starts from (data/materials.xml); empty = none
+  Real density = 1000;                 // kg/m³
+  Rheology rheology;                   // μ(γ̇); Newtonian 1e-3 Pa·s by default
+  Ageing ageing;                       // none by default
+  Real boundary_viscosity = 0;         // Pa·s, friction against walls, bodies and the nozzle (0 = free slip)
+};
+
+/// A Newtonian fluid of dynamic viscosity `viscosity` (Pa·s).
+inline Material newtonian(std::string name, Real density, Real viscosity, Real boundary_viscosity = 0) {
+  Material material;
+  material.name = std::move(name);
+  material.density = density;
+  material.rheology.viscosity = viscosity;
+  material.boundary_viscosity = boundary_viscosity;
+  return material;
+}
+
+}  // namespace m3dp::material

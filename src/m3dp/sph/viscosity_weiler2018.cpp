@@ -1,0 +1,265 @@
+// Implicit viscosity after M. Weiler, D. Koschier, M. Brand, J. Bender, "A Physically Consistent
+// Implicit Viscosity Solver for SPH Fluids", Computer Graphics Forum 37(2), 145–155, 2018.
+//
+// The viscous force on particle i is the Morris-type Laplacian in its momentum-conserving form,
+// with each particle's own dynamic viscosity μ (Pa·s, from the rheology):
+//   F_i = Σ_j 2(d+2) μ_ij V_i V_j (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij,   μ_ij = (μ_i + μ_j)/2,
+// plus the same sum over boundary particles with the phase's boundary viscosity and the wall's
+// velocity. Backward Euler, m_i v_i' = m_i v_i* + Δt F_i(v'), is the linear system A v' = b with
+//   (A v)_i = m_i v_i + Σ_j c_ij x_ij x_ijᵀ (v_i − v_j) + Σ_b c_ib x_ib x_ibᵀ v_i
+//   b_i     = m_i v_i* + Σ_b c_ib x_ib x_ibᵀ v_b,
+// c = −Δt · 2(d+2) μ V_i V_j (dW/dr)/r / (r² + 0.01h²) ≥ 0. A is symmetric positive definite (c_ij =
+// c_ji, and the sum is a dissipation), so it is solved matrix-free by conjugate gradients with a
+// 3×3 block-Jacobi preconditioner, starting from v*. Stable at any viscosity and time step.
+//
+// The shear rate for the rheology is γ̇ = √(2 D:D) with D = sym(∇v), ∇v_i = Σ_j V_j (v_j − v_i) ⊗ ∇W_ij.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_reduce.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <cmath>
+#include <functional>
+
+#include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/solver.hpp"
+
+namespace m3dp::sph::stages {
+
+namespace {
+
+constexpr Real kDimensionFactor = 2 * (3 + 2);  // 2(d+2), d = 3
+
+bool phase_needs_shear_rate(const FluidPhase& phase) {
+  return phase.rheology.model != material::RheologyModel::newtonian || phase.ageing.enabled();
+}
+
+/// Σ over particles of f(i) in double, in a fixed order (the same sum on every run).
+template <class Term>
+double deterministic_sum(std::size_t count, Term&& term) {
+  return tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 512), 0.0,
+      [&](const tbb::blocked_range<std::size_t>& range, double sum) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) sum += term(i);
+        return sum;
+      },
+      std::plus<double>());
+}
+
+}  // namespace
+
+Real update_effective_viscosity(const Parameters& parameters, State& state) {
+  auto& fluid = state.fluid;
+  const auto& boundary = state.boundary;
+  const std::size_t count = fluid.size();
+  const Real rest_density = parameters.phases.front().density;
+  const bool any_shear_rate = std::any_of(parameters.phases.begin(), parameters.phases.end(), phase_needs_shear_rate);
+  const auto& fluid_lists = state.fluid_neighbors;
+  const auto& boundary_lists = state.boundary_neighbors;
+  const Real time = static_cast<Real>(state.time);
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
+      [&](const tbb::blocked_range<std::size_t>& range, Real largest) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) {
+          const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+          if (!any_shear_rate || !phase_needs_shear_rate(phase)) {
+            fluid.viscosity[i] = phase.rheology.viscosity;
+            fluid.shear_rate[i] = 0;
+          } else {
+            // ∇v_i = Σ_j V_j (v_j − v_i) x_ijᵀ (dW/dr)/r, V_j f = (ρ0/ρ_j) × the pair gradient.
+            const Vec3 position_i = fluid.position[i];
+            const Vec3 velocity_i = fluid.velocity[i];
+            Mat3 gradient = Mat3::Zero();
+            const std::size_t fluid_first = i * fluid_lists.stride;
+            for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+              const Index j = fluid_lists.indices[fluid_first + k];
+              const Real weight = (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k];
+              gradient += (weight * (fluid.velocity[j] - velocity_i)) * (position_i - fluid.position[j]).transpose();
+            }
+            // Walls shear the material only where it sticks to them.
+            if (phase.boundary_viscosity > 0) {
+              const std::size_t boundary_first = i * boundary_lists.stride;
+              for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+                const Index b = boundary_lists.indices[boundary_first + k];
+                gradient += (state.boundary_pair_gradient[boundary_first + k] * (boundary.velocity[b] - velocity_i)) *
+                            (position_i - boundary.position[b]).transpose();
+              }
+            }
+            const Mat3 strain_rate = Real(0.5) * (gradient + gradient.transpose());
+            const Real shear_rate = std::sqrt(2 * strain_rate.squaredNorm());
+            const Real age = time - fluid.birth_time[i];
+            fluid.shear_rate[i] = shear_rate;
+            fluid.viscosity[i] = phase.rheology.effective_viscosity(
+                shear_rate, phase.ageing.yield_stress(phase.rheology.yield_stress, age), phase.ageing.viscosity_scale(age));
+          }
+          largest = std::max(largest, std::max(fluid.viscosity[i], phase.boundary_viscosity) / phase.density);
+        }
+        return largest;
+      },
+      [](Real a, Real b) { return std::max(a, b); });
+}
+
+int solve_implicit_viscosity(const Parameters& parameters, State& state, Real time_step) {
+  const auto& settings = parameters.settings;
+  auto& fluid = state.fluid;
+  const auto& boundary = state.boundary;
+  const std::size_t count = fluid.size();
+  if (count == 0) return 0;
+  const bool any_viscosity =
+      std::any_of(parameters.phases.begin(), parameters.phases.end(), [](const FluidPhase& phase) {
+        return phase.rheology.model != material::RheologyModel::newtonian || phase.rheology.viscosity > 0 ||
+               phase.boundary_viscosity > 0;
+      });
+  if (!any_viscosity) return 0;
+
+  const Real rest_density = parameters.phases.front().density;
+  const Real support_radius = settings.support_radius_factor * settings.particle_radius;
+  const Real regularisation = Real(0.01) * support_radius * support_radius;
+  const auto& fluid_lists = state.fluid_neighbors;
+  const auto& boundary_lists = state.boundary_neighbors;
+  auto& system = state.viscosity_system;
+  system.fluid_pair_coefficient.resize(fluid_lists.indices.size());
+  system.boundary_pair_coefficient.resize(boundary_lists.indices.size());
+  for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product})
+    vector->resize(count);
+  system.inverse_diagonal.resize(count);
+
+  // Coefficients, preconditioner and right-hand side (positions do not move during the solve).
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+    const Vec3 position_i = fluid.position[i];
+    const Real mass_i = fluid.mass[i];
+    const Real volume_i = mass_i / fluid.density[i];
+    const Real mu_i = fluid.viscosity[i];
+    Mat3 diagonal = mass_i * Mat3::Identity();
+    Vec3 rhs = mass_i * fluid.velocity[i];
+    const std::size_t fluid_first = i * fluid_lists.stride;
+    for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+      const Index j = fluid_lists.indices[fluid_first + k];
+      const Vec3 r = position_i - fluid.position[j];
+      const Real mu_ij = Real(0.5) * (mu_i + fluid.viscosity[j]);
+      // V_j (dW/dr)/r = (ρ0/ρ_j) × pair gradient (which holds (m_j/ρ0)(dW/dr)/r); negative.
+      const Real coefficient = -time_step * kDimensionFactor * mu_ij * volume_i *
+                               (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k] /
+                               (r.squaredNorm() + regularisation);
+      system.fluid_pair_coefficient[fluid_first + k] = coefficient;
+      diagonal += coefficient * r * r.transpose();
+    }
+    const std::size_t boundary_first = i * boundary_lists.stride;
+    for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+      Real coefficient = 0;
+      if (phase.boundary_viscosity > 0) {
+        const Index b = boundary_lists.indices[boundary_first + k];
+        const Vec3 r = position_i - boundary.position[b];
+        coefficient = -time_step * kDimensionFactor * phase.boundary_viscosity * volume_i *
+                      state.boundary_pair_gradient[boundary_first + k] / (r.squaredNorm() + regularisation);
+        diagonal += coefficient * r * r.transpose();
+        rhs += (coefficient * r.dot(boundary.velocity[b])) * r;
+      }
+      system.boundary_pair_coefficient[boundary_first + k] = coefficient;
+    }
+    system.inverse_diagonal[i] = diagonal.inverse();
+    system.rhs[i] = rhs;
+  }, 128);
+
+  // y = A x
+  auto multiply = [&](const std::vector<Vec3>& x, std::vector<Vec3>& y) {
+    parallel_for_each_index(count, [&](std::size_t i) {
+      const Vec3 position_i = fluid.position[i];
+      const Vec3 x_i = x[i];
+      Vec3 result = fluid.mass[i] * x_i;
+      const std::size_t fluid_first = i * fluid_lists.stride;
+      for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+        const Index j = fluid_lists.indices[fluid_first + k];
+        const Vec3 r = position_i - fluid.position[j];
+        result += (system.fluid_pair_coefficient[fluid_first + k] * r.dot(x_i - x[j])) * r;
+      }
+      const std::size_t boundary_first = i * boundary_lists.stride;
+      for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+        const Real coefficient = system.boundary_pair_coefficient[boundary_first + k];
+        if (coefficient == 0) continue;
+        const Vec3 r = position_i - boundary.position[boundary_lists.indices[boundary_first + k]];
+        result += (coefficient * r.dot(x_i)) * r;
+      }
+      y[i] = result;
+    }, 128);
+  };
+
+  // Preconditioned conjugate gradients on v (in fluid.velocity), from v*.
+  auto& velocity = fluid.velocity;
+  multiply(velocity, system.product);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    system.residual[i] = system.rhs[i] - system.product[i];
+    system.preconditioned[i] = system.inverse_diagonal[i] * system.residual[i];
+    system.direction[i] = system.preconditioned[i];
+  }, 1024);
+  const double rhs_norm = std::sqrt(deterministic_sum(count, [&](std::size_t i) { return double(system.rhs[i].squaredNorm()); }));
+  const double tolerance = settings.viscosity_tolerance * rhs_norm;
+  double residual_dot = deterministic_sum(count, [&](std::size_t i) { return double(system.residual[i].dot(system.preconditioned[i])); });
+  double residual_norm = std::sqrt(deterministic_sum(count, [&](std::size_t i) { return double(system.residual[i].squaredNorm()); }));
+  int iterations = 0;
+  while (residual_norm > tolerance && iterations < settings.max_viscosity_iterations) {
+    multiply(system.direction, system.product);
+    const double curvature = deterministic_sum(count, [&](std::size_t i) { return double(system.direction[i].dot(system.product[i])); });
+    if (!(curvature > 0)) break;
+    const Real step = static_cast<Real>(residual_dot / curvature);
+    parallel_for_each_index(count, [&](std::size_t i) {
+      velocity[i] += step * system.direction[i];
+      system.residual[i] -= step * system.product[i];
+      system.preconditioned[i] = system.inverse_diagonal[i] * system.residual[i];
+    }, 1024);
+    const double next_dot = deterministic_sum(count, [&](std::size_t i) { return double(system.residual[i].dot(system.preconditioned[i])); });
+    residual_norm = std::sqrt(deterministic_sum(count, [&](std::size_t i) { return double(system.residual[i].squaredNorm()); }));
+    const Real beta = static_cast<Real>(next_dot / residual_dot);
+    residual_dot = next_dot;
+    parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i] + beta * system.direction[i]; }, 1024);
+    ++iterations;
+  }
+
+  // Wall friction as a reaction on the bodies: the body feels −F_ib = (c_ib/Δt) x xᵀ (v_i − v_b).
+  const bool any_boundary_viscosity = std::any_of(parameters.phases.begin(), parameters.phases.end(),
+                                                  [](const FluidPhase& phase) { return phase.boundary_viscosity > 0; });
+  if (any_boundary_viscosity && !state.bodies.empty()) {
+    const Real inverse_time_step = Real(1) / time_step;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
+      std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+        const std::size_t boundary_first = i * boundary_lists.stride;
+        for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+          const Real coefficient = system.boundary_pair_coefficient[boundary_first + k];
+          if (coefficient == 0) continue;
+          const Index b = boundary_lists.indices[boundary_first + k];
+          const Vec3 r = fluid.position[i] - boundary.position[b];
+          const Vec3 force = (coefficient * inverse_time_step * r.dot(velocity[i] - boundary.velocity[b])) * r;
+          Wrench& wrench = wrenches[boundary.body[b]];
+          wrench.force += force;
+          wrench.torque += (boundary.position[b] - state.bodies[boundary.body[b]].pose.position).cross(force);
+        }
+      }
+    });
+  }
+  return iterations;
+}
+
+void apply_xsph(const Parameters& parameters, State& state) {
+  const Real factor = parameters.settings.xsph_factor;
+  if (factor <= 0) return;
+  auto& fluid = state.fluid;
+  const std::size_t count = fluid.size();
+  const Real support_radius = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
+  auto& smoothed = state.scratch_vec3;
+  smoothed.resize(count);
+  with_kernel(parameters.settings.kernel, support_radius, [&](const auto& kernel) {
+    parallel_for_each_index(count, [&](std::size_t i) {
+      Vec3 change = Vec3::Zero();
+      for (const Index j : state.fluid_neighbors.of(i))
+        change += (fluid.mass[j] / fluid.density[j] * kernel.W((fluid.position[i] - fluid.position[j]).norm())) *
+                  (fluid.velocity[j] - fluid.velocity[i]);
+      smoothed[i] = fluid.velocity[i] + factor * change;
+    }, 256);
+  });
+  fluid.velocity.swap(smoothed);
+}
+
+}  // namespace m3dp::sph::stages
