@@ -16,6 +16,13 @@ struct Material {
   Rheology rheology;                   // μ(γ̇); Newtonian 1e-3 Pa·s by default
   Ageing ageing;                       // none by default
   Real boundary_viscosity = 0;         // Pa·s, friction against walls, bodies and the nozzle (0 = free slip)
+  bool sticks_to_walls = false;        // no slip: walls see the material's own effective viscosity instead
+
+  [[nodiscard]] bool has_wall_friction() const { return sticks_to_walls || boundary_viscosity > 0; }
+  /// Viscosity (Pa·s) of the wall term for a particle of effective viscosity `particle_viscosity`.
+  [[nodiscard]] Real wall_viscosity(Real particle_viscosity) const {
+    return sticks_to_walls ? particle_viscosity : boundary_viscosity;
+  }
 };
 
 /// A Newtonian fluid of dynamic viscosity `viscosity` (Pa·s).

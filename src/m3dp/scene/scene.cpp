@@ -1207,9 +1207,16 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
     valid = false;
   }
   if (const pugi::xml_node ageing = element.child("ageing")) read_ageing(ageing, material.ageing);
-  if (const auto value = read_scalar(element, "boundary_viscosity", Quantity::dynamic_viscosity, Limits::non_negative(),
-                                     Presence::optional)) {
-    material.boundary_viscosity = Real(*value);
+  // A viscosity in Pa·s (Navier slip: the wall carries μ_b × slip rate), or no_slip: the material sticks.
+  if (const pugi::xml_node wall = element.child("boundary_viscosity")) {
+    if (trim(wall.child_value()) == "no_slip") {
+      leaf_text(wall, {});
+      material.sticks_to_walls = true;
+    } else if (const auto value = read_scalar(element, "boundary_viscosity", Quantity::dynamic_viscosity,
+                                              Limits::non_negative(), Presence::optional)) {
+      material.boundary_viscosity = Real(*value);
+      material.sticks_to_walls = false;
+    }
   }
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;

@@ -81,6 +81,63 @@ Real calibrated_boundary_volume_scale(KernelType type, Real support_radius, Real
   return static_cast<Real>((1.0 - fluid_share) / wall_share(type, support_radius, wall_spacing, fluid_spacing));
 }
 
+/// The Morris/Monaghan viscosity sum 2(d+2) Σ_j V_j (v_ij·x_ij)/(r² + 0.01h²) ∇W_ij is the Laplacian
+/// only where a kernel has many neighbours: on the rest lattice of a cubic spline with a support of
+/// two spacings (our default) it gives 0.70 ∇²v, so every viscosity would act 30 % too weak (the
+/// Poiseuille test sees exactly that). `fluid` scales the sum so that it is exact on the rest lattice
+/// for a shear flow u = (z², 0, 0). `boundary` scales the wall term so that a linear shear flow
+/// u = γ̇ z over a wall is in equilibrium, i.e. the no-slip plane is the geometric surface (a radius in
+/// front of the boundary layer), with the Akinci volumes the solver gives a flat wall. The velocity
+/// gradient (the rheology's shear rate) gets the same treatment: exact for linear shear inside the
+/// fluid and over a wall (with the wall's term alone, a first-layer particle sees 0.77 of its shear
+/// rate, and a yield-stress material at the wall behaves too stiff).
+ViscosityCalibration calibrated_viscosity(KernelType type, Real support_radius, Real fluid_spacing, Real wall_spacing,
+                                          Real boundary_volume_scale) {
+  return with_kernel(type, support_radius, [&](const auto& kernel) {
+    const double d = fluid_spacing, regularisation = 0.01 * double(support_radius) * support_radius, volume = d * d * d;
+    const int reach = static_cast<int>(std::ceil(support_radius / fluid_spacing)) + 1;
+    auto pair_term = [&](double distance_squared) {
+      return double(kernel.gradient_factor(Real(std::sqrt(distance_squared)))) / (distance_squared + regularisation);
+    };
+    // Laplacian of (z², 0, 0) at the origin: x-component of 2(d+2) Σ V (u_i − u_j)(x_i − x_j)² f / (r² + ε) = 2.
+    double laplacian = 0, fluid_shear = 0, gradient = 0, fluid_gradient_near_wall = 0;
+    for (int i = -reach; i <= reach; ++i)
+      for (int j = -reach; j <= reach; ++j)
+        for (int k = -reach; k <= reach; ++k) {
+          const double x = i * d, y = j * d, z = k * d, r2 = x * x + y * y + z * z;
+          if (r2 == 0 || r2 >= double(support_radius) * support_radius) continue;
+          laplacian += volume * (-z * z) * x * x * pair_term(r2);
+          // Linear shear over the wall: the fluid neighbours of a first-layer particle (k ≥ 0), u = z.
+          if (k >= 0) fluid_shear += volume * (-z) * x * x * pair_term(r2);
+          // Velocity gradient of u = (z, 0, 0): Σ V (u_j − u_i)(z_i − z_j) f = ∂u/∂z = 1; near the wall only k ≥ 0.
+          const double gradient_term = volume * z * (-z) * double(kernel.gradient_factor(Real(std::sqrt(r2))));
+          gradient += gradient_term;
+          if (k >= 0) fluid_gradient_near_wall += gradient_term;
+        }
+    laplacian *= 2 * (3 + 2);
+    const double fluid_scale = 2.0 / laplacian;
+    // The wall layer one spacing below that particle (no-slip plane half a spacing below it), at rest.
+    double in_plane = 0, wall_shear = 0, wall_gradient = 0;
+    const int wall_reach = static_cast<int>(std::ceil(support_radius / wall_spacing)) + 1;
+    for (int i = -wall_reach; i <= wall_reach; ++i)
+      for (int j = -wall_reach; j <= wall_reach; ++j) in_plane += kernel.W(Vec3(i * wall_spacing, j * wall_spacing, 0).norm());
+    const double wall_volume = boundary_volume_scale / in_plane;
+    for (int i = -wall_reach; i <= wall_reach; ++i)
+      for (int j = -wall_reach; j <= wall_reach; ++j) {
+        const double x = i * wall_spacing, y = j * wall_spacing, r2 = x * x + y * y + d * d;
+        if (r2 >= double(support_radius) * support_radius) continue;
+        wall_shear += wall_volume * (d / 2) * x * x * pair_term(r2);
+        wall_gradient += wall_volume * (-d / 2) * d * double(kernel.gradient_factor(Real(std::sqrt(r2))));
+      }
+    ViscosityCalibration calibration;
+    calibration.fluid = static_cast<Real>(fluid_scale);
+    calibration.boundary = static_cast<Real>(-fluid_scale * fluid_shear / wall_shear);
+    calibration.fluid_gradient = static_cast<Real>(1 / gradient);
+    calibration.boundary_gradient = static_cast<Real>((1 - fluid_gradient_near_wall / gradient) / (wall_gradient / gradient));
+    return calibration;
+  });
+}
+
 }  // namespace
 
 Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
@@ -102,6 +159,8 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   boundary_volume_scale_ = calibrated_boundary_volume_scale(settings.kernel, support_radius(), particle_diameter(), wall_spacing);
   // A centre on the geometric surface is a radius from the layer; the limit sits a tenth of a radius
   // in front of it, so that rounding never leaves a centre on the wrong side.
+  viscosity_calibration_ = calibrated_viscosity(settings.kernel, support_radius(), particle_diameter(), wall_spacing,
+                                                boundary_volume_scale_);
   boundary_share_at_surface_ =
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
   state_.time_step = settings.max_time_step;
@@ -264,8 +323,8 @@ const StepStats& Solver::step() {
 
   start = Clock::now();
   // Each particle's viscosity from its rheology and age, then gravity (and explicit viscosity).
-  const Real largest_kinematic_viscosity = stages::update_effective_viscosity(parameters_, state_);
-  stages::compute_non_pressure_accelerations(parameters_, state_);
+  const Real largest_kinematic_viscosity = stages::update_effective_viscosity(parameters_, state_, viscosity_calibration_);
+  stages::compute_non_pressure_accelerations(parameters_, state_, viscosity_calibration_);
   // CFL (Courant) condition on the velocity after the non-pressure forces.
   const Real previous_step = state_.time_step;
   const Real max_speed_squared = tbb::parallel_reduce(
@@ -283,8 +342,11 @@ const StepStats& Solver::step() {
   // Explicit viscosity: Morris et al. 1997's limit Δt ≤ 0.125 h²/ν, with the smoothing length h =
   // half the support radius = one particle diameter for our kernels. The implicit solver has none.
   const bool explicit_viscosity = settings.viscosity_solver == ViscositySolver::explicit_morris1997;
+  // The calibration strengthens the sums (most at walls), so the limit tightens by the same factor.
   if (explicit_viscosity && largest_kinematic_viscosity > 0)
-    time_step = std::min(time_step, Real(0.125) * diameter * diameter / largest_kinematic_viscosity);
+    time_step = std::min(time_step, Real(0.125) * diameter * diameter /
+                                        (largest_kinematic_viscosity *
+                                         std::max(viscosity_calibration_.fluid, viscosity_calibration_.boundary)));
   // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
   // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
   // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
@@ -296,7 +358,7 @@ const StepStats& Solver::step() {
   stats.stage_ms.forces = elapsed_ms(start);
 
   start = Clock::now();
-  if (!explicit_viscosity) stats.viscosity_iterations = stages::solve_implicit_viscosity(parameters_, state_, time_step);
+  if (!explicit_viscosity) stats.viscosity_iterations = stages::solve_implicit_viscosity(parameters_, state_, time_step, viscosity_calibration_);
   stages::apply_xsph(parameters_, state_);
   stats.stage_ms.viscosity = elapsed_ms(start);
 

@@ -1,7 +1,7 @@
 // Non-pressure accelerations: gravity and laminar viscosity.
 // Viscosity: J. P. Morris, P. J. Fox, Y. Zhu, "Modeling Low Reynolds Number Incompressible Flows
 // Using SPH", J. Comput. Phys. 136, 1997, in the form of Monaghan 2005 (eq. 6.19) used by SPlisHSPlasH:
-//   a_i += 2(d+2)/ρ_i Σ_j μ_ij (m_j/ρ_j) (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij,  μ_ij = (μ_i + μ_j)/2
+//   a_i += 2(d+2)/ρ_i Σ_j μ_ij (m_j/ρ_j) (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij,  μ_ij their harmonic mean
 // with each particle's dynamic viscosity μ (Pa·s, from the rheology). Explicit: the time step is
 // bounded by the viscous limit in Solver::step. Uses the pair gradients of the density pass.
 // The default is the implicit solver (viscosity_weiler2018.cpp); this one is the cheaper option for water.
@@ -13,7 +13,7 @@
 
 namespace m3dp::sph::stages {
 
-void compute_non_pressure_accelerations(const Parameters& parameters, State& state) {
+void compute_non_pressure_accelerations(const Parameters& parameters, State& state, const ViscosityCalibration& calibration) {
   const bool explicit_viscosity = parameters.settings.viscosity_solver == ViscositySolver::explicit_morris1997;
   const auto& settings = parameters.settings;
   auto& fluid = state.fluid;
@@ -46,19 +46,20 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
         for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
           const Index j = fluid_lists.indices[first + k];
           const Vec3 r = position_i - fluid.position[j];
-          const Real mu_ij = Real(0.5) * (mu_i + fluid.viscosity[j]);
+          const Real mu_ij = pair_viscosity(mu_i, fluid.viscosity[j]);
           viscous += mu_ij * (rest_density / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
                      (velocity_i - fluid.velocity[j]).dot(r) / (r.squaredNorm() + regularisation) * r;
         }
-        acceleration += kDimensionFactor * inverse_density_i * viscous;
+        acceleration += kDimensionFactor * calibration.fluid * inverse_density_i * viscous;
       }
-      if (phase.boundary_viscosity > 0) {
+      if (phase.has_wall_friction()) {
+        const Real wall_viscosity = phase.wall_viscosity(fluid.viscosity[i]);
         const Real mass_i = fluid.mass[i];
         const std::size_t first = i * boundary_lists.stride;
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[first + k];
           const Vec3 r = position_i - boundary.position[b];
-          const Vec3 a = kDimensionFactor * phase.boundary_viscosity * inverse_density_i * state.boundary_pair_gradient[first + k] *
+          const Vec3 a = kDimensionFactor * calibration.boundary * wall_viscosity * inverse_density_i * state.boundary_pair_gradient[first + k] *
                          (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * r;
           acceleration += a;
           const Vec3 force = -mass_i * a;

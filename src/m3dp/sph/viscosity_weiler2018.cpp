@@ -3,12 +3,13 @@
 //
 // The viscous force on particle i is the Morris-type Laplacian in its momentum-conserving form,
 // with each particle's own dynamic viscosity μ (Pa·s, from the rheology):
-//   F_i = Σ_j 2(d+2) μ_ij V_i V_j (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij,   μ_ij = (μ_i + μ_j)/2,
+//   F_i = Σ_j 2(d+2) μ_ij V_i V_j (v_ij·x_ij) / (|x_ij|² + 0.01 h²) ∇W_ij,   μ_ij = 2μ_iμ_j/(μ_i + μ_j),
 // plus the same sum over boundary particles with the phase's boundary viscosity and the wall's
 // velocity. Backward Euler, m_i v_i' = m_i v_i* + Δt F_i(v'), is the linear system A v' = b with
 //   (A v)_i = m_i v_i + Σ_j c_ij x_ij x_ijᵀ (v_i − v_j) + Σ_b c_ib x_ib x_ibᵀ v_i
 //   b_i     = m_i v_i* + Σ_b c_ib x_ib x_ibᵀ v_b,
-// c = −Δt · 2(d+2) μ V_i V_j (dW/dr)/r / (r² + 0.01h²) ≥ 0. A is symmetric positive definite (c_ij =
+// c = −Δt · 2(d+2) μ V_i V_j (dW/dr)/r / (r² + 0.01h²) ≥ 0, times the calibration that makes the sum
+// the Laplacian on the rest lattice (ViscosityCalibration: the sum alone is 30 % short at our kernel sizes). A is symmetric positive definite (c_ij =
 // c_ji, and the sum is a dissipation), so it is solved matrix-free by conjugate gradients with a
 // 3×3 block-Jacobi preconditioner, starting from v*. Stable at any viscosity and time step.
 //
@@ -49,7 +50,7 @@ double deterministic_sum(std::size_t count, Term&& term) {
 
 }  // namespace
 
-Real update_effective_viscosity(const Parameters& parameters, State& state) {
+Real update_effective_viscosity(const Parameters& parameters, State& state, const ViscosityCalibration& calibration) {
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const std::size_t count = fluid.size();
@@ -74,15 +75,17 @@ Real update_effective_viscosity(const Parameters& parameters, State& state) {
             const std::size_t fluid_first = i * fluid_lists.stride;
             for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
               const Index j = fluid_lists.indices[fluid_first + k];
-              const Real weight = (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k];
+              const Real weight =
+                  calibration.fluid_gradient * (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k];
               gradient += (weight * (fluid.velocity[j] - velocity_i)) * (position_i - fluid.position[j]).transpose();
             }
             // Walls shear the material only where it sticks to them.
-            if (phase.boundary_viscosity > 0) {
+            if (phase.has_wall_friction()) {
               const std::size_t boundary_first = i * boundary_lists.stride;
               for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
                 const Index b = boundary_lists.indices[boundary_first + k];
-                gradient += (state.boundary_pair_gradient[boundary_first + k] * (boundary.velocity[b] - velocity_i)) *
+                gradient += (calibration.boundary_gradient * state.boundary_pair_gradient[boundary_first + k] *
+                             (boundary.velocity[b] - velocity_i)) *
                             (position_i - boundary.position[b]).transpose();
               }
             }
@@ -93,14 +96,15 @@ Real update_effective_viscosity(const Parameters& parameters, State& state) {
             fluid.viscosity[i] = phase.rheology.effective_viscosity(
                 shear_rate, phase.ageing.yield_stress(phase.rheology.yield_stress, age), phase.ageing.viscosity_scale(age));
           }
-          largest = std::max(largest, std::max(fluid.viscosity[i], phase.boundary_viscosity) / phase.density);
+          largest = std::max(largest, std::max(fluid.viscosity[i], phase.wall_viscosity(fluid.viscosity[i])) / phase.density);
         }
         return largest;
       },
       [](Real a, Real b) { return std::max(a, b); });
 }
 
-int solve_implicit_viscosity(const Parameters& parameters, State& state, Real time_step) {
+int solve_implicit_viscosity(const Parameters& parameters, State& state, Real time_step,
+                             const ViscosityCalibration& calibration) {
   const auto& settings = parameters.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
@@ -109,7 +113,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   const bool any_viscosity =
       std::any_of(parameters.phases.begin(), parameters.phases.end(), [](const FluidPhase& phase) {
         return phase.rheology.model != material::RheologyModel::newtonian || phase.rheology.viscosity > 0 ||
-               phase.boundary_viscosity > 0;
+               phase.has_wall_friction();
       });
   if (!any_viscosity) return 0;
 
@@ -138,9 +142,9 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = fluid_lists.indices[fluid_first + k];
       const Vec3 r = position_i - fluid.position[j];
-      const Real mu_ij = Real(0.5) * (mu_i + fluid.viscosity[j]);
+      const Real mu_ij = pair_viscosity(mu_i, fluid.viscosity[j]);
       // V_j (dW/dr)/r = (ρ0/ρ_j) × pair gradient (which holds (m_j/ρ0)(dW/dr)/r); negative.
-      const Real coefficient = -time_step * kDimensionFactor * mu_ij * volume_i *
+      const Real coefficient = -time_step * kDimensionFactor * calibration.fluid * mu_ij * volume_i *
                                (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k] /
                                (r.squaredNorm() + regularisation);
       system.fluid_pair_coefficient[fluid_first + k] = coefficient;
@@ -149,10 +153,10 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const std::size_t boundary_first = i * boundary_lists.stride;
     for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
       Real coefficient = 0;
-      if (phase.boundary_viscosity > 0) {
+      if (phase.has_wall_friction()) {
         const Index b = boundary_lists.indices[boundary_first + k];
         const Vec3 r = position_i - boundary.position[b];
-        coefficient = -time_step * kDimensionFactor * phase.boundary_viscosity * volume_i *
+        coefficient = -time_step * kDimensionFactor * calibration.boundary * phase.wall_viscosity(mu_i) * volume_i *
                       state.boundary_pair_gradient[boundary_first + k] / (r.squaredNorm() + regularisation);
         diagonal += coefficient * r * r.transpose();
         rhs += (coefficient * r.dot(boundary.velocity[b])) * r;
@@ -219,7 +223,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 
   // Wall friction as a reaction on the bodies: the body feels −F_ib = (c_ib/Δt) x xᵀ (v_i − v_b).
   const bool any_boundary_viscosity = std::any_of(parameters.phases.begin(), parameters.phases.end(),
-                                                  [](const FluidPhase& phase) { return phase.boundary_viscosity > 0; });
+                                                  [](const FluidPhase& phase) { return phase.has_wall_friction(); });
   if (any_boundary_viscosity && !state.bodies.empty()) {
     const Real inverse_time_step = Real(1) / time_step;
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
