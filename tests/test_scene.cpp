@@ -534,3 +534,132 @@ TEST(Scene, MissingSceneFileIsNamed) {
     EXPECT_CONTAINS(error.what(), "cannot read the scene (expected an SDF world file, e.g. scenes/dam_break.sdf): no such file");
   }
 }
+
+namespace {
+/// The valid scene with its water replaced by `material` (which must be named "water").
+std::string with_material(const std::string& material) {
+  return replaced(valid_scene(), R"(<material name="water">
+        <density>1000</density>
+        <viscosity unit="mPa*s">1</viscosity>
+        <boundary_viscosity unit="cP">2</boundary_viscosity>
+      </material>)", material);
+}
+}  // namespace
+
+TEST(SceneMaterials, RheologyAndAgeingAreReadInSiUnits) {
+  const auto scene = load_scene_from_string(with_material(R"(<material name="water">
+        <density>1800</density>
+        <rheology model="herschel_bulkley">
+          <yield_stress unit="kPa">1.5</yield_stress>
+          <consistency>150</consistency>
+          <flow_index>0.35</flow_index>
+          <regularization unit="ms">500</regularization>
+          <max_viscosity>2e5</max_viscosity>
+        </rheology>
+        <ageing>
+          <structuration_rate unit="Pa/min">60</structuration_rate>
+          <viscosity_growth unit="1/min">0.6</viscosity_growth>
+        </ageing>
+        <boundary_viscosity>no_slip</boundary_viscosity>
+      </material>)"), "clay.sdf");
+  const auto& material = scene.find_material("water")->material;
+  EXPECT_EQ(material.rheology.model, m3dp::material::RheologyModel::herschel_bulkley);
+  EXPECT_FLOAT_EQ(material.rheology.yield_stress, 1500.0f);
+  EXPECT_FLOAT_EQ(material.rheology.consistency, 150.0f);
+  EXPECT_FLOAT_EQ(material.rheology.flow_index, 0.35f);
+  EXPECT_FLOAT_EQ(material.rheology.regularization, 0.5f);
+  EXPECT_FLOAT_EQ(material.rheology.max_viscosity, 2e5f);
+  EXPECT_FLOAT_EQ(material.ageing.structuration_rate, 1.0f);
+  EXPECT_FLOAT_EQ(material.ageing.viscosity_growth, 0.01f);
+  EXPECT_TRUE(material.sticks_to_walls);
+  // The model itself: Herschel–Bulkley stress τ0 (1 − e^(−mγ̇)) + K γ̇ⁿ (Papanastasiou, m = 0.5 s).
+  const Real rate = 10;
+  const Real stress = material.rheology.effective_viscosity(rate, 1500, 1) * rate;
+  EXPECT_NEAR(stress, 1500 * (1 - std::exp(-5.0)) + 150 * std::pow(10.0, 0.35), 1e-4 * stress);
+}
+
+TEST(SceneMaterials, PresetWithOverrides) {
+  const auto scene = load_scene_from_string(with_material(R"(<material name="water" preset="printable_mortar">
+        <rheology><yield_stress>800</yield_stress></rheology>
+        <ageing><structuration_rate>2</structuration_rate></ageing>
+      </material>)"), "mortar.sdf");
+  const auto& material = scene.find_material("water")->material;
+  EXPECT_EQ(material.preset, "printable_mortar");
+  EXPECT_FLOAT_EQ(material.density, 2100.0f);             // the preset's
+  EXPECT_EQ(material.rheology.model, m3dp::material::RheologyModel::bingham);
+  EXPECT_FLOAT_EQ(material.rheology.viscosity, 10.0f);    // the preset's plastic viscosity
+  EXPECT_FLOAT_EQ(material.rheology.yield_stress, 800.0f);  // overridden
+  EXPECT_FLOAT_EQ(material.ageing.structuration_rate, 2.0f);
+}
+
+TEST(SceneMaterials, EveryPresetLoadsWithItsSource) {
+  const auto presets = m3dp::scene::load_material_presets();
+  std::vector<std::string> names;
+  for (const auto& entry : presets) {
+    names.push_back(entry.material.name);
+    EXPECT_GT(entry.material.density, 900.0f) << entry.material.name;
+    EXPECT_GT(entry.material.rheology.rest_viscosity(), 0.0f) << entry.material.name;
+  }
+  for (const char* expected : {"water", "honey", "clay_paste", "printable_mortar", "printable_concrete", "silicone"})
+    EXPECT_NE(std::find(names.begin(), names.end(), expected), names.end()) << expected;
+  // Each has a <source>: the data file is for looking values up.
+  const std::string text = [] {
+    std::ifstream file(m3dp::scene::material_presets_file());
+    return std::string(std::istreambuf_iterator<char>(file), {});
+  }();
+  auto occurrences = [&](const std::string& needle) {
+    int count = 0;
+    for (auto at = text.find(needle); at != std::string::npos; at = text.find(needle, at + 1)) ++count;
+    return count;
+  };
+  EXPECT_EQ(occurrences("<source>"), occurrences("<material name="));
+}
+
+TEST(SceneMaterials, MistakesAreReportedAtTheirLines) {
+  const std::string unknown_preset = with_material(R"(<material name="water" preset="porridge"/>)");
+  expect_error_at(unknown_preset, "preset=\"porridge\"", "unknown material preset 'porridge'; the presets (");
+  EXPECT_CONTAINS(load_error(unknown_preset).what(), "water, honey, clay_paste, printable_mortar, printable_concrete, silicone");
+
+  const std::string wrong_child = with_material(R"(<material name="water"><density>2000</density>
+        <rheology model="bingham"><yield_stress>100</yield_stress><consistency>3</consistency></rheology></material>)");
+  expect_error_at(wrong_child, "<consistency>", "unknown element <consistency> in <rheology>; expected one of: "
+                                               "yield_stress, plastic_viscosity, regularization, max_viscosity");
+  expect_error_at(wrong_child, "<rheology model=\"bingham\">",
+                  "missing required <plastic_viscosity> in <rheology>");
+
+  const std::string no_model = with_material(R"(<material name="water"><density>2000</density>
+        <rheology><viscosity>3</viscosity></rheology></material>)");
+  expect_error_at(no_model, "<rheology>", "missing required attribute model=\"...\" on <rheology>");
+
+  const std::string unknown_model = with_material(R"(<material name="water"><density>2000</density>
+        <rheology model="maxwell"/></material>)");
+  expect_error_at(unknown_model, "<rheology model", "unknown rheology model 'maxwell'; expected one of: newtonian, "
+                                                    "power_law, cross, carreau, bingham, herschel_bulkley");
+
+  const std::string both = with_material(R"(<material name="water"><density>2000</density><viscosity>1</viscosity>
+        <rheology model="newtonian"><viscosity>3</viscosity></rheology></material>)");
+  expect_error_at(both, "<viscosity>1", "<material name=\"water\"> has both <viscosity> (a Newtonian fluid) and "
+                                        "<rheology> (line");
+
+  const std::string neither = with_material(R"(<material name="water"><density>2000</density></material>)");
+  expect_error_at(neither, "<material name=\"water\">", "missing <viscosity> (Pa*s, a Newtonian fluid) or <rheology");
+
+  const std::string bad_index = with_material(R"(<material name="water"><density>2000</density>
+        <rheology model="power_law"><consistency>3</consistency><flow_index>-1</flow_index></rheology></material>)");
+  expect_error_at(bad_index, "<flow_index>", "<flow_index> must be in (0, 2], got -1");
+
+  const std::string bad_rate = with_material(R"(<material name="water"><density>2000</density><viscosity>1</viscosity>
+        <ageing><structuration_rate unit="Pa*s">1</structuration_rate></ageing></material>)");
+  expect_error_at(bad_rate, "<structuration_rate", "unit 'Pa*s' on <structuration_rate> is not a stress rate unit");
+}
+
+TEST(SceneMaterials, AWrongPresetFileIsReportedAtItsOwnLine) {
+  const fs::path file = fs::temp_directory_path() / ("m3dp_presets_" + std::to_string(::getpid()) + ".xml");
+  std::ofstream(file) << "<?xml version=\"1.0\"?>\n<materials>\n  <material name=\"paste\">\n"
+                         "    <density>-5</density><viscosity>1</viscosity>\n  </material>\n</materials>\n";
+  ::setenv("M3DP_MATERIALS", file.c_str(), 1);
+  const InputError error = load_error(with_material(R"(<material name="water" preset="paste"/>)"));
+  ::unsetenv("M3DP_MATERIALS");
+  fs::remove(file);
+  EXPECT_CONTAINS(error.what(), file.string() + ":4: error: <density> must be > 0 kg/m^3, got -5");
+}
