@@ -220,3 +220,95 @@ TEST(Poiseuille, BinghamPlugAndProfileWithin10Percent) {
               measured_plug, plug_half_width, 100 * (measured_plug / plug_half_width - 1), n);
   EXPECT_NEAR(measured_plug / plug_half_width, 1.0, 0.10);
 }
+
+namespace {
+
+/// A cylinder of Bingham material (height H = diameter) released on a smooth floor; returns the
+/// slump s′ = (H − final height)/H. The final height is read on the axis (the top of the particles
+/// within D/4 of it, plus a radius) once the material has stopped.
+struct SlumpResult {
+  double slump = 0;
+  double seconds = 0;
+  double mean_iterations = 0;
+};
+
+SlumpResult run_slump(double dimensionless_yield_stress, int particles_high) {
+  const Real height = Real(0.1);
+  const Real d = height / Real(particles_high);
+  const double density = 1000, g = 9.81;
+  sph::Parameters parameters;
+  parameters.settings.particle_radius = d / 2;
+  parameters.settings.max_time_step = Real(2e-3);
+  parameters.settings.bounds.min = Vec3(-1, -1, -0.1f);
+  parameters.settings.bounds.max = Vec3(1, 1, 0.5f);
+  material::Material paste = material::newtonian("paste", Real(density), 0);
+  paste.rheology.model = material::RheologyModel::bingham;
+  paste.rheology.yield_stress = Real(dimensionless_yield_stress * density * g * height);
+  paste.rheology.viscosity = 20;          // Pa·s: damps the collapse; the final shape depends on τ0 only
+  paste.rheology.regularization = 1000;   // s (the default): unyielded viscosity τ0·m, creep ≈ 1/(τ′m) per second
+  parameters.phases.push_back(paste);
+  sph::Solver solver(parameters);
+  const BoxShape floor{Vec3(0.8f, 0.8f, 4 * d)};
+  solver.add_body("floor", sph::sample_box_surface(floor, d, -d / 2).points, Pose{Vec3(0, 0, -2 * d), Quat::Identity()}, true);
+  std::vector<Vec3> points;
+  const int across = particles_high;
+  for (int i = 0; i < across; ++i)
+    for (int j = 0; j < across; ++j)
+      for (int k = 0; k < particles_high; ++k) {
+        const Vec3 p((i + Real(0.5)) * d - height / 2, (j + Real(0.5)) * d - height / 2, (k + Real(0.5)) * d);
+        if (p.head<2>().norm() <= height / 2) points.push_back(p);
+      }
+  solver.add_particles(points, Vec3::Zero(), 0);
+  auto axis_height = [&] {
+    Real top = 0;
+    const auto& fluid = solver.fluid();
+    for (std::size_t i = 0; i < fluid.size(); ++i)
+      if (fluid.position[i].head<2>().norm() < height / 4) top = std::max(top, fluid.position[i].z());
+    return double(top + d / 2);
+  };
+  // Run until the material has stopped: the fastest particle below 1 % of √(gH) over 0.1 s.
+  const double speed_scale = std::sqrt(g * height);
+  double quiet_since = 0;
+  long iterations = 0;
+  while (solver.time() < 3.0) {
+    iterations += solver.step().viscosity_iterations;
+    Real fastest = 0;
+    for (const Vec3& v : solver.fluid().velocity) fastest = std::max(fastest, v.norm());
+    if (fastest > 0.01 * speed_scale) quiet_since = solver.time();
+    if (solver.time() - quiet_since > 0.1 && solver.time() > 0.2) break;
+  }
+  return SlumpResult{(height - axis_height()) / height, solver.time(), double(iterations) / double(solver.state().step)};
+}
+
+}  // namespace
+
+void expect_slump_like_the_formula(double tau) {
+  // Pashias et al. 1996: s′ = 1 − 2τ′(1 − ln 2τ′), τ′ = τy/(ρgH), for 2τ′ < 1. Its 2 is Tresca's
+  // criterion (a column yields where the vertical stress reaches 2τy). A 3D Bingham fluid yields by von
+  // Mises, at √3 τy under uniaxial load (as in Roussel & Coussot 2005's slump analysis and Roussel
+  // 2018's buildability bound ρgH/√3), so the same derivation gives s′ = 1 − √3τ′(1 − ln √3τ′). The
+  // test holds the model to that form; the Tresca form is printed beside it. The floor is smooth, as
+  // the derivation assumes (no friction at the base).
+  {
+    const SlumpResult result = run_slump(tau, 16);
+    const double von_mises = 1 - std::sqrt(3.0) * tau * (1 - std::log(std::sqrt(3.0) * tau));
+    const double tresca = 1 - 2 * tau * (1 - std::log(2 * tau));
+    std::printf("tau' = %.2f: slump s' = %.3f; formula, von Mises form %.3f: error %+.1f %% (tolerance 15 %%); Pashias' "
+                "Tresca form %.3f: %+.1f %%. Stopped at %.2f s, %.1f viscosity iterations per step\n",
+                tau, result.slump, von_mises, 100 * (result.slump / von_mises - 1), tresca, 100 * (result.slump / tresca - 1),
+                result.seconds, result.mean_iterations);
+    EXPECT_NEAR(result.slump / von_mises, 1.0, 0.15) << "tau' = " << tau;
+  }
+}
+
+// Three yield stresses, one test each so that ctest runs them side by side.
+TEST(Slump, PashiasCylinderWithin15PercentAtLowYieldStress) { expect_slump_like_the_formula(0.05); }
+TEST(Slump, PashiasCylinderWithin15PercentAtMediumYieldStress) { expect_slump_like_the_formula(0.1); }
+TEST(Slump, PashiasCylinderWithin15PercentAtHighYieldStress) { expect_slump_like_the_formula(0.2); }
+
+TEST(Slump, NoSlumpWhenTwiceTheYieldStressExceedsTheWeight) {
+  const SlumpResult result = run_slump(0.6, 16);
+  // 2τ′ ≥ 1 (and √3τ′ ≥ 1): the weight never reaches the yield stress.
+  std::printf("tau' = 0.60 (2 tau' >= 1): slump s' = %.4f (expected none: below 0.02)\n", result.slump);
+  EXPECT_LT(result.slump, 0.02);
+}

@@ -51,7 +51,7 @@ struct SolverSettings {
   int reorder_interval = 32;                  // steps between Z-order reorderings
   ViscositySolver viscosity_solver = ViscositySolver::implicit_weiler2018;
   Real viscosity_tolerance = Real(1e-3);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
-  int max_viscosity_iterations = 100;
+  int max_viscosity_iterations = 300;
   Real xsph_factor = 0;                       // XSPH velocity smoothing ε (Monaghan 1989), 0 = none
 };
 
