@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <vector>
@@ -311,4 +312,91 @@ TEST(Slump, NoSlumpWhenTwiceTheYieldStressExceedsTheWeight) {
   // 2τ′ ≥ 1 (and √3τ′ ≥ 1): the weight never reaches the yield stress.
   std::printf("tau' = 0.60 (2 tau' >= 1): slump s' = %.4f (expected none: below 0.02)\n", result.slump);
   EXPECT_LT(result.slump, 0.02);
+}
+
+namespace {
+
+struct StrandSection {
+  double area = 0;     // m², deposited volume per unit length in the steady middle third
+  double width = 0;    // m
+  double height = 0;   // m
+  double seconds = 0;  // wall-clock
+  std::uint64_t blocked_layers = 0;
+};
+
+/// A nozzle of diameter D at gap g over a floor extrudes at U while moving at V along x: the strand's
+/// section in the middle third of a 0.12 m line, once the nozzle has passed it.
+StrandSection print_strand(double speed_ratio) {
+  const Real diameter = Real(0.01), exit_speed = Real(0.1), gap = Real(0.01);
+  const Real nozzle_speed = Real(speed_ratio) * exit_speed;
+  const Real length = Real(0.12);
+  const Real d = Real(0.002);
+  sph::Parameters parameters;
+  parameters.settings.particle_radius = d / 2;
+  parameters.settings.max_time_step = Real(2e-3);
+  parameters.settings.bounds.min = Vec3(-0.1f, -0.1f, -0.05f);
+  parameters.settings.bounds.max = Vec3(0.25f, 0.1f, 0.1f);
+  // A paste that holds a 1 cm bead (τ0 ≥ ρgh/√3 ≈ 85 Pa) and sticks to the bed.
+  material::Material paste = material::newtonian("paste", 1500, 0);
+  paste.rheology.model = material::RheologyModel::bingham;
+  paste.rheology.yield_stress = 150;
+  paste.rheology.viscosity = 5;
+  paste.sticks_to_walls = true;
+  parameters.phases.push_back(paste);
+  parameters.nozzles.push_back(sph::NozzleSettings{"nozzle", diameter, exit_speed, 0});
+  sph::Solver solver(parameters);
+  solver.add_body("bed", sph::sample_box_surface(BoxShape{Vec3(0.34f, 0.16f, 4 * d)}, d, -d / 2).points,
+                  Pose{Vec3(0.07f, 0, -2 * d), Quat::Identity()}, true);
+  solver.reserve(20000);
+  const auto wall_start = std::chrono::steady_clock::now();
+  const double print_time = length / nozzle_speed;
+  while (solver.time() < print_time + 0.3) {
+    const double t = std::min(solver.time(), print_time);
+    Pose pose;
+    pose.position = Vec3(Real(t) * nozzle_speed, 0, gap);
+    solver.set_nozzle(0, pose, Vec3(nozzle_speed, 0, 0), solver.time() < print_time);
+    solver.step();
+  }
+  StrandSection section;
+  section.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  section.blocked_layers = solver.state().nozzles[0].blocked_layers;
+  const Real low = length / 3, high = 2 * length / 3;
+  Real y_min = 1, y_max = -1, top = 0;
+  std::size_t count = 0;
+  for (const Vec3& p : solver.fluid().position) {
+    if (p.x() < low || p.x() > high) continue;
+    ++count;
+    y_min = std::min(y_min, p.y());
+    y_max = std::max(y_max, p.y());
+    top = std::max(top, p.z());
+  }
+  section.area = double(count) * d * d * d / double(high - low);
+  section.width = count > 0 ? double(y_max - y_min + d) : 0.0;
+  section.height = double(top + d / 2);
+  return section;
+}
+
+}  // namespace
+
+TEST(Strand, AreaIsFlowOverSpeedAndShapeFlattensAsTheNozzleSlows) {
+  // A = (π D²/4) · U/V in the steady part, whatever the material (mass conservation); the section goes
+  // from near-round (fast nozzle) to a flat, wide bead (slow nozzle): Comminal et al. 2018.
+  const double nozzle_area = kPi * 0.01 * 0.01 / 4;
+  std::vector<StrandSection> sections;
+  for (const double ratio : {2.0, 1.0, 0.5}) {
+    const StrandSection section = print_strand(ratio);
+    const double expected = nozzle_area / ratio;
+    const double error = section.area / expected - 1;
+    std::printf("V/U = %.1f: area %.3g m^2, (pi D^2/4) U/V = %.3g m^2: error %+.1f %% (tolerance 5 %%); width %.1f mm, "
+                "height %.1f mm (gap 10 mm), width/height %.2f; %.1f s, %llu steps with a blocked layer\n",
+                ratio, section.area, expected, 100 * error, 1e3 * section.width, 1e3 * section.height,
+                section.width / section.height, section.seconds, static_cast<unsigned long long>(section.blocked_layers));
+    EXPECT_LT(std::abs(error), 0.05) << "V/U = " << ratio;
+    sections.push_back(section);
+  }
+  for (std::size_t k = 1; k < sections.size(); ++k) {
+    EXPECT_GT(sections[k].width, sections[k - 1].width) << "the bead widens as the nozzle slows";
+    EXPECT_GT(sections[k].width / sections[k].height, sections[k - 1].width / sections[k - 1].height)
+        << "and flattens";
+  }
 }

@@ -372,6 +372,7 @@ const StepStats& Solver::step() {
   stats.stage_ms.viscosity = elapsed_ms(start);
 
   start = Clock::now();
+  push_out_of_nozzles();
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.position[i] += time_step * state_.fluid.velocity[i]; }, 1024);
   keep_out_of_boundaries();
   stages::collect_body_wrenches(state_);
@@ -566,6 +567,30 @@ void Solver::emit(StepStats& stats) {
       nozzle.particles_emitted += geometry.disc_offsets.size();
       stats.particles_emitted += geometry.disc_offsets.size();
     }
+  }
+}
+
+void Solver::push_out_of_nozzles() {
+  // The extruder pushes: material in a nozzle's exit cross-section, up to one spacing in front of
+  // it, leaves at least at the exit speed (a velocity inlet). Where the bead below fills the gap
+  // (slow printing, small gaps) this squeezes it sideways; without it the new layers would find no
+  // room and the flow would be lost. Applied last, after the solvers, so that nothing softens it.
+  auto& fluid = state_.fluid;
+  const Real diameter = particle_diameter();
+  for (std::size_t n = 0; n < state_.nozzles.size(); ++n) {
+    const NozzleState& nozzle = state_.nozzles[n];
+    const NozzleSettings& settings = parameters_.nozzles[n];
+    if (!nozzle.extruding || nozzle.flow_scale <= 0) continue;
+    const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
+    const Real target_speed = settings.exit_speed * nozzle.flow_scale + nozzle.velocity.dot(axis);
+    const Real radius_squared = settings.inner_diameter * settings.inner_diameter / 4;
+    parallel_for_each_index(fluid.size(), [&](std::size_t i) {
+      const Vec3 offset = fluid.position[i] - nozzle.pose.position;
+      const Real axial = offset.dot(axis);
+      if (axial < 0 || axial > diameter || (offset - axial * axis).squaredNorm() > radius_squared) return;
+      const Real speed = fluid.velocity[i].dot(axis);
+      if (speed < target_speed) fluid.velocity[i] += (target_speed - speed) * axis;
+    }, 2048);
   }
 }
 

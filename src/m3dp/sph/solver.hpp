@@ -219,6 +219,7 @@ class Solver {
   void update_bodies();
   void remove_out_of_bounds(StepStats& stats);
   void emit(StepStats& stats);
+  void push_out_of_nozzles();
   void reorder();
   void search_neighbors();
   void keep_out_of_boundaries();
