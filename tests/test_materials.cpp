@@ -167,7 +167,7 @@ TEST(Poiseuille, BinghamPlugAndProfileWithin10Percent) {
   channel.material.rheology.yield_stress = Real(yield_stress);
   channel.material.rheology.viscosity = Real(plastic_viscosity);
   channel.material.rheology.regularization = Real(2e4);  // s: unyielded viscosity τ0·m = 1000 μp
-  channel.viscosity_tolerance = Real(1e-3);  // the default
+  channel.viscosity_tolerance = sph::SolverSettings{}.viscosity_tolerance;  // the default
   channel.material.sticks_to_walls = true;  // the Navier slip of a constant wall viscosity is not the reference's
   sph::Solver solver = channel.make();
   auto exact = [&](double z) {

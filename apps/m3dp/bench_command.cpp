@@ -20,11 +20,16 @@
 namespace m3dp::app {
 
 void add_bench_options(CLI::App& command, BenchOptions& options) {
-  command.add_option("scenario", options.scenario, "dam_break (the solver alone) or ur10_wall (robot printing, everything)")
-      ->check(CLI::IsMember({"dam_break", "ur10_wall"}))
+  command.add_option("scenario", options.scenario,
+                     "dam_break (the solver alone), ur10_wall (robot printing, everything) or clay_print (a "
+                     "Herschel-Bulkley clay at up to --max-viscosity, implicit viscosity)")
+      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print"}))
       ->capture_default_str();
   command.add_option("--scene", options.scene_file, "ur10_wall: scene file to run instead of the project's");
-  command.add_option("--particles", options.particles, "Fluid particles in the dam-break column")->capture_default_str();
+  command.add_option("--particles", options.particles, "Fluid particles in the dam-break column or the clay slab")
+      ->capture_default_str();
+  command.add_option("--max-viscosity", options.max_viscosity, "clay_print: cap of the clay's effective viscosity (Pa*s)")
+      ->capture_default_str();
   command.add_option("--steps", options.steps, "Timed steps")->capture_default_str();
   command.add_option("--warmup", options.warmup_steps, "Steps before timing starts")->capture_default_str();
   command.add_option("--tolerance", options.density_tolerance, "Mean density error tolerance (fraction)")->capture_default_str();
@@ -76,9 +81,67 @@ int bench_ur10_wall(const BenchOptions& options) {
 }
 }  // namespace
 
+/// Times `options.steps` steps after the warm-up and prints throughput, iterations and stage times.
+void time_steps(sim::Simulation& simulation, const BenchOptions& options) {
+  auto& solver = simulation.solver();
+  for (int i = 0; i < options.warmup_steps; ++i) simulation.step();
+  sph::StageTimes sum;
+  double particle_steps = 0, density_iterations = 0, divergence_iterations = 0, viscosity_iterations = 0, simulated = 0;
+  const auto start = std::chrono::steady_clock::now();
+  for (int i = 0; i < options.steps; ++i) {
+    const auto& stats = simulation.step();
+    const auto& ms = stats.stage_ms;
+    sum.bodies += ms.bodies; sum.remove += ms.remove; sum.emit += ms.emit; sum.reorder += ms.reorder;
+    sum.neighbors += ms.neighbors; sum.density += ms.density; sum.divergence += ms.divergence;
+    sum.forces += ms.forces; sum.pressure += ms.pressure; sum.viscosity += ms.viscosity; sum.advect += ms.advect;
+    particle_steps += static_cast<double>(solver.fluid().size());
+    density_iterations += stats.density_iterations;
+    divergence_iterations += stats.divergence_iterations;
+    viscosity_iterations += stats.viscosity_iterations;
+    simulated += stats.time_step;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double n = options.steps;
+  fmt::print("{} steps in {:.3f} s: {:.3g} particle-steps/s, {:.2f} ms/step, mean dt {:.3g} s, real-time factor {:.3g}\n",
+             options.steps, seconds, particle_steps / seconds, 1000 * seconds / n, simulated / n, simulated / seconds);
+  fmt::print("iterations per step: density {:.2f}, divergence {:.2f}, viscosity {:.2f}\n", density_iterations / n,
+             divergence_iterations / n, viscosity_iterations / n);
+  fmt::print("stage,ms_per_step\n");
+  const std::pair<const char*, double> stages[] = {
+      {"bodies", sum.bodies},   {"remove", sum.remove},   {"emit", sum.emit},         {"reorder", sum.reorder},
+      {"neighbors", sum.neighbors}, {"density", sum.density}, {"divergence", sum.divergence}, {"forces", sum.forces},
+      {"pressure", sum.pressure}, {"viscosity", sum.viscosity}, {"advect", sum.advect}};
+  for (const auto& [name, total] : stages) fmt::print("{},{:.3f}\n", name, total / n);
+}
+
+int bench_clay_print(const BenchOptions& options) {
+  sim::ClayPrintSetup setup;
+  setup.slab_particles = options.particles;
+  setup.max_viscosity = static_cast<Real>(options.max_viscosity);
+  sim::Simulation simulation(sim::clay_print_scene(setup));
+  const auto& solver = simulation.solver();
+  const auto& clay = solver.parameters().phases.front();
+  fmt::print("clay_print: {} clay particles (radius {:.3g} m) on a floor, a 10 mm nozzle printing on them; {} "
+             "(tau0 {} Pa, K {} Pa*s^n, n {}), viscosity capped at {:.3g} Pa*s, steps up to {:.3g} s, {} threads\n",
+             solver.fluid().size(), setup.particle_radius, clay.name, clay.rheology.yield_stress, clay.rheology.consistency,
+             clay.rheology.flow_index, clay.rheology.max_viscosity, setup.time_step, ThreadLimit::active_threads());
+  time_steps(simulation, options);
+  Real largest = 0;
+  double sum = 0;
+  for (const Real mu : solver.fluid().viscosity) {
+    largest = std::max(largest, mu);
+    sum += mu;
+  }
+  fmt::print("effective viscosity at the end: mean {:.3g} Pa*s, largest {:.3g} Pa*s (goal: >= 1e6 particle-steps/s at "
+             "1e4 Pa*s and >= 1 ms steps)\n",
+             sum / double(std::max<std::size_t>(1, solver.fluid().size())), largest);
+  return 0;
+}
+
 int bench_command(const BenchOptions& options) {
   ThreadLimit thread_limit(options.threads);
   if (options.scenario == "ur10_wall") return bench_ur10_wall(options);
+  if (options.scenario == "clay_print") return bench_clay_print(options);
   sim::DamBreakSetup setup;
   setup.column_width = Real(0.5);
   setup.depth = Real(0.25);
@@ -93,33 +156,7 @@ int bench_command(const BenchOptions& options) {
   fmt::print("dam break: {} fluid + {} boundary particles, radius {:.4g} m, {} threads, tolerance {:.3g} %, CFL {}\n",
              solver.fluid().size(), solver.boundary().size(), setup.particle_radius, ThreadLimit::active_threads(),
              100 * options.density_tolerance, options.cfl_factor);
-  for (int i = 0; i < options.warmup_steps; ++i) simulation.step();
-
-  sph::StageTimes sum;
-  double particle_steps = 0, density_iterations = 0, divergence_iterations = 0, simulated = 0;
-  const auto start = std::chrono::steady_clock::now();
-  for (int i = 0; i < options.steps; ++i) {
-    const auto& stats = simulation.step();
-    const auto& ms = stats.stage_ms;
-    sum.bodies += ms.bodies; sum.remove += ms.remove; sum.emit += ms.emit; sum.reorder += ms.reorder;
-    sum.neighbors += ms.neighbors; sum.density += ms.density; sum.divergence += ms.divergence;
-    sum.forces += ms.forces; sum.pressure += ms.pressure; sum.advect += ms.advect;
-    particle_steps += static_cast<double>(solver.fluid().size());
-    density_iterations += stats.density_iterations;
-    divergence_iterations += stats.divergence_iterations;
-    simulated += stats.time_step;
-  }
-  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-  const double n = options.steps;
-  fmt::print("{} steps in {:.3f} s: {:.3g} particle-steps/s, {:.2f} ms/step, mean dt {:.3g} s, real-time factor {:.3g}\n",
-             options.steps, seconds, particle_steps / seconds, 1000 * seconds / n, simulated / n, simulated / seconds);
-  fmt::print("iterations per step: density {:.2f}, divergence {:.2f}\n", density_iterations / n, divergence_iterations / n);
-  fmt::print("stage,ms_per_step\n");
-  const std::pair<const char*, double> stages[] = {
-      {"bodies", sum.bodies},   {"remove", sum.remove},   {"emit", sum.emit},         {"reorder", sum.reorder},
-      {"neighbors", sum.neighbors}, {"density", sum.density}, {"divergence", sum.divergence}, {"forces", sum.forces},
-      {"pressure", sum.pressure}, {"advect", sum.advect}};
-  for (const auto& [name, total] : stages) fmt::print("{},{:.3f}\n", name, total / n);
+  time_steps(simulation, options);
   return 0;
 }
 

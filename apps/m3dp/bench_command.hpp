@@ -13,6 +13,7 @@ struct BenchOptions {
   double cfl_factor = 1.0;
   int threads = 0;
   std::string kernel = "cubic_spline";
+  double max_viscosity = 1e4;         // Pa·s, clay_print
 };
 
 void add_bench_options(CLI::App& command, BenchOptions& options);

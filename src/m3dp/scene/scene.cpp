@@ -1078,7 +1078,8 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
   check_attributes(solver, {});
   check_children(solver, {"particle_radius", "kernel", "cfl_factor", "min_time_step", "max_time_step",
                           "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
-                          "warm_start", "end_time", "bounds"});
+                          "warm_start", "end_time", "bounds", "viscosity_solver", "max_viscosity_error",
+                          "max_viscosity_iterations", "xsph"});
   sph::SolverSettings& settings = scene_.solver;
 
   if (const auto radius =
@@ -1108,6 +1109,27 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
     const pugi::xml_node culprit = max_step ? solver.child("max_time_step") : solver.child("min_time_step");
     report(culprit, fmt::format("<max_time_step> ({} s) must be >= <min_time_step> ({} s)", settings.max_time_step,
                                 settings.min_time_step));
+  }
+  if (const pugi::xml_node method = solver.child("viscosity_solver")) {
+    const std::string_view name = leaf_text(method, {});
+    if (name == "implicit") {
+      settings.viscosity_solver = sph::ViscositySolver::implicit_weiler2018;
+    } else if (name == "explicit") {
+      settings.viscosity_solver = sph::ViscositySolver::explicit_morris1997;
+    } else {
+      report(method, fmt::format("<viscosity_solver> must be one of: implicit (Weiler et al. 2018, any viscosity), "
+                                 "explicit (Morris et al. 1997, water-like fluids); got '{}'",
+                                 name));
+    }
+  }
+  if (const auto error = read_scalar(solver, "max_viscosity_error", Quantity::fraction, Limits::positive_up_to(0.1),
+                                     Presence::optional)) {
+    settings.viscosity_tolerance = Real(*error);
+  }
+  if (const auto iterations = read_int(solver, "max_viscosity_iterations", 1)) settings.max_viscosity_iterations = *iterations;
+  if (const auto factor = read_scalar(solver, "xsph", Quantity::plain_number, Limits{std::nullopt, 0.0, 1.0},
+                                      Presence::optional)) {
+    settings.xsph_factor = Real(*factor);
   }
   if (const auto error = read_scalar(solver, "max_density_error", Quantity::fraction, Limits::positive_up_to(0.1),
                                      Presence::optional)) {
@@ -1356,7 +1378,7 @@ std::vector<MaterialEntry> SceneReader::read_material_library() {
 
 void SceneReader::read_fluid_block(const pugi::xml_node& element) {
   check_attributes(element, {"name", "material"});
-  check_children(element, {"min", "max", "velocity"});
+  check_children(element, {"min", "max", "velocity", "cylinder"});
   FluidBlock block;
   block.name = read_attribute(element, "name", Presence::required).value_or("");
   block.material = read_attribute(element, "material", Presence::required).value_or("");
@@ -1364,7 +1386,24 @@ void SceneReader::read_fluid_block(const pugi::xml_node& element) {
   if (!block.name.empty()) check_unique_name(element, block.name, fluid_block_names_);
   if (!block.material.empty()) material_uses_.push_back(MaterialUse{block.material, describe(element), block.where});
 
-  const auto box = read_box(element);
+  std::optional<Aabb> box;
+  if (const pugi::xml_node cylinder = element.child("cylinder")) {
+    // A vertical cylinder: the slump test's mould.
+    if (element.child("min") || element.child("max")) {
+      report(cylinder, fmt::format("{} has both <cylinder> and <min>/<max>; give one shape", describe(element)));
+    }
+    check_attributes(cylinder, {});
+    check_children(cylinder, {"base", "radius", "height"});
+    const auto base = read_vector(cylinder, "base", Quantity::length, Presence::required);
+    const auto radius = read_scalar(cylinder, "radius", Quantity::length, Limits::positive(), Presence::required);
+    const auto height = read_scalar(cylinder, "height", Quantity::length, Limits::positive(), Presence::required);
+    if (base && radius && height) {
+      box = Aabb{*base - Vec3(Real(*radius), Real(*radius), 0), *base + Vec3(Real(*radius), Real(*radius), Real(*height))};
+      block.cylinder_radius = Real(*radius);
+    }
+  } else {
+    box = read_box(element);
+  }
   if (box) block.box = *box;
   // Particles outside the solver bounds are removed at once, so a block reaching out of them is a mistake.
   if (box && bounds_ && !(bounds_->contains(box->min) && bounds_->contains(box->max))) {

@@ -77,11 +77,13 @@ struct MaterialEntry {
   SourceLocation where;
 };
 
-/// A box of fluid particles on a lattice of spacing 2·particle_radius filling [min, max].
+/// Particles on a lattice of spacing 2·particle_radius filling a box [min, max] or, when `cylinder_radius`
+/// is set, the vertical cylinder inscribed in that box (a slump-test mould: base centre, radius, height).
 struct FluidBlock {
   std::string name;
   std::string material;
   Aabb box;                            // m
+  std::optional<Real> cylinder_radius; // m; the cylinder's axis is the box's vertical centre line
   Vec3 initial_velocity = Vec3::Zero();  // m/s
   SourceLocation where;
 };

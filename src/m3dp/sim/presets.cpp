@@ -1,6 +1,9 @@
 #include "m3dp/sim/presets.hpp"
 
+#include <algorithm>
 #include <cmath>
+
+#include "m3dp/core/error.hpp"
 
 namespace m3dp::sim {
 
@@ -63,6 +66,52 @@ scene::Scene dam_break_scene(const DamBreakSetup& setup) {
   column.box.max = Vec3(a, setup.depth, 2 * a);
   scene.fluid_blocks.push_back(column);
   scene.output.particles_period = Real(0.02);
+  return scene;
+}
+
+scene::Scene clay_print_scene(const ClayPrintSetup& setup) {
+  scene::Scene scene;
+  scene.file = "clay_print (built in)";
+  scene.world_name = "clay_print";
+  scene.end_time = setup.end_time;
+  const Real diameter = 2 * setup.particle_radius;
+  scene.solver.particle_radius = setup.particle_radius;
+  scene.solver.max_time_step = setup.time_step;
+  // A slab 8 particles thick and twice as long as wide, holding about slab_particles.
+  const Real thickness = 8 * diameter;
+  const Real width = std::sqrt(Real(setup.slab_particles) * diameter * diameter * diameter / thickness / 2);
+  const Real length = 2 * width;
+  scene.solver.bounds.min = Vec3(-0.1f, -0.1f, -0.05f) - Vec3(0, width / 2, 0);
+  scene.solver.bounds.max = Vec3(length + 0.1f, width / 2 + 0.1f, 0.2f);
+  const auto presets = scene::load_material_presets();
+  const auto clay = std::find_if(presets.begin(), presets.end(), [](const scene::MaterialEntry& entry) {
+    return entry.material.name == "clay_paste";
+  });
+  if (clay == presets.end()) throw Error("clay_print: the material presets have no clay_paste");
+  scene::MaterialEntry material = *clay;
+  material.material.rheology.max_viscosity = setup.max_viscosity;
+  scene.materials.push_back(material);
+  scene.bodies.push_back({"floor", {box_between("floor", Vec3(-0.05f, -width / 2 - 0.05f, -diameter), Vec3(length + 0.05f, width / 2 + 0.05f, 0))}, {}});
+  scene::FluidBlock slab;
+  slab.name = "printed";
+  slab.material = material.material.name;
+  slab.box.min = Vec3(0, -width / 2, 0);
+  slab.box.max = Vec3(length, width / 2, thickness);
+  scene.fluid_blocks.push_back(slab);
+  // A 10 mm nozzle lays a new strand along the slab's centre line, 8 mm above it.
+  scene::PrintHead head;
+  head.name = "nozzle";
+  head.material = material.material.name;
+  head.inner_diameter = Real(0.01);
+  head.exit_speed = Real(0.05);
+  toolpath::PathSegment line;
+  line.curve = toolpath::LineCurve{Vec3(0, 0, thickness + Real(0.008)), Vec3(length, 0, thickness + Real(0.008))};
+  line.speed = Real(0.05);
+  line.extrude = true;
+  head.trajectory = toolpath::Trajectory({line}, 0);
+  head.where = SourceLocation{"<built in code>", 0};
+  scene.print_heads.push_back(head);
+  scene.output.write_particles = false;
   return scene;
 }
 

@@ -31,4 +31,16 @@ struct HydrostaticSetup {
 
 scene::Scene hydrostatic_scene(const HydrostaticSetup& setup);
 
+/// High-viscosity printing: a nozzle lays a clay strand along a slab of already printed clay
+/// (the clay_paste preset, Herschel–Bulkley, implicit viscosity) on a floor.
+struct ClayPrintSetup {
+  std::size_t slab_particles = 20000;   // the printed clay already there
+  Real particle_radius = Real(0.00125);
+  Real max_viscosity = Real(1e4);       // Pa·s: cap of the effective viscosity (the preset's unyielded 10⁶ is far stiffer)
+  Real time_step = Real(1e-3);          // s, the largest step the solver may take
+  double end_time = 100;
+};
+
+scene::Scene clay_print_scene(const ClayPrintSetup& setup);
+
 }  // namespace m3dp::sim

@@ -36,7 +36,8 @@ class ParticleFrameWriter {
     io::write_vtu(file, fluid.position,
                   {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", fluid.density),
                    io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
-                   io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time)},
+                   io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time),
+                   io::PointArray::of("viscosity", fluid.viscosity), io::PointArray::of("shear_rate", fluid.shear_rate)},
                   {{"particle_radius", solver.parameters().settings.particle_radius}, {"time", solver.time()}});
     collection_.add(solver.time(), file);
   }
@@ -106,6 +107,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"max_density_error", summary.max_density_error},
       {"mean_density_iterations", summary.mean_density_iterations},
       {"mean_divergence_iterations", summary.mean_divergence_iterations},
+      {"mean_viscosity_iterations", summary.mean_viscosity_iterations},
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"bodies", bodies},
@@ -117,8 +119,9 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
 }
 
 constexpr const char* kTimingHeader =
-    "step,time_s,dt_s,particles,density_iterations,divergence_iterations,density_error,ms_bodies,ms_remove,ms_emit,"
-    "ms_reorder,ms_neighbors,ms_density,ms_divergence,ms_forces,ms_pressure,ms_advect,ms_coupling,ms_world,ms_output,ms_total\n";
+    "step,time_s,dt_s,particles,density_iterations,divergence_iterations,viscosity_iterations,density_error,ms_bodies,"
+    "ms_remove,ms_emit,ms_reorder,ms_neighbors,ms_density,ms_divergence,ms_forces,ms_pressure,ms_viscosity,ms_advect,"
+    "ms_coupling,ms_world,ms_output,ms_total\n";
 
 }  // namespace
 
@@ -160,7 +163,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   const auto wall_start = Clock::now();
   auto wall_seconds = [&] { return std::chrono::duration<double>(Clock::now() - wall_start).count(); };
   double next_frame_time = 0;
-  double density_iterations_sum = 0, divergence_iterations_sum = 0, particle_steps = 0;
+  double density_iterations_sum = 0, divergence_iterations_sum = 0, viscosity_iterations_sum = 0, particle_steps = 0;
   auto& solver = simulation.solver();
 
   auto write_frame_if_due = [&]() -> double {
@@ -222,13 +225,15 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
       particle_steps += static_cast<double>(particles);
       density_iterations_sum += stats.density_iterations;
       divergence_iterations_sum += stats.divergence_iterations;
+      viscosity_iterations_sum += stats.viscosity_iterations;
       summary.max_density_error = std::max(summary.max_density_error, static_cast<double>(stats.density_error));
       if (timing) {
         const auto& ms = stats.stage_ms;
-        fmt::print(timing, "{},{:.8g},{:.6g},{},{},{},{:.4g},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n",
+        fmt::print(timing, "{},{:.8g},{:.6g},{},{},{},{},{:.4g},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n",
                    solver.state().step, solver.time(), stats.time_step, particles, stats.density_iterations,
-                   stats.divergence_iterations, stats.density_error, ms.bodies, ms.remove, ms.emit, ms.reorder, ms.neighbors,
-                   ms.density, ms.divergence, ms.forces, ms.pressure, ms.advect, simulation.last_coupling_ms(),
+                   stats.divergence_iterations, stats.viscosity_iterations, stats.density_error, ms.bodies, ms.remove,
+                   ms.emit, ms.reorder, ms.neighbors, ms.density, ms.divergence, ms.forces, ms.pressure, ms.viscosity,
+                   ms.advect, simulation.last_coupling_ms(),
                    simulation.last_world_ms(), output_ms,
                    ms.total() + simulation.last_coupling_ms() + simulation.last_world_ms() + output_ms);
       }
@@ -281,6 +286,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   if (summary.steps > 0) {
     summary.mean_density_iterations = density_iterations_sum / static_cast<double>(summary.steps);
     summary.mean_divergence_iterations = divergence_iterations_sum / static_cast<double>(summary.steps);
+    summary.mean_viscosity_iterations = viscosity_iterations_sum / static_cast<double>(summary.steps);
   }
   progress.finish({solver.time(), end_time, solver.state().step, static_cast<long long>(summary.particles), summary.wall_time});
 
@@ -307,8 +313,10 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         summary.blocked_layers);
   text += fmt::format("  mass        {:.6g} kg initial + {:.6g} emitted - {:.6g} lost = {:.6g} kg\n", summary.mass_initial,
                       summary.mass_emitted, summary.mass_lost, summary.mass_final);
-  text += fmt::format("  solver      {:.2f} density + {:.2f} divergence iterations per step, max mean density error {:.3f} %\n",
-                      summary.mean_density_iterations, summary.mean_divergence_iterations, 100 * summary.max_density_error);
+  text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step, max mean "
+                      "density error {:.3f} %\n",
+                      summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations,
+                      100 * summary.max_density_error);
   if (!output_directory.empty())
     text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
                         summary.frames_written);

@@ -69,7 +69,12 @@ Simulation::Simulation(const scene::Scene& scene)
   coupling_ = std::make_unique<coupling::FluidBodyCoupling>(world_, solver_);
   std::size_t initial_particles = 0;
   for (const auto& block : scene_.fluid_blocks) {
-    const auto points = lattice_in_box(block.box, spacing);
+    auto points = lattice_in_box(block.box, spacing);
+    if (block.cylinder_radius) {
+      const Vec3 axis_point = (block.box.min + block.box.max) / 2;
+      const Real radius = *block.cylinder_radius;
+      std::erase_if(points, [&](const Vec3& p) { return (p - axis_point).head<2>().norm() > radius; });
+    }
     initial_particles += solver_.add_particles(points, block.initial_velocity, phase_index(scene_, block.material));
   }
   // Reserve for everything the print heads will emit, so steps do not reallocate.

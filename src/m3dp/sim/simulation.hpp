@@ -91,6 +91,7 @@ struct RunSummary {
   double max_density_error = 0;      // largest mean relative density error after a density solve
   double mean_density_iterations = 0;
   double mean_divergence_iterations = 0;
+  double mean_viscosity_iterations = 0;   // conjugate-gradient iterations of the implicit viscosity solve
   std::size_t frames_written = 0;
   std::size_t meshes_written = 0;    // surface meshes in meshes/ (scene <meshing>)
   std::size_t meshes_skipped = 0;    // requests that came while the mesher was still busy

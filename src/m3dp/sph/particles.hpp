@@ -26,6 +26,7 @@ struct FluidParticles {
   std::vector<Real> birth_time;          // (n) s, simulated time the particle appeared
   std::vector<Real> viscosity;           // (n) Pa·s, effective dynamic viscosity of this step (rheology, age)
   std::vector<Real> shear_rate;          // (n) 1/s, √(2 D:D) of this step (non-Newtonian phases only)
+  std::vector<Vec3> viscous_change;      // (n) m/s, last step's velocity change by the implicit viscosity (warm start)
 
   [[nodiscard]] std::size_t size() const { return position.size(); }
 
@@ -46,6 +47,7 @@ struct FluidParticles {
     visit(birth_time);
     visit(viscosity);
     visit(shear_rate);
+    visit(viscous_change);
   }
   void reserve(std::size_t capacity) {
     for_each_field([&](auto& field) { field.reserve(capacity); });

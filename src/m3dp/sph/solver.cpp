@@ -239,6 +239,7 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.birth_time[i] = static_cast<Real>(state_.time);
     fluid.viscosity[i] = parameters_.phases[phase].rheology.viscosity;
     fluid.shear_rate[i] = 0;
+    fluid.viscous_change[i] = Vec3::Zero();
     ++added;
   }
   return added;
@@ -261,7 +262,8 @@ void Solver::reserve(std::size_t capacity) {
   system.fluid_pair_coefficient.reserve(capacity * state_.fluid_neighbors.stride);
   system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);
   system.inverse_diagonal.reserve(capacity);
-  for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product})
+  for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product,
+                       &system.start_velocity})
     vector->reserve(capacity);
 }
 
@@ -560,6 +562,7 @@ void Solver::emit(StepStats& stats) {
         fluid.birth_time[i] = static_cast<Real>(state_.time);
         fluid.viscosity[i] = parameters_.phases[settings.phase].rheology.viscosity;
         fluid.shear_rate[i] = 0;
+        fluid.viscous_change[i] = Vec3::Zero();
         state_.mass_emitted_total += mass;
       }
       nozzle.pending_time -= geometry.layer_period;

@@ -50,7 +50,7 @@ struct SolverSettings {
   Real max_speed = 100;                       // m/s; faster means the state exploded
   int reorder_interval = 32;                  // steps between Z-order reorderings
   ViscositySolver viscosity_solver = ViscositySolver::implicit_weiler2018;
-  Real viscosity_tolerance = Real(1e-3);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
+  Real viscosity_tolerance = Real(1e-2);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
   int max_viscosity_iterations = 300;
   Real xsph_factor = 0;                       // XSPH velocity smoothing ε (Monaghan 1989), 0 = none
 };
@@ -154,7 +154,7 @@ struct State {
     std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)
     std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
-    std::vector<Vec3> rhs, residual, direction, preconditioned, product;  // (n) each
+    std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
   } viscosity_system;
 };
 
