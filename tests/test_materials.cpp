@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "m3dp/sph/boundary_sampling.hpp"
+#include "m3dp/sim/simulation.hpp"
 #include "m3dp/sph/solver.hpp"
 
 using namespace m3dp;
@@ -28,6 +29,7 @@ struct Channel {
   int particles_in_y = 12;
   Real max_time_step = Real(5e-3);
   Real viscosity_tolerance = Real(1e-4);
+  bool rest_detection = true;
 
   [[nodiscard]] Real diameter() const { return width / Real(particles_across); }
 
@@ -40,6 +42,7 @@ struct Channel {
     parameters.settings.gravity = Vec3(body_force, 0, 0);
     parameters.settings.max_time_step = max_time_step;
     parameters.settings.viscosity_tolerance = viscosity_tolerance;
+    parameters.settings.rest_detection = rest_detection;
     parameters.settings.bounds.min = Vec3(-length, -length, -width);
     parameters.settings.bounds.max = Vec3(2 * length, 2 * length, 2 * width);
     parameters.phases.push_back(material);
@@ -168,6 +171,7 @@ TEST(Poiseuille, BinghamPlugAndProfileWithin10Percent) {
   channel.material.rheology.viscosity = Real(plastic_viscosity);
   channel.material.rheology.regularization = Real(2e4);  // s: unyielded viscosity τ0·m = 1000 μp
   channel.viscosity_tolerance = sph::SolverSettings{}.viscosity_tolerance;  // the default
+  channel.rest_detection = false;  // µm/s flows: far below the default rest speed (2 mm/s), yet moving
   channel.material.sticks_to_walls = true;  // the Navier slip of a constant wall viscosity is not the reference's
   sph::Solver solver = channel.make();
   auto exact = [&](double z) {
@@ -399,4 +403,72 @@ TEST(Strand, AreaIsFlowOverSpeedAndShapeFlattensAsTheNozzleSlows) {
     EXPECT_GT(sections[k].width / sections[k].height, sections[k - 1].width / sections[k - 1].height)
         << "and flattens";
   }
+}
+
+TEST(RestDetection, RestedMaterialCostsNothingAndWakesWhenABoxLandsOnIt) {
+  // A slab of yield-stress paste settles on a floor and comes to rest: its particles leave the solve.
+  // A box dropped on it sets the material it reaches moving again.
+  scene::Scene scene;
+  scene.file = "wake-up (built in)";
+  scene.solver.particle_radius = Real(0.0025);
+  scene.solver.max_time_step = Real(2e-3);
+  scene.solver.bounds.min = Vec3(-0.3f, -0.3f, -0.1f);
+  scene.solver.bounds.max = Vec3(0.3f, 0.3f, 0.6f);
+  material::Material paste = material::newtonian("paste", 1500, 0);
+  paste.rheology.model = material::RheologyModel::bingham;
+  paste.rheology.yield_stress = 150;
+  paste.rheology.viscosity = 5;
+  paste.sticks_to_walls = true;
+  scene.materials.push_back(scene::MaterialEntry{paste, {}});
+  scene.bodies.push_back(scene::StaticBody{
+      "floor", {scene::CollisionShape{"floor", BoxShape{Vec3(0.4f, 0.4f, 0.02f)}, Pose{Vec3(0, 0, -0.01f), Quat::Identity()}, {}}}, {}});
+  scene::FluidBlock slab;
+  slab.name = "slab";
+  slab.material = "paste";
+  slab.box.min = Vec3(-0.06f, -0.06f, 0);
+  slab.box.max = Vec3(0.06f, 0.06f, 0.03f);
+  scene.fluid_blocks.push_back(slab);
+  scene.output.write_particles = false;
+  scene::DynamicBody box;
+  box.name = "box";
+  box.collisions.push_back(scene::CollisionShape{"box/link/box", BoxShape{Vec3::Constant(0.04f)}, Pose{}, {}});
+  box.pose.position = Vec3(0, 0, 0.45f);  // lands at about 0.28 s, at 2.7 m/s
+  box.mass = 0.2;                         // 1.2 kPa on its footprint, 8 times the yield stress
+  scene.dynamic_bodies.push_back(box);
+  sim::Simulation simulation(scene);
+  const auto& solver = simulation.solver();
+  const std::size_t total = solver.fluid().size();
+  const auto body = simulation.dynamic_bodies().front();
+
+  std::size_t least_active = total;
+  double cost_at_rest_ms = 0;
+  int steps_at_rest = 0;
+  while (simulation.time() < 0.25) {
+    const auto& stats = simulation.step();
+    least_active = std::min(least_active, solver.state().active_count);
+    if (simulation.time() > 0.2) {
+      cost_at_rest_ms += stats.stage_ms.total();
+      ++steps_at_rest;
+    }
+  }
+  const std::size_t resting_before = total - solver.state().active_count;
+  std::printf("before the box lands: %zu of %zu particles at rest (%.0f %%), %.3f ms per solver step\n", resting_before, total,
+              100.0 * double(resting_before) / double(total), cost_at_rest_ms / steps_at_rest);
+  EXPECT_GT(resting_before, total * 9 / 10) << "the settled slab should have come to rest";
+
+  std::size_t most_active = 0;
+  Real fastest = 0;
+  while (simulation.time() < 0.45) {
+    simulation.step();
+    most_active = std::max(most_active, solver.state().active_count);
+    for (std::size_t i = 0; i < solver.state().active_count; ++i) fastest = std::max(fastest, solver.fluid().velocity[i].norm());
+  }
+  const Real box_height = simulation.world().pose(body).position.z();
+  std::printf("after it lands: up to %zu particles active again, fastest %.3f m/s; the box's centre at %.1f mm (slab top "
+              "30 mm, box half-size 20 mm)\n",
+              most_active, fastest, 1e3 * box_height);
+  EXPECT_GT(most_active, total / 10) << "the landing box must wake the material under it";
+  EXPECT_GT(fastest, solver.parameters().settings.wake_speed);
+  EXPECT_LT(box_height, 0.05f) << "the paste yields under 8x its yield stress: the box sinks in";
+  EXPECT_GT(box_height, 0.0f);
 }

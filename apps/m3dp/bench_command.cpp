@@ -11,6 +11,7 @@
 #include <fstream>
 #include <map>
 #include <sstream>
+#include <tuple>
 #include <unistd.h>
 
 #include "m3dp/core/parallel.hpp"
@@ -22,12 +23,14 @@ namespace m3dp::app {
 void add_bench_options(CLI::App& command, BenchOptions& options) {
   command.add_option("scenario", options.scenario,
                      "dam_break (the solver alone), ur10_wall (robot printing, everything) or clay_print (a "
-                     "Herschel-Bulkley clay at up to --max-viscosity, implicit viscosity)")
-      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print"}))
+                     "Herschel-Bulkley clay at up to --max-viscosity, implicit viscosity) or wall_layers (a clay wall "
+                     "of --layers layers: the cost of a step at the top layer against the second)")
+      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers"}))
       ->capture_default_str();
   command.add_option("--scene", options.scene_file, "ur10_wall: scene file to run instead of the project's");
   command.add_option("--particles", options.particles, "Fluid particles in the dam-break column or the clay slab")
       ->capture_default_str();
+  command.add_option("--layers", options.layers, "wall_layers: layers of the wall")->capture_default_str();
   command.add_option("--max-viscosity", options.max_viscosity, "clay_print: cap of the clay's effective viscosity (Pa*s)")
       ->capture_default_str();
   command.add_option("--steps", options.steps, "Timed steps")->capture_default_str();
@@ -138,8 +141,67 @@ int bench_clay_print(const BenchOptions& options) {
   return 0;
 }
 
+int bench_wall_layers(const BenchOptions& options) {
+  sim::WallPrintSetup setup;
+  setup.layers = options.layers;
+  setup.max_viscosity = static_cast<Real>(options.max_viscosity);
+  const scene::Scene scene = sim::wall_print_scene(setup);
+  sim::Simulation simulation(scene);
+  const auto& solver = simulation.solver();
+  const double layer_time = 4 * double(setup.side) / double(setup.nozzle_speed);
+  fmt::print("wall_layers: {} layers of clay (clay_paste, viscosity capped at {:.3g} Pa*s), {:.0f} mm square, {:.0f} mm "
+             "layers, particle radius {:.3g} m, {:.1f} s per layer, {} threads\n",
+             setup.layers, setup.max_viscosity, 1e3 * setup.side, 1e3 * setup.layer_height, setup.particle_radius, layer_time,
+             ThreadLimit::active_threads());
+  // Solver milliseconds per step, per layer (the world is trivial here).
+  std::vector<double> milliseconds(static_cast<std::size_t>(setup.layers), 0.0), steps(milliseconds.size(), 0.0),
+      active(milliseconds.size(), 0.0), resting(milliseconds.size(), 0.0), viscosity(milliseconds.size(), 0.0);
+  std::vector<sph::StageTimes> stage_sums(milliseconds.size());
+  const auto start = std::chrono::steady_clock::now();
+  while (simulation.time() < scene.end_time) {
+    const auto& stats = simulation.step();
+    const auto layer = static_cast<std::size_t>(simulation.time() / layer_time);
+    if (layer >= milliseconds.size()) continue;
+    milliseconds[layer] += stats.stage_ms.total();
+    auto& sum = stage_sums[layer];
+    const auto& ms = stats.stage_ms;
+    sum.bodies += ms.bodies; sum.remove += ms.remove; sum.emit += ms.emit; sum.reorder += ms.reorder;
+    sum.neighbors += ms.neighbors; sum.density += ms.density; sum.divergence += ms.divergence;
+    sum.forces += ms.forces; sum.pressure += ms.pressure; sum.viscosity += ms.viscosity; sum.advect += ms.advect;
+    steps[layer] += 1;
+    active[layer] += double(solver.state().active_count);
+    resting[layer] += double(stats.particles_at_rest);
+    viscosity[layer] += stats.viscosity_iterations;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  fmt::print("{:.1f} s simulated in {:.1f} s wall, {} particles at the end\n", simulation.time(), seconds, solver.fluid().size());
+  fmt::print("layer,ms_per_step,active_particles,resting_particles,viscosity_iterations\n");
+  for (std::size_t layer = 0; layer < milliseconds.size(); ++layer)
+    if (steps[layer] > 0)
+      fmt::print("{},{:.3f},{:.0f},{:.0f},{:.1f}\n", layer + 1, milliseconds[layer] / steps[layer], active[layer] / steps[layer],
+                 resting[layer] / steps[layer], viscosity[layer] / steps[layer]);
+  if (milliseconds.size() >= 2 && steps[1] > 0 && steps.back() > 0) {
+    const double ratio = (milliseconds.back() / steps.back()) / (milliseconds[1] / steps[1]);
+    fmt::print("cost of a step at layer {} / at layer 2: {:.2f} (goal <= 1.5)\n", setup.layers, ratio);
+    fmt::print("stage,ms_per_step_layer_2,ms_per_step_layer_{}\n", setup.layers);
+    const auto& first = stage_sums[1];
+    const auto& last = stage_sums.back();
+    const double n_first = steps[1], n_last = steps.back();
+    const std::tuple<const char*, double, double> rows[] = {
+        {"bodies", first.bodies, last.bodies},          {"remove", first.remove, last.remove},
+        {"emit", first.emit, last.emit},                {"reorder", first.reorder, last.reorder},
+        {"neighbors", first.neighbors, last.neighbors}, {"density", first.density, last.density},
+        {"divergence", first.divergence, last.divergence}, {"forces", first.forces, last.forces},
+        {"pressure", first.pressure, last.pressure},    {"viscosity", first.viscosity, last.viscosity},
+        {"advect", first.advect, last.advect}};
+    for (const auto& [name, a, b] : rows) fmt::print("{},{:.3f},{:.3f}\n", name, a / n_first, b / n_last);
+  }
+  return 0;
+}
+
 int bench_command(const BenchOptions& options) {
   ThreadLimit thread_limit(options.threads);
+  if (options.scenario == "wall_layers") return bench_wall_layers(options);
   if (options.scenario == "ur10_wall") return bench_ur10_wall(options);
   if (options.scenario == "clay_print") return bench_clay_print(options);
   sim::DamBreakSetup setup;

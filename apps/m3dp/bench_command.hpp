@@ -13,7 +13,8 @@ struct BenchOptions {
   double cfl_factor = 1.0;
   int threads = 0;
   std::string kernel = "cubic_spline";
-  double max_viscosity = 1e4;         // Pa·s, clay_print
+  double max_viscosity = 1e4;         // Pa·s, clay_print and wall_layers
+  int layers = 20;                    // wall_layers
 };
 
 void add_bench_options(CLI::App& command, BenchOptions& options);

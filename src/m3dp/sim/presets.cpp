@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/toolpath/waypoints.hpp"
 
 namespace m3dp::sim {
 
@@ -69,6 +70,20 @@ scene::Scene dam_break_scene(const DamBreakSetup& setup) {
   return scene;
 }
 
+namespace {
+/// The clay_paste preset with its effective viscosity capped at `max_viscosity` (Pa·s).
+scene::MaterialEntry clay_paste(Real max_viscosity) {
+  const auto presets = scene::load_material_presets();
+  const auto clay = std::find_if(presets.begin(), presets.end(), [](const scene::MaterialEntry& entry) {
+    return entry.material.name == "clay_paste";
+  });
+  if (clay == presets.end()) throw Error("the material presets have no clay_paste");
+  scene::MaterialEntry material = *clay;
+  material.material.rheology.max_viscosity = max_viscosity;
+  return material;
+}
+}  // namespace
+
 scene::Scene clay_print_scene(const ClayPrintSetup& setup) {
   scene::Scene scene;
   scene.file = "clay_print (built in)";
@@ -83,13 +98,7 @@ scene::Scene clay_print_scene(const ClayPrintSetup& setup) {
   const Real length = 2 * width;
   scene.solver.bounds.min = Vec3(-0.1f, -0.1f, -0.05f) - Vec3(0, width / 2, 0);
   scene.solver.bounds.max = Vec3(length + 0.1f, width / 2 + 0.1f, 0.2f);
-  const auto presets = scene::load_material_presets();
-  const auto clay = std::find_if(presets.begin(), presets.end(), [](const scene::MaterialEntry& entry) {
-    return entry.material.name == "clay_paste";
-  });
-  if (clay == presets.end()) throw Error("clay_print: the material presets have no clay_paste");
-  scene::MaterialEntry material = *clay;
-  material.material.rheology.max_viscosity = setup.max_viscosity;
+  const scene::MaterialEntry material = clay_paste(setup.max_viscosity);
   scene.materials.push_back(material);
   scene.bodies.push_back({"floor", {box_between("floor", Vec3(-0.05f, -width / 2 - 0.05f, -diameter), Vec3(length + 0.05f, width / 2 + 0.05f, 0))}, {}});
   scene::FluidBlock slab;
@@ -111,6 +120,34 @@ scene::Scene clay_print_scene(const ClayPrintSetup& setup) {
   head.trajectory = toolpath::Trajectory({line}, 0);
   head.where = SourceLocation{"<built in code>", 0};
   scene.print_heads.push_back(head);
+  scene.output.write_particles = false;
+  return scene;
+}
+
+scene::Scene wall_print_scene(const WallPrintSetup& setup) {
+  scene::Scene scene;
+  scene.file = "wall_print (built in)";
+  scene.world_name = "wall_print";
+  scene.solver.particle_radius = setup.particle_radius;
+  const Real height = Real(setup.layers + 2) * setup.layer_height;
+  scene.solver.bounds.min = Vec3(-0.1f, -0.1f, -0.05f);
+  scene.solver.bounds.max = Vec3(setup.side + 0.1f, setup.side + 0.1f, height + 0.1f);
+  scene.materials.push_back(clay_paste(setup.max_viscosity));
+  scene.bodies.push_back({"floor", {box_between("floor", Vec3(-0.05f, -0.05f, -0.01f), Vec3(setup.side + 0.05f, setup.side + 0.05f, 0))}, {}});
+  scene::PrintHead head;
+  head.name = "nozzle";
+  head.material = scene.materials.front().material.name;
+  head.inner_diameter = setup.nozzle_diameter;
+  // A bead as wide as the nozzle and one layer high: U = V · (D h) / (π D²/4).
+  head.exit_speed = setup.nozzle_speed * setup.nozzle_diameter * setup.layer_height /
+                    (kPi * setup.nozzle_diameter * setup.nozzle_diameter / 4);
+  toolpath::PathSegment wall;
+  wall.curve = toolpath::rectangle_wall(Vec3(0, 0, setup.layer_height), setup.side, setup.side, setup.layers, setup.layer_height);
+  wall.speed = setup.nozzle_speed;
+  head.trajectory = toolpath::Trajectory({wall}, 0);
+  head.where = SourceLocation{"<built in code>", 0};
+  scene.print_heads.push_back(head);
+  scene.end_time = head.trajectory.end_time() + 0.5;
   scene.output.write_particles = false;
   return scene;
 }

@@ -43,4 +43,18 @@ struct ClayPrintSetup {
 
 scene::Scene clay_print_scene(const ClayPrintSetup& setup);
 
+/// A square wall printed layer on layer by a gantry nozzle, in clay: the case for "material at rest
+/// costs nothing" (the cost of a step at the top layer against the second).
+struct WallPrintSetup {
+  int layers = 20;
+  Real side = Real(0.04);              // m, square wall's side
+  Real layer_height = Real(0.008);     // m
+  Real nozzle_diameter = Real(0.008);  // m
+  Real nozzle_speed = Real(0.1);       // m/s
+  Real particle_radius = Real(0.001);
+  Real max_viscosity = Real(1e4);      // Pa·s cap of the clay's effective viscosity
+};
+
+scene::Scene wall_print_scene(const WallPrintSetup& setup);
+
 }  // namespace m3dp::sim

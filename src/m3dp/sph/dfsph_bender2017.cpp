@@ -101,7 +101,7 @@ Real density_change_rate(const SolverView& view, std::size_t i) {
 
 /// One pressure velocity update with the κ in view.kappa; adds the reaction on the bodies.
 void apply_pressure_velocity_update(const SolverView& view, State& state, Real time_step) {
-  for_each_particle_range(state.fluid.size(), [&](const tbb::blocked_range<std::size_t>& range) {
+  for_each_particle_range(state.active_count, [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<Wrench>& wrenches = thread_body_wrenches(state);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Real kappa_i = view.kappa[i];
@@ -166,7 +166,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                      parameters.settings.support_radius_factor * parameters.settings.particle_radius,
                      [&](const auto& kernel) {
                        return tbb::parallel_reduce(
-                           tbb::blocked_range<std::size_t>(0, fluid.size(), 128), Real(0),
+                           tbb::blocked_range<std::size_t>(0, state.active_count, 128), Real(0),
                            [&](const tbb::blocked_range<std::size_t>& range, Real max_error) {
                              for (std::size_t i = range.begin(); i != range.end(); ++i) {
                                const Vec3 position_i = fluid.position[i];
@@ -214,7 +214,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
 
 int solve_divergence(const Parameters& parameters, State& state, Real time_step) {
   const auto& settings = parameters.settings;
-  const std::size_t count = state.fluid.size();
+  const std::size_t count = state.active_count;
   if (count == 0) return 0;
   const SolverView view = view_of(state);
   const Real inverse_time_step = Real(1) / time_step;
@@ -266,7 +266,7 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
 
 int solve_density(const Parameters& parameters, State& state, Real time_step, Real& mean_density_error) {
   const auto& settings = parameters.settings;
-  const std::size_t count = state.fluid.size();
+  const std::size_t count = state.active_count;
   mean_density_error = 0;
   if (count == 0) return 0;
   const SolverView view = view_of(state);

@@ -2,6 +2,7 @@
 // Particle state as structure-of-arrays. Every per-particle field is declared once, in
 // for_each_field, so resizing, reordering and removal can never forget one.
 #include <cstdint>
+#include <utility>
 #include <string>
 #include <vector>
 
@@ -27,6 +28,7 @@ struct FluidParticles {
   std::vector<Real> viscosity;           // (n) Pa·s, effective dynamic viscosity of this step (rheology, age)
   std::vector<Real> shear_rate;          // (n) 1/s, √(2 D:D) of this step (non-Newtonian phases only)
   std::vector<Vec3> viscous_change;      // (n) m/s, last step's velocity change by the implicit viscosity (warm start)
+  std::vector<Real> rest_time;           // (n) s the particle has been at rest (see SolverSettings::rest_detection)
 
   [[nodiscard]] std::size_t size() const { return position.size(); }
 
@@ -48,6 +50,7 @@ struct FluidParticles {
     visit(viscosity);
     visit(shear_rate);
     visit(viscous_change);
+    visit(rest_time);
   }
   void reserve(std::size_t capacity) {
     for_each_field([&](auto& field) { field.reserve(capacity); });
@@ -58,6 +61,10 @@ struct FluidParticles {
   /// Moves particle `from` into slot `to` (used by swap-removal).
   void move(std::size_t from, std::size_t to) {
     for_each_field([&](auto& field) { field[to] = field[from]; });
+  }
+  /// Exchanges two particles (keeps the active ones first, see State::active_count).
+  void swap(std::size_t a, std::size_t b) {
+    for_each_field([&](auto& field) { std::swap(field[a], field[b]); });
   }
 };
 

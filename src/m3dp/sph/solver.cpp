@@ -5,6 +5,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <numeric>
@@ -222,6 +223,7 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
   SpatialHashGrid grid;
   grid.build(state_.boundary.position, support_radius());
   auto& fluid = state_.fluid;
+  const std::size_t first_new = fluid.size();
   std::size_t added = 0;
   for (const Vec3& point : positions) {
     bool blocked = false;
@@ -240,9 +242,80 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.viscosity[i] = parameters_.phases[phase].rheology.viscosity;
     fluid.shear_rate[i] = 0;
     fluid.viscous_change[i] = Vec3::Zero();
+    fluid.rest_time[i] = 0;
     ++added;
   }
+  activate_appended(first_new);
   return added;
+}
+
+void Solver::activate_appended(std::size_t first) {
+  auto& fluid = state_.fluid;
+  // Each new particle takes the first resting one's slot; that one moves to the end.
+  for (std::size_t i = first; i < fluid.size(); ++i) {
+    if (i != state_.active_count) fluid.swap(i, state_.active_count);
+    ++state_.active_count;
+  }
+}
+
+void Solver::update_rest_partition() {
+  auto& fluid = state_.fluid;
+  const Real duration = parameters_.settings.rest_duration;
+  // Resting: from the top of the active range down, so a swap never moves an unvisited candidate.
+  for (std::size_t i = state_.active_count; i-- > 0;) {
+    if (fluid.rest_time[i] < duration) continue;
+    const std::size_t last = --state_.active_count;
+    if (i != last) fluid.swap(i, last);
+    fluid.velocity[last] = Vec3::Zero();
+    fluid.viscous_change[last] = Vec3::Zero();
+    fluid.kappa_density[last] = 0;
+    fluid.kappa_divergence[last] = 0;
+  }
+  // Waking: a resting particle whose clock was reset by motion nearby (update_rest_clocks).
+  for (std::size_t j = state_.active_count; j < fluid.size(); ++j) {
+    if (fluid.rest_time[j] >= duration) continue;
+    if (j != state_.active_count) fluid.swap(j, state_.active_count);
+    ++state_.active_count;
+  }
+}
+
+void Solver::update_rest_clocks(Real time_step) {
+  const auto& settings = parameters_.settings;
+  auto& fluid = state_.fluid;
+  const std::size_t active = state_.active_count;
+  const Real rest_speed_squared = settings.rest_speed * settings.rest_speed;
+  const Real wake_speed_squared = settings.wake_speed * settings.wake_speed;
+  const Real time = static_cast<Real>(state_.time);
+  auto wake = [&](std::size_t j) { std::atomic_ref<Real>(fluid.rest_time[j]).store(0, std::memory_order_relaxed); };
+  parallel_for_each_index(active, [&](std::size_t i) {
+    const FluidPhase& phase = parameters_.phases[fluid.phase[i]];
+    const Real speed_squared = fluid.velocity[i].squaredNorm();
+    // Only a yield-stress material can stop for good (any other creeps on); it rests while slow and
+    // while its shear stress μ γ̇ stays below its (aged) yield stress.
+    bool resting = false;
+    if (material::has_yield_stress(phase.rheology.model) && speed_squared < rest_speed_squared) {
+      const Real age = time - fluid.birth_time[i];
+      resting = fluid.viscosity[i] * fluid.shear_rate[i] < phase.ageing.yield_stress(phase.rheology.yield_stress, age);
+    }
+    fluid.rest_time[i] = resting ? fluid.rest_time[i] + time_step : Real(0);
+    if (speed_squared > wake_speed_squared)
+      for (const Index j : state_.fluid_neighbors.of(i))
+        if (j >= active) wake(j);
+  }, 512);
+  // A moving body's surface wakes the resting material it reaches (a robot, a dropped box).
+  if (active == fluid.size() || state_.moving_boundary_indices.empty()) return;
+  const Real support_squared = support_radius() * support_radius();
+  parallel_for_each_index(state_.moving_boundary_indices.size(), [&](std::size_t k) {
+    const Index b = state_.moving_boundary_indices[k];
+    const Vec3 velocity = state_.boundary.velocity[b];
+    if (velocity.squaredNorm() <= wake_speed_squared) return;
+    // Where the surface is now and where it will be in two steps: a fast body must not reach resting
+    // material before it has woken (it would land inside particles that do not push back).
+    for (const Vec3 position : {state_.boundary.position[b], Vec3(state_.boundary.position[b] + 2 * time_step * velocity)})
+      state_.fluid_grid.for_each_candidate(position, [&](Index j, const Vec3& p) {
+        if (j >= active && (p - position).squaredNorm() < support_squared) wake(j);
+      });
+  }, 64);
 }
 
 void Solver::reserve(std::size_t capacity) {
@@ -302,11 +375,15 @@ const StepStats& Solver::step() {
   stats.stage_ms.emit = elapsed_ms(start);
 
   start = Clock::now();
+  if (settings.rest_detection) update_rest_partition();
   if (settings.reorder_interval > 0 && state_.step % settings.reorder_interval == 0) reorder();
   stats.stage_ms.reorder = elapsed_ms(start);
 
-  const std::size_t count = state_.fluid.size();
-  state_.kappa.resize(count);
+  // Only the active particles are simulated; the resting ones keep κ = 0 (solver sweeps read it for
+  // every neighbour).
+  const std::size_t count = state_.active_count;
+  state_.kappa.resize(state_.fluid.size());
+  std::fill(state_.kappa.begin() + static_cast<std::ptrdiff_t>(count), state_.kappa.end(), Real(0));
 
   start = Clock::now();
   search_neighbors();
@@ -376,6 +453,8 @@ const StepStats& Solver::step() {
   start = Clock::now();
   push_out_of_nozzles();
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.position[i] += time_step * state_.fluid.velocity[i]; }, 1024);
+  if (settings.rest_detection) update_rest_clocks(time_step);
+  stats.particles_at_rest = state_.fluid.size() - state_.active_count;
   keep_out_of_boundaries();
   stages::collect_body_wrenches(state_);
   // Impulses were summed as forces of velocity updates applied over one step each; see the update.
@@ -469,6 +548,8 @@ void Solver::remove_out_of_bounds(StepStats& stats) {
       },
       std::plus<std::size_t>());
   if (outside == 0) return;
+  // Swap-removal that keeps the active particles first: an active slot is refilled from the end of the
+  // active range, whose slot is refilled from the end of the array.
   std::size_t count = fluid.size();
   for (std::size_t i = 0; i < count;) {
     if (bounds.contains(fluid.position[i])) {
@@ -476,8 +557,14 @@ void Solver::remove_out_of_bounds(StepStats& stats) {
       continue;
     }
     state_.mass_removed_total += fluid.mass[i];
+    if (i < state_.active_count) {
+      const std::size_t last_active = --state_.active_count;
+      if (i != last_active) fluid.move(last_active, i);
+      if (last_active != count - 1) fluid.move(count - 1, last_active);
+    } else if (i != count - 1) {
+      fluid.move(count - 1, i);
+    }
     --count;
-    if (i != count) fluid.move(count, i);
   }
   fluid.resize(count);
   state_.particles_removed_total += outside;
@@ -563,8 +650,10 @@ void Solver::emit(StepStats& stats) {
         fluid.viscosity[i] = parameters_.phases[settings.phase].rheology.viscosity;
         fluid.shear_rate[i] = 0;
         fluid.viscous_change[i] = Vec3::Zero();
+        fluid.rest_time[i] = 0;
         state_.mass_emitted_total += mass;
       }
+      activate_appended(first);
       nozzle.pending_time -= geometry.layer_period;
       ++nozzle.layers_emitted;
       nozzle.particles_emitted += geometry.disc_offsets.size();
@@ -587,7 +676,7 @@ void Solver::push_out_of_nozzles() {
     const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
     const Real target_speed = settings.exit_speed * nozzle.flow_scale + nozzle.velocity.dot(axis);
     const Real radius_squared = settings.inner_diameter * settings.inner_diameter / 4;
-    parallel_for_each_index(fluid.size(), [&](std::size_t i) {
+    parallel_for_each_index(state_.active_count, [&](std::size_t i) {
       const Vec3 offset = fluid.position[i] - nozzle.pose.position;
       const Real axial = offset.dot(axis);
       if (axial < 0 || axial > diameter || (offset - axial * axis).squaredNorm() > radius_squared) return;
@@ -606,9 +695,11 @@ void Solver::reorder() {
   state_.permutation.resize(count);
   parallel_for_each_index(count, [&](std::size_t i) {
     const Vec3& p = fluid.position[i];
+    // The top bit keeps the resting particles after the active ones (Morton codes use 63 bits).
     state_.sort_keys[i] = morton_code(static_cast<std::int32_t>(std::floor(p.x() * inverse_cell)),
                                       static_cast<std::int32_t>(std::floor(p.y() * inverse_cell)),
-                                      static_cast<std::int32_t>(std::floor(p.z() * inverse_cell)));
+                                      static_cast<std::int32_t>(std::floor(p.z() * inverse_cell))) |
+                          (i >= state_.active_count ? (std::uint64_t(1) << 63) : 0);
     state_.permutation[i] = static_cast<Index>(i);
   }, 2048);
   tbb::parallel_sort(state_.permutation.begin(), state_.permutation.end(),
@@ -633,10 +724,12 @@ void Solver::reorder() {
 
 void Solver::search_neighbors() {
   const Real support = support_radius();
+  // Every particle is in the grid (resting ones are neighbours too); only the active ones query it.
   state_.fluid_grid.build(state_.fluid.position, support);
-  find_neighbors(state_.fluid_grid, state_.fluid.position, support, true, state_.fluid_neighbors);
+  const std::span<const Vec3> active(state_.fluid.position.data(), state_.active_count);
+  find_neighbors(state_.fluid_grid, active, support, true, state_.fluid_neighbors);
   const SpatialHashGrid* boundary_grids[] = {&state_.static_boundary_grid, &state_.moving_boundary_grid};
-  find_neighbors(boundary_grids, state_.fluid.position, support, false, state_.boundary_neighbors);
+  find_neighbors(boundary_grids, active, support, false, state_.boundary_neighbors);
 }
 
 void Solver::keep_out_of_boundaries() {
@@ -650,7 +743,7 @@ void Solver::keep_out_of_boundaries() {
   const Real surface_share = boundary_share_at_surface_;
   with_kernel(parameters_.settings.kernel, support_radius(), [&](const auto& kernel) {
     const Real inverse_time_step = Real(1) / state_.time_step;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 256), [&](const tbb::blocked_range<std::size_t>& range) {
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state_.active_count, 256), [&](const tbb::blocked_range<std::size_t>& range) {
       std::vector<Wrench>& wrenches = stages::thread_body_wrenches(state_);
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
       // A few Newton steps: one lands short where the share is curved (edges, corners).

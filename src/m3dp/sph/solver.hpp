@@ -53,6 +53,14 @@ struct SolverSettings {
   Real viscosity_tolerance = Real(1e-2);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
   int max_viscosity_iterations = 300;
   Real xsph_factor = 0;                       // XSPH velocity smoothing ε (Monaghan 1989), 0 = none
+  // Material at rest costs nothing: a particle of a yield-stress material that has moved slower than
+  // rest_speed, below its yield stress, for rest_duration leaves the solve and stays where it is as a
+  // fixed neighbour of the material still moving. It wakes when a moving neighbour (fluid faster than
+  // wake_speed, or a moving body's surface) comes within a support radius.
+  bool rest_detection = true;
+  Real rest_speed = Real(2e-3);               // m/s
+  Real rest_duration = Real(0.05);            // s
+  Real wake_speed = Real(5e-3);               // m/s
 };
 
 /// A circular nozzle that emits whole disc layers of particles (Issue: volume flux π D²/4 · U).
@@ -98,6 +106,7 @@ struct StepStats {
   Real max_density_error = 0;           // max over particles of (ρ/ρ0 − 1) at the start of the step
   std::size_t particles_emitted = 0;
   std::size_t particles_removed = 0;
+  std::size_t particles_at_rest = 0;    // at the end of the step (not simulated)
   StageTimes stage_ms;
 };
 
@@ -109,6 +118,9 @@ struct Wrench {
 /// Everything that changes during a run.
 struct State {
   FluidParticles fluid;
+  // The first active_count particles are simulated; the rest have come to rest (rest_detection) and
+  // only stand as fixed neighbours: zero velocity and κ, not in any solver sweep.
+  std::size_t active_count = 0;
   BoundaryParticles boundary;
   std::vector<BoundaryBody> bodies;
   std::vector<NozzleState> nozzles;
@@ -220,6 +232,12 @@ class Solver {
   void remove_out_of_bounds(StepStats& stats);
   void emit(StepStats& stats);
   void push_out_of_nozzles();
+  /// Moves the particles appended from `first` on into the active range (before the resting ones).
+  void activate_appended(std::size_t first);
+  /// Particles that have rested long enough leave the active range; woken ones re-enter it.
+  void update_rest_partition();
+  /// After advection: rest clocks of the active particles, and wake-up marks on resting ones near motion.
+  void update_rest_clocks(Real time_step);
   void reorder();
   void search_neighbors();
   void keep_out_of_boundaries();

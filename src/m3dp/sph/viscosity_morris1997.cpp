@@ -23,7 +23,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
   constexpr Real kDimensionFactor = 2 * (3 + 2);
   const Real rest_density = parameters.phases.front().density;
   if (!explicit_viscosity) {
-    parallel_for_each_index(fluid.size(), [&](std::size_t i) { fluid.acceleration[i] = settings.gravity; }, 1024);
+    parallel_for_each_index(state.active_count, [&](std::size_t i) { fluid.acceleration[i] = settings.gravity; }, 1024);
     return;
   }
 
@@ -31,7 +31,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
   // (m_j/ρ_j) ∇W_ij = (ρ0/ρ_j) · pair_gradient · x_ij.
   const auto& fluid_lists = state.fluid_neighbors;
   const auto& boundary_lists = state.boundary_neighbors;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, fluid.size(), 128), [&](const tbb::blocked_range<std::size_t>& range) {
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<Wrench>& wrenches = thread_body_wrenches(state);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const FluidPhase& phase = parameters.phases[fluid.phase[i]];

@@ -58,7 +58,7 @@ std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
 Real update_effective_viscosity(const Parameters& parameters, State& state, const ViscosityCalibration& calibration) {
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
-  const std::size_t count = fluid.size();
+  const std::size_t count = state.active_count;
   const Real rest_density = parameters.phases.front().density;
   const bool any_shear_rate = std::any_of(parameters.phases.begin(), parameters.phases.end(), phase_needs_shear_rate);
   const auto& fluid_lists = state.fluid_neighbors;
@@ -113,7 +113,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   const auto& settings = parameters.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
-  const std::size_t count = fluid.size();
+  const std::size_t count = state.active_count;
   if (count == 0) return 0;
   const bool any_viscosity =
       std::any_of(parameters.phases.begin(), parameters.phases.end(), [](const FluidPhase& phase) {
@@ -132,7 +132,9 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   system.boundary_pair_coefficient.resize(boundary_lists.indices.size());
   for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product,
                        &system.start_velocity})
-    vector->resize(count);
+    vector->resize(fluid.size());
+  // A.x reads x at every neighbour: resting particles are fixed (zero velocity), so zero in the direction.
+  std::fill(system.direction.begin() + static_cast<std::ptrdiff_t>(count), system.direction.end(), Vec3::Zero());
   system.inverse_diagonal.resize(count);
 
   // Coefficients, preconditioner and right-hand side (positions do not move during the solve).
@@ -270,7 +272,7 @@ void apply_xsph(const Parameters& parameters, State& state) {
   const Real factor = parameters.settings.xsph_factor;
   if (factor <= 0) return;
   auto& fluid = state.fluid;
-  const std::size_t count = fluid.size();
+  const std::size_t count = state.active_count;
   const Real support_radius = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
   auto& smoothed = state.scratch_vec3;
   smoothed.resize(count);
@@ -283,7 +285,7 @@ void apply_xsph(const Parameters& parameters, State& state) {
       smoothed[i] = fluid.velocity[i] + factor * change;
     }, 256);
   });
-  fluid.velocity.swap(smoothed);
+  std::copy(smoothed.begin(), smoothed.end(), fluid.velocity.begin());
 }
 
 }  // namespace m3dp::sph::stages
