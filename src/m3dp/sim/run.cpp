@@ -37,7 +37,8 @@ class ParticleFrameWriter {
                   {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", fluid.density),
                    io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
                    io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time),
-                   io::PointArray::of("viscosity", fluid.viscosity), io::PointArray::of("shear_rate", fluid.shear_rate)},
+                   io::PointArray::of("viscosity", fluid.viscosity), io::PointArray::of("shear_rate", fluid.shear_rate),
+                   io::PointArray::of("rest_time", fluid.rest_time)},
                   {{"particle_radius", solver.parameters().settings.particle_radius}, {"time", solver.time()}});
     collection_.add(solver.time(), file);
   }
@@ -108,6 +109,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"mean_density_iterations", summary.mean_density_iterations},
       {"mean_divergence_iterations", summary.mean_divergence_iterations},
       {"mean_viscosity_iterations", summary.mean_viscosity_iterations},
+      {"particles_at_rest", summary.particles_at_rest},
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"bodies", bodies},
@@ -261,6 +263,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   summary.real_time_factor = summary.wall_time > 0 ? summary.simulated_time / summary.wall_time : 0;
   summary.particle_steps_per_second = summary.wall_time > 0 ? particle_steps / summary.wall_time : 0;
   summary.particles = solver.fluid().size();
+  summary.particles_at_rest = solver.fluid().size() - solver.state().active_count;
   summary.particles_removed = solver.state().particles_removed_total;
   summary.mass_emitted = solver.state().mass_emitted_total;
   summary.mass_lost = solver.state().mass_removed_total;
@@ -305,7 +308,8 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
   if (!summary.error.empty()) text += fmt::format("  error: {}\n", summary.error);
   text += fmt::format("  speed       {:.3g} x real time, {:.3g} particle-steps/s\n", summary.real_time_factor,
                       summary.particle_steps_per_second);
-  text += fmt::format("  particles   {} now, {} emitted, {} left the bounds\n", summary.particles, summary.particles_emitted,
+  text += fmt::format("  particles   {} now ({} at rest, not simulated), {} emitted, {} left the bounds\n", summary.particles,
+                      summary.particles_at_rest, summary.particles_emitted,
                       summary.particles_removed);
   if (summary.blocked_layers > 0)
     text += fmt::format("  nozzles     a due layer found no room in front of its nozzle in {} steps (material backing up "

@@ -84,6 +84,7 @@ struct RunSummary {
   double wall_time = 0;         // s
   double real_time_factor = 0;  // simulated s per wall s
   std::size_t particles = 0;
+  std::size_t particles_at_rest = 0;   // at the end: resting material, not simulated (rest detection)
   std::uint64_t particles_emitted = 0;
   std::uint64_t particles_removed = 0;
   std::uint64_t blocked_layers = 0;  // steps in which a due nozzle layer found no room (summed over nozzles)
