@@ -663,3 +663,32 @@ TEST(SceneMaterials, AWrongPresetFileIsReportedAtItsOwnLine) {
   fs::remove(file);
   EXPECT_CONTAINS(error.what(), file.string() + ":4: error: <density> must be > 0 kg/m^3, got -5");
 }
+
+TEST(SceneMaterials, ViscositySolverAndRestSettings) {
+  const std::string settings = replaced(valid_scene(), "<end_time>2</end_time>", R"(<end_time>2</end_time>
+        <viscosity_solver>explicit</viscosity_solver>
+        <max_viscosity_error unit="%">0.5</max_viscosity_error>
+        <max_viscosity_iterations>40</max_viscosity_iterations>
+        <xsph>0.05</xsph>
+        <rest_detection>false</rest_detection>
+        <rest_speed unit="mm/s">1</rest_speed>
+        <rest_duration unit="ms">80</rest_duration>
+        <wake_speed unit="mm/s">4</wake_speed>)");
+  const auto scene = load_scene_from_string(settings, "settings.sdf");
+  EXPECT_EQ(scene.solver.viscosity_solver, m3dp::sph::ViscositySolver::explicit_morris1997);
+  EXPECT_FLOAT_EQ(scene.solver.viscosity_tolerance, 0.005f);
+  EXPECT_EQ(scene.solver.max_viscosity_iterations, 40);
+  EXPECT_FLOAT_EQ(scene.solver.xsph_factor, 0.05f);
+  EXPECT_FALSE(scene.solver.rest_detection);
+  EXPECT_FLOAT_EQ(scene.solver.rest_speed, 0.001f);
+  EXPECT_FLOAT_EQ(scene.solver.rest_duration, 0.08f);
+  EXPECT_FLOAT_EQ(scene.solver.wake_speed, 0.004f);
+
+  const std::string bad = replaced(valid_scene(), "<end_time>2</end_time>",
+                                   "<end_time>2</end_time><viscosity_solver>implicit_weiler</viscosity_solver>");
+  expect_error_at(bad, "<viscosity_solver>", "<viscosity_solver> must be one of: implicit (Weiler et al. 2018, any "
+                                             "viscosity), explicit (Morris et al. 1997, water-like fluids); got "
+                                             "'implicit_weiler'");
+  const std::string bad_kernel = replaced(valid_scene(), "<kernel>wendland_c2</kernel>", "<kernel>gaussian</kernel>");
+  expect_error_at(bad_kernel, "<kernel>", "<kernel> must be one of: cubic_spline, wendland_c2; got 'gaussian'");
+}

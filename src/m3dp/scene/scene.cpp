@@ -253,6 +253,22 @@ class SceneReader {
                                   Presence presence);
   std::optional<Vec3> read_direction(const pugi::xml_node& parent, const char* name, Presence presence);
   std::optional<bool> read_bool(const pugi::xml_node& parent, const char* name);
+  /// The value of a keyword element (`<kernel>wendland_c2</kernel>`) from its allowed words; a word not
+  /// among them is reported with the list (and `hint`, which explains them, if given).
+  template <class Value>
+  std::optional<Value> read_keyword(const pugi::xml_node& parent, const char* name,
+                                    std::initializer_list<std::pair<std::string_view, Value>> choices,
+                                    std::string_view hint = {}) {
+    const pugi::xml_node element = parent.child(name);
+    if (!element) return std::nullopt;
+    const std::string_view word = leaf_text(element, {});
+    for (const auto& [choice, value] : choices)
+      if (choice == word) return value;
+    std::string words;
+    for (const auto& choice : choices) words += (words.empty() ? "" : ", ") + std::string(choice.first);
+    report(element, fmt::format("<{}> must be one of: {}; got '{}'", name, hint.empty() ? words : std::string(hint), word));
+    return std::nullopt;
+  }
   std::optional<int> read_int(const pugi::xml_node& parent, const char* name, int minimum);
   std::optional<double> read_number_attribute(const pugi::xml_node& element, const char* name, Quantity quantity,
                                               const Limits& limits);
@@ -1088,16 +1104,9 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
     settings.particle_radius = Real(*radius);
     particle_radius_ = settings.particle_radius;
   }
-  if (const pugi::xml_node kernel = solver.child("kernel")) {
-    const std::string_view name = leaf_text(kernel, {});
-    if (name == "cubic_spline") {
-      settings.kernel = sph::KernelType::cubic_spline;
-    } else if (name == "wendland_c2") {
-      settings.kernel = sph::KernelType::wendland_c2;
-    } else {
-      report(kernel, fmt::format("<kernel> must be one of: cubic_spline, wendland_c2; got '{}'", name));
-    }
-  }
+  if (const auto kernel = read_keyword<sph::KernelType>(
+          solver, "kernel", {{"cubic_spline", sph::KernelType::cubic_spline}, {"wendland_c2", sph::KernelType::wendland_c2}}))
+    settings.kernel = *kernel;
   if (const auto cfl = read_scalar(solver, "cfl_factor", Quantity::plain_number, Limits::positive_up_to(2),
                                    Presence::optional)) {
     settings.cfl_factor = Real(*cfl);
@@ -1111,18 +1120,11 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
     report(culprit, fmt::format("<max_time_step> ({} s) must be >= <min_time_step> ({} s)", settings.max_time_step,
                                 settings.min_time_step));
   }
-  if (const pugi::xml_node method = solver.child("viscosity_solver")) {
-    const std::string_view name = leaf_text(method, {});
-    if (name == "implicit") {
-      settings.viscosity_solver = sph::ViscositySolver::implicit_weiler2018;
-    } else if (name == "explicit") {
-      settings.viscosity_solver = sph::ViscositySolver::explicit_morris1997;
-    } else {
-      report(method, fmt::format("<viscosity_solver> must be one of: implicit (Weiler et al. 2018, any viscosity), "
-                                 "explicit (Morris et al. 1997, water-like fluids); got '{}'",
-                                 name));
-    }
-  }
+  if (const auto method = read_keyword<sph::ViscositySolver>(
+          solver, "viscosity_solver",
+          {{"implicit", sph::ViscositySolver::implicit_weiler2018}, {"explicit", sph::ViscositySolver::explicit_morris1997}},
+          "implicit (Weiler et al. 2018, any viscosity), explicit (Morris et al. 1997, water-like fluids)"))
+    settings.viscosity_solver = *method;
   if (const auto error = read_scalar(solver, "max_viscosity_error", Quantity::fraction, Limits::positive_up_to(0.1),
                                      Presence::optional)) {
     settings.viscosity_tolerance = Real(*error);
@@ -1681,14 +1683,8 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
   }
   if (const auto period = read_scalar(meshing, "period", Quantity::time, Limits::positive(), Presence::optional))
     settings.period = Real(*period);
-  if (const pugi::xml_node format = meshing.child("format")) {
-    const std::string_view name = leaf_text(format, {});
-    if (name == "obj" || name == "ply" || name == "stl") {
-      settings.format = std::string(name);
-    } else {
-      report(format, fmt::format("<format> must be one of: obj, ply, stl; got '{}'", name));
-    }
-  }
+  if (const auto format = read_keyword<std::string_view>(meshing, "format", {{"obj", "obj"}, {"ply", "ply"}, {"stl", "stl"}}))
+    settings.format = std::string(*format);
   if (const pugi::xml_node material = meshing.child("material")) {
     settings.material = std::string(leaf_text(material, {}));
     material_uses_.push_back(MaterialUse{settings.material, "<meshing>", where(material)});

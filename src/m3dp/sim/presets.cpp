@@ -82,6 +82,18 @@ scene::MaterialEntry clay_paste(Real max_viscosity) {
   material.material.rheology.max_viscosity = max_viscosity;
   return material;
 }
+
+/// A nozzle named "nozzle" that an ideal gantry moves along `segment` from t = 0.
+scene::PrintHead gantry_head(const std::string& material, Real inner_diameter, Real exit_speed, const toolpath::PathSegment& segment) {
+  scene::PrintHead head;
+  head.name = "nozzle";
+  head.material = material;
+  head.inner_diameter = inner_diameter;
+  head.exit_speed = exit_speed;
+  head.trajectory = toolpath::Trajectory({segment}, 0);
+  head.where = SourceLocation{"<built in code>", 0};
+  return head;
+}
 }  // namespace
 
 scene::Scene clay_print_scene(const ClayPrintSetup& setup) {
@@ -110,18 +122,10 @@ scene::Scene clay_print_scene(const ClayPrintSetup& setup) {
   slab.box.max = Vec3(length, width / 2, thickness);
   scene.fluid_blocks.push_back(slab);
   // A 10 mm nozzle lays a new strand along the slab's centre line, 8 mm above it.
-  scene::PrintHead head;
-  head.name = "nozzle";
-  head.material = material.material.name;
-  head.inner_diameter = Real(0.01);
-  head.exit_speed = Real(0.05);
   toolpath::PathSegment line;
   line.curve = toolpath::LineCurve{Vec3(0, 0, thickness + Real(0.008)), Vec3(length, 0, thickness + Real(0.008))};
   line.speed = Real(0.05);
-  line.extrude = true;
-  head.trajectory = toolpath::Trajectory({line}, 0);
-  head.where = SourceLocation{"<built in code>", 0};
-  scene.print_heads.push_back(head);
+  scene.print_heads.push_back(gantry_head(material.material.name, Real(0.01), Real(0.05), line));
   scene.output.write_particles = false;
   return scene;
 }
@@ -136,20 +140,14 @@ scene::Scene wall_print_scene(const WallPrintSetup& setup) {
   scene.solver.bounds.max = Vec3(setup.side + 0.1f, setup.side + 0.1f, height + 0.1f);
   scene.materials.push_back(clay_paste(setup.max_viscosity));
   scene.bodies.push_back({"floor", {box_between("floor", Vec3(-0.05f, -0.05f, -0.01f), Vec3(setup.side + 0.05f, setup.side + 0.05f, 0))}, {}});
-  scene::PrintHead head;
-  head.name = "nozzle";
-  head.material = scene.materials.front().material.name;
-  head.inner_diameter = setup.nozzle_diameter;
   // A bead as wide as the nozzle and one layer high: U = V · (D h) / (π D²/4).
-  head.exit_speed = setup.nozzle_speed * setup.nozzle_diameter * setup.layer_height /
-                    (kPi * setup.nozzle_diameter * setup.nozzle_diameter / 4);
+  const Real exit_speed = setup.nozzle_speed * setup.nozzle_diameter * setup.layer_height /
+                          (kPi * setup.nozzle_diameter * setup.nozzle_diameter / 4);
   toolpath::PathSegment wall;
   wall.curve = toolpath::rectangle_wall(Vec3(0, 0, setup.layer_height), setup.side, setup.side, setup.layers, setup.layer_height);
   wall.speed = setup.nozzle_speed;
-  head.trajectory = toolpath::Trajectory({wall}, 0);
-  head.where = SourceLocation{"<built in code>", 0};
-  scene.print_heads.push_back(head);
-  scene.end_time = head.trajectory.end_time() + 0.5;
+  scene.print_heads.push_back(gantry_head(scene.materials.front().material.name, setup.nozzle_diameter, exit_speed, wall));
+  scene.end_time = scene.print_heads.back().trajectory.end_time() + 0.5;
   scene.output.write_particles = false;
   return scene;
 }
