@@ -6,10 +6,12 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <cstdio>
 #include <vector>
 
 #include "m3dp/sph/boundary_sampling.hpp"
+#include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/sph/solver.hpp"
 
@@ -471,4 +473,41 @@ TEST(RestDetection, RestedMaterialCostsNothingAndWakesWhenABoxLandsOnIt) {
   EXPECT_GT(fastest, solver.parameters().settings.wake_speed);
   EXPECT_LT(box_height, 0.05f) << "the paste yields under 8x its yield stress: the box sinks in";
   EXPECT_GT(box_height, 0.0f);
+}
+
+TEST(MaterialMatrix, NineMaterialsInOneWorldSpreadByTheirRheology) {
+  // scenes/material_matrix.sdf: nine nozzles, each its own material, lay the same line. The beads
+  // spread more the lower the yield stress and, without one, the lower the viscosity.
+  scene::Scene scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / "material_matrix.sdf");
+  scene.output.write_particles = false;
+  ASSERT_EQ(scene.materials.size(), 9u);
+  sim::Simulation simulation(scene);
+  while (simulation.time() < scene.end_time) simulation.step();
+  const auto& fluid = simulation.solver().fluid();
+  const Real d = simulation.solver().particle_diameter();
+  const double viscosities[] = {1, 10, 100}, yield_stresses[] = {0, 50, 300};
+  double width[3][3] = {}, height[3][3] = {};
+  std::printf("bead width / height (mm) in the middle of each line; rows: plastic viscosity, columns: yield stress\n");
+  for (int row = 0; row < 3; ++row) {
+    std::printf("  %5.0f Pa s:", viscosities[row]);
+    for (int column = 0; column < 3; ++column) {
+      const Real x0 = Real(0.12) * Real(column), y0 = Real(0.08) * Real(row);
+      Real y_min = 1, y_max = -1, top = 0;
+      for (std::size_t i = 0; i < fluid.size(); ++i) {
+        const Vec3& p = fluid.position[i];
+        if (p.x() < x0 + Real(0.015) || p.x() > x0 + Real(0.045) || std::abs(p.y() - y0) > Real(0.039)) continue;
+        y_min = std::min(y_min, p.y());
+        y_max = std::max(y_max, p.y());
+        top = std::max(top, p.z());
+      }
+      width[row][column] = double(y_max - y_min + d);
+      height[row][column] = double(top + d / 2);
+      std::printf("  tau %3.0f Pa: %5.1f / %4.1f", yield_stresses[column], 1e3 * width[row][column], 1e3 * height[row][column]);
+    }
+    std::printf("\n");
+  }
+  for (int row = 0; row < 3; ++row)
+    EXPECT_GT(width[row][0], width[row][2]) << "a yield stress keeps the bead narrower, at " << viscosities[row] << " Pa s";
+  EXPECT_GT(width[0][0], width[2][0]) << "a thin Newtonian fluid spreads wider than a thick one";
+  EXPECT_LT(height[0][0], height[0][2]) << "and lies flatter than a bead with a yield stress";
 }
