@@ -311,7 +311,7 @@ void Solver::update_rest_clocks(Real time_step) {
     if (velocity.squaredNorm() <= wake_speed_squared) return;
     // Where the surface is now and where it will be in two steps: a fast body must not reach resting
     // material before it has woken (it would land inside particles that do not push back).
-    for (const Vec3 position : {state_.boundary.position[b], Vec3(state_.boundary.position[b] + 2 * time_step * velocity)})
+    for (const Vec3& position : {state_.boundary.position[b], Vec3(state_.boundary.position[b] + 2 * time_step * velocity)})
       state_.fluid_grid.for_each_candidate(position, [&](Index j, const Vec3& p) {
         if (j >= active && (p - position).squaredNorm() < support_squared) wake(j);
       });
