@@ -272,6 +272,8 @@ void Solver::update_rest_partition() {
     fluid.kappa_divergence[last] = 0;
   }
   // Waking: a resting particle whose clock was reset by motion nearby (update_rest_clocks).
+  if (!state_.resting_woken) return;
+  state_.resting_woken = 0;
   for (std::size_t j = state_.active_count; j < fluid.size(); ++j) {
     if (fluid.rest_time[j] >= duration) continue;
     if (j != state_.active_count) fluid.swap(j, state_.active_count);
@@ -286,7 +288,10 @@ void Solver::update_rest_clocks(Real time_step) {
   const Real rest_speed_squared = settings.rest_speed * settings.rest_speed;
   const Real wake_speed_squared = settings.wake_speed * settings.wake_speed;
   const Real time = static_cast<Real>(state_.time);
-  auto wake = [&](std::size_t j) { std::atomic_ref<Real>(fluid.rest_time[j]).store(0, std::memory_order_relaxed); };
+  auto wake = [&](std::size_t j) {
+    std::atomic_ref<Real>(fluid.rest_time[j]).store(0, std::memory_order_relaxed);
+    std::atomic_ref<int>(state_.resting_woken).store(1, std::memory_order_relaxed);
+  };
   parallel_for_each_index(active, [&](std::size_t i) {
     const FluidPhase& phase = parameters_.phases[fluid.phase[i]];
     const Real speed_squared = fluid.velocity[i].squaredNorm();
@@ -540,8 +545,9 @@ void Solver::remove_out_of_bounds(StepStats& stats) {
   const Aabb& bounds = parameters_.settings.bounds;
   if (bounds.empty()) return;
   auto& fluid = state_.fluid;
+  // Resting particles do not move, so only active ones can have left.
   const std::size_t outside = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, fluid.size(), 2048), std::size_t(0),
+      tbb::blocked_range<std::size_t>(0, state_.active_count, 2048), std::size_t(0),
       [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
         for (std::size_t i = range.begin(); i != range.end(); ++i) found += bounds.contains(fluid.position[i]) ? 0 : 1;
         return found;
@@ -551,19 +557,15 @@ void Solver::remove_out_of_bounds(StepStats& stats) {
   // Swap-removal that keeps the active particles first: an active slot is refilled from the end of the
   // active range, whose slot is refilled from the end of the array.
   std::size_t count = fluid.size();
-  for (std::size_t i = 0; i < count;) {
+  for (std::size_t i = 0; i < state_.active_count;) {
     if (bounds.contains(fluid.position[i])) {
       ++i;
       continue;
     }
     state_.mass_removed_total += fluid.mass[i];
-    if (i < state_.active_count) {
-      const std::size_t last_active = --state_.active_count;
-      if (i != last_active) fluid.move(last_active, i);
-      if (last_active != count - 1) fluid.move(count - 1, last_active);
-    } else if (i != count - 1) {
-      fluid.move(count - 1, i);
-    }
+    const std::size_t last_active = --state_.active_count;
+    if (i != last_active) fluid.move(last_active, i);
+    if (last_active != count - 1) fluid.move(count - 1, last_active);
     --count;
   }
   fluid.resize(count);
@@ -687,19 +689,18 @@ void Solver::push_out_of_nozzles() {
 }
 
 void Solver::reorder() {
+  // Only the active particles: resting ones do not move, so their order stays good.
   auto& fluid = state_.fluid;
-  const std::size_t count = fluid.size();
+  const std::size_t count = state_.active_count;
   if (count < 2) return;
   const Real inverse_cell = Real(1) / support_radius();
   state_.sort_keys.resize(count);
   state_.permutation.resize(count);
   parallel_for_each_index(count, [&](std::size_t i) {
     const Vec3& p = fluid.position[i];
-    // The top bit keeps the resting particles after the active ones (Morton codes use 63 bits).
     state_.sort_keys[i] = morton_code(static_cast<std::int32_t>(std::floor(p.x() * inverse_cell)),
                                       static_cast<std::int32_t>(std::floor(p.y() * inverse_cell)),
-                                      static_cast<std::int32_t>(std::floor(p.z() * inverse_cell))) |
-                          (i >= state_.active_count ? (std::uint64_t(1) << 63) : 0);
+                                      static_cast<std::int32_t>(std::floor(p.z() * inverse_cell)));
     state_.permutation[i] = static_cast<Index>(i);
   }, 2048);
   tbb::parallel_sort(state_.permutation.begin(), state_.permutation.end(),
@@ -710,7 +711,7 @@ void Solver::reorder() {
   auto gather = [&](auto& field, auto& scratch) {
     scratch.resize(count);
     parallel_for_each_index(count, [&](std::size_t i) { scratch[i] = field[state_.permutation[i]]; }, 2048);
-    field.swap(scratch);
+    std::copy(scratch.begin(), scratch.begin() + static_cast<std::ptrdiff_t>(count), field.begin());
   };
   fluid.for_each_field([&](auto& field) {
     using Element = typename std::decay_t<decltype(field)>::value_type;
@@ -787,8 +788,9 @@ void Solver::check_state() const {
   const auto& fluid = state_.fluid;
   const Real max_speed_squared = parameters_.settings.max_speed * parameters_.settings.max_speed;
   // Lowest index of a bad particle, or size() if none.
+  // Active particles only: resting ones have not moved since they were checked.
   const std::size_t bad = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, fluid.size(), 2048), fluid.size(),
+      tbb::blocked_range<std::size_t>(0, state_.active_count, 2048), fluid.size(),
       [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
         for (std::size_t i = range.begin(); i != range.end() && i < found; ++i) {
           const Real speed_squared = fluid.velocity[i].squaredNorm();

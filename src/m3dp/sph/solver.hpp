@@ -121,6 +121,7 @@ struct State {
   // The first active_count particles are simulated; the rest have come to rest (rest_detection) and
   // only stand as fixed neighbours: zero velocity and κ, not in any solver sweep.
   std::size_t active_count = 0;
+  int resting_woken = 0;             // 1 when update_rest_clocks woke a resting particle this step
   BoundaryParticles boundary;
   std::vector<BoundaryBody> bodies;
   std::vector<NozzleState> nozzles;
