@@ -205,6 +205,9 @@ class SceneReader {
   SceneReader(const std::string& text, fs::path file) : text_(text), file_(std::move(file)), lines_(text) {}
 
   Scene read();
+  /// Parses the text into `document` and returns its root element, which must be <expected_root>
+  /// (InputError at the file's line otherwise).
+  pugi::xml_node parse_root(pugi::xml_document& document, std::string_view expected_root);
   /// Reads a <materials> file of <material> definitions (the presets). Throws InputError listing every problem.
   std::vector<MaterialEntry> read_material_library();
 
@@ -609,20 +612,24 @@ std::optional<Aabb> SceneReader::read_box(const pugi::xml_node& parent) {
 
 // ---- SDF world ----
 
-Scene SceneReader::read() {
-  pugi::xml_document document;
+pugi::xml_node SceneReader::parse_root(pugi::xml_document& document, std::string_view expected_root) {
   const pugi::xml_parse_result parsed =
       document.load_buffer(text_.data(), text_.size(), pugi::parse_default, pugi::encoding_utf8);
   if (!parsed) {
     throw InputError(SourceLocation{file_.string(), lines_.line_at(parsed.offset)},
                      fmt::format("the file is not well-formed XML: {}", parsed.description()));
   }
-  scene_.file = file_;
-
-  const pugi::xml_node sdf = document.document_element();
-  if (std::string_view(sdf.name()) != "sdf") {
-    throw InputError(where(sdf), fmt::format("expected the root element <sdf>, got <{}>", sdf.name()));
+  const pugi::xml_node root = document.document_element();
+  if (std::string_view(root.name()) != expected_root) {
+    throw InputError(where(root), fmt::format("expected the root element <{}>, got <{}>", expected_root, root.name()));
   }
+  return root;
+}
+
+Scene SceneReader::read() {
+  pugi::xml_document document;
+  const pugi::xml_node sdf = parse_root(document, "sdf");
+  scene_.file = file_;
   const auto worlds = child_elements(sdf, "world");
   if (worlds.empty()) {
     report(sdf, "missing <world> in <sdf>; a scene is an SDF world");
@@ -1362,16 +1369,7 @@ const std::vector<MaterialEntry>& SceneReader::material_presets() {
 
 std::vector<MaterialEntry> SceneReader::read_material_library() {
   pugi::xml_document document;
-  const pugi::xml_parse_result parsed =
-      document.load_buffer(text_.data(), text_.size(), pugi::parse_default, pugi::encoding_utf8);
-  if (!parsed) {
-    throw InputError(SourceLocation{file_.string(), lines_.line_at(parsed.offset)},
-                     fmt::format("the file is not well-formed XML: {}", parsed.description()));
-  }
-  const pugi::xml_node root = document.document_element();
-  if (std::string_view(root.name()) != "materials") {
-    throw InputError(where(root), fmt::format("expected the root element <materials>, got <{}>", root.name()));
-  }
+  const pugi::xml_node root = parse_root(document, "materials");
   check_children(root, {"material"}, {"material"});
   std::vector<MaterialEntry> entries;
   for (const auto& element : child_elements(root, "material")) {
