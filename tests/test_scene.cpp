@@ -578,6 +578,26 @@ TEST(SceneMaterials, RheologyAndAgeingAreReadInSiUnits) {
   EXPECT_NEAR(stress, 1500 * (1 - std::exp(-5.0)) + 150 * std::pow(10.0, 0.35), 1e-4 * stress);
 }
 
+TEST(SceneMaterials, SurfaceTensionAndAdhesionInNewtonsPerMetre) {
+  const auto scene = load_scene_from_string(with_material(R"(<material name="water" preset="water">
+        <adhesion unit="mN/m">145</adhesion>
+      </material>)"), "wetting.sdf");
+  const auto& material = scene.find_material("water")->material;
+  EXPECT_FLOAT_EQ(material.surface_tension, 0.07274f);  // the preset's (IAPWS)
+  EXPECT_FLOAT_EQ(material.adhesion, 0.145f);
+  try {
+    load_scene_from_string(with_material(R"(<material name="water">
+        <density>1000</density>
+        <viscosity>1</viscosity>
+        <surface_tension>-0.07</surface_tension>
+      </material>)"), "negative.sdf");
+    FAIL() << "no error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), "negative.sdf:");
+    EXPECT_CONTAINS(error.what(), "surface_tension");
+  }
+}
+
 TEST(SceneMaterials, PresetWithOverrides) {
   const auto scene = load_scene_from_string(with_material(R"(<material name="water" preset="printable_mortar">
         <rheology><yield_stress>800</yield_stress></rheology>

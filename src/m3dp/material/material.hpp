@@ -17,7 +17,10 @@ struct Material {
   Ageing ageing;                       // none by default
   Real boundary_viscosity = 0;         // Pa·s, friction against walls, bodies and the nozzle (0 = free slip)
   bool sticks_to_walls = false;        // no slip: walls see the material's own effective viscosity instead
+  Real surface_tension = 0;            // N/m against air (water at 20 °C: 0.0728); 0 = none
+  Real adhesion = 0;                   // N/m, work of adhesion to walls, σ(1 + cos θ) by Young–Dupré; 0 = none
 
+  [[nodiscard]] bool has_surface_forces() const { return surface_tension > 0 || adhesion > 0; }
   [[nodiscard]] bool has_wall_friction() const { return sticks_to_walls || boundary_viscosity > 0; }
   /// Viscosity (Pa·s) of the wall term for a particle of effective viscosity `particle_viscosity`.
   [[nodiscard]] Real wall_viscosity(Real particle_viscosity) const {

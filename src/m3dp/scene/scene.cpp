@@ -34,7 +34,7 @@ constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
 enum class Quantity {
   plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass, stress, stress_rate, rate,
-  consistency
+  consistency, surface_tension
 };
 
 struct Unit {
@@ -64,6 +64,7 @@ QuantityInfo quantity_info(Quantity quantity) {
   static constexpr Unit kStressRate[] = {{"Pa/s", 1}, {"Pa/min", 1.0 / 60}};
   static constexpr Unit kRate[] = {{"1/s", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
   static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
+  static constexpr Unit kSurfaceTension[] = {{"N/m", 1}, {"mN/m", 1e-3}, {"J/m^2", 1}, {"J/m2", 1}};
   switch (quantity) {
     case Quantity::mass: return {"mass", "kg", kMass};
     case Quantity::length: return {"length", "m", kLength};
@@ -78,6 +79,7 @@ QuantityInfo quantity_info(Quantity quantity) {
     case Quantity::stress_rate: return {"stress rate", "Pa/s", kStressRate};
     case Quantity::rate: return {"rate", "1/s", kRate};
     case Quantity::consistency: return {"consistency", "Pa*s^n", kConsistency};
+    case Quantity::surface_tension: return {"surface tension", "N/m", kSurfaceTension};
     case Quantity::plain_number: break;
   }
   return {"plain number", "", {}};
@@ -1214,7 +1216,8 @@ void SceneReader::read_material(const pugi::xml_node& element) {
 
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base) {
-  check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "source"});
+  check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
+                           "source"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
@@ -1257,6 +1260,13 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
       material.sticks_to_walls = false;
     }
   }
+  // Akinci et al. 2013: σ against air, and the work of adhesion σ(1 + cos θ) to walls (both N/m).
+  if (const auto tension = read_scalar(element, "surface_tension", Quantity::surface_tension, Limits::non_negative(),
+                                       Presence::optional))
+    material.surface_tension = Real(*tension);
+  if (const auto adhesion = read_scalar(element, "adhesion", Quantity::surface_tension, Limits::non_negative(),
+                                        Presence::optional))
+    material.adhesion = Real(*adhesion);
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;

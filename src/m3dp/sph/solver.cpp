@@ -162,8 +162,11 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   // in front of it, so that rounding never leaves a centre on the wrong side.
   viscosity_calibration_ = calibrated_viscosity(settings.kernel, support_radius(), particle_diameter(), wall_spacing,
                                                 boundary_volume_scale_);
+  surface_tension_calibration_ = calibrated_surface_tension(settings.kernel, support_radius(), parameters_.phases.front().density,
+                                                           particle_diameter(), wall_spacing, boundary_volume_scale_);
   boundary_share_at_surface_ =
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
+  for (const auto& phase : parameters_.phases) largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
   state_.time_step = settings.max_time_step;
 }
 
@@ -340,6 +343,7 @@ void Solver::reserve(std::size_t capacity) {
   system.fluid_pair_coefficient.reserve(capacity * state_.fluid_neighbors.stride);
   system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);
   system.inverse_diagonal.reserve(capacity);
+  state_.surface_normal.reserve(capacity);
   for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product,
                        &system.start_velocity})
     vector->reserve(capacity);
@@ -409,6 +413,7 @@ const StepStats& Solver::step() {
   // Each particle's viscosity from its rheology and age, then gravity (and explicit viscosity).
   const Real largest_kinematic_viscosity = stages::update_effective_viscosity(parameters_, state_, viscosity_calibration_);
   stages::compute_non_pressure_accelerations(parameters_, state_, viscosity_calibration_);
+  stages::add_surface_tension(parameters_, state_, surface_tension_calibration_);
   // CFL (Courant) condition on the velocity after the non-pressure forces.
   const Real previous_step = state_.time_step;
   const Real max_speed_squared = tbb::parallel_reduce(
@@ -434,6 +439,10 @@ const StepStats& Solver::step() {
   // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
   // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
   // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
+  // Capillary waves (Brackbill et al. 1992): Δt ≤ √(ρ d³ / (2π σ)).
+  if (largest_surface_tension_ > 0)
+    time_step = std::min(time_step, std::sqrt(parameters_.phases.front().density * diameter * diameter * diameter /
+                                              (2 * kPi * largest_surface_tension_)));
   const Real gravity_norm = settings.gravity.norm();
   if (gravity_norm > 0) time_step = std::min(time_step, std::sqrt(diameter / (50 * gravity_norm)));
   time_step = std::max(time_step, settings.min_time_step);

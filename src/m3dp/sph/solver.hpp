@@ -169,6 +169,7 @@ struct State {
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
     std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
   } viscosity_system;
+  std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij of this step (surface tension only)
 };
 
 /// Factors on the viscosity sums that make them exact on the rest lattice (see calibrated_viscosity()).
@@ -178,6 +179,16 @@ struct ViscosityCalibration {
   Real fluid_gradient = 1;     // on the velocity gradient's fluid sum
   Real boundary_gradient = 1;  // on its wall sum
 };
+
+/// Surface tension (Akinci et al. 2013) coefficients per unit of the material's physical values:
+/// γ = cohesion_per_tension × σ (N/m), β = adhesion_per_work × W_a (N/m); see surface_tension_akinci2013.cpp.
+struct SurfaceTensionCalibration {
+  Real cohesion_per_tension = 0;
+  Real adhesion_per_work = 0;
+};
+/// The mean-field surface energy of Akinci's cohesion and adhesion forces on the rest lattice.
+SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real rest_density,
+                                                     Real fluid_spacing, Real wall_spacing, Real boundary_volume_scale);
 
 /// Derived, immutable data of a nozzle: disc sample offsets and layer period.
 struct NozzleGeometry {
@@ -227,6 +238,7 @@ class Solver {
   [[nodiscard]] double total_fluid_mass() const;
   [[nodiscard]] Real boundary_volume_scale() const { return boundary_volume_scale_; }
   [[nodiscard]] const ViscosityCalibration& viscosity_calibration() const { return viscosity_calibration_; }
+  [[nodiscard]] const SurfaceTensionCalibration& surface_tension_calibration() const { return surface_tension_calibration_; }
 
  private:
   void update_bodies();
@@ -248,6 +260,8 @@ class Solver {
   Real boundary_volume_scale_ = 1;      // see calibrated_boundary_volume_scale() in solver.cpp
   Real boundary_share_at_surface_ = 1;
   ViscosityCalibration viscosity_calibration_;  // Σ V_b W on a geometric surface; see keep_out_of_boundaries()
+  SurfaceTensionCalibration surface_tension_calibration_;
+  Real largest_surface_tension_ = 0;    // N/m, over the phases (capillary time-step limit)
   std::vector<NozzleGeometry> nozzle_geometry_;
   State state_;
 };
@@ -270,6 +284,9 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
 /// boundary friction to the body wrenches. Returns conjugate-gradient iterations.
 int solve_implicit_viscosity(const Parameters& parameters, State& state, Real time_step,
                              const ViscosityCalibration& calibration);
+/// Surface tension and wall adhesion (Akinci et al. 2013), added to state.fluid.acceleration; the
+/// adhesion's reaction goes to the body wrenches.
+void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration);
 /// XSPH (Monaghan 1989): v_i += ε Σ_j V_j (v_j − v_i) W_ij.
 void apply_xsph(const Parameters& parameters, State& state);
 /// Viscosity of a particle pair (Pa·s): the harmonic mean, as for fluxes across layers in series. Where a
