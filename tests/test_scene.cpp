@@ -712,3 +712,41 @@ TEST(SceneMaterials, ViscositySolverAndRestSettings) {
   const std::string bad_kernel = replaced(valid_scene(), "<kernel>wendland_c2</kernel>", "<kernel>gaussian</kernel>");
   expect_error_at(bad_kernel, "<kernel>", "<kernel> must be one of: cubic_spline, wendland_c2; got 'gaussian'");
 }
+
+TEST(SceneMaterials, GranularMaterialsAreReadAndMayNotMixWithFluids) {
+  const auto scene = load_scene_from_string(with_material(R"(<material name="water">
+        <density>1800</density>
+        <viscosity>0</viscosity>
+        <granular>
+          <stiffness unit="N/mm">0.2</stiffness>
+          <restitution>0.4</restitution>
+          <friction>0.7</friction>
+        </granular>
+      </material>)"), "pellets.sdf");
+  const auto& granular = scene.find_material("water")->material.granular;
+  EXPECT_TRUE(granular.enabled);
+  EXPECT_FLOAT_EQ(granular.stiffness, 200.0f);
+  EXPECT_FLOAT_EQ(granular.restitution, 0.4f);
+  EXPECT_FLOAT_EQ(granular.friction, 0.7f);
+  try {
+    load_scene_from_string(with_material(R"(<material name="water">
+        <density>1000</density>
+        <viscosity>0</viscosity>
+        <granular><restitution>1.5</restitution></granular>
+      </material>)"), "bouncy.sdf");
+    FAIL() << "no error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), "bouncy.sdf:");
+    EXPECT_CONTAINS(error.what(), "restitution");
+  }
+}
+
+TEST(SceneFiles, EverySceneShippedInScenesLoads) {
+  int scenes = 0;
+  for (const auto& entry : fs::directory_iterator(M3DP_SCENES)) {
+    if (entry.path().extension() != ".sdf") continue;
+    ++scenes;
+    EXPECT_NO_THROW(m3dp::scene::load_scene(entry.path())) << entry.path();
+  }
+  EXPECT_GE(scenes, 10);
+}

@@ -34,7 +34,7 @@ constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
 enum class Quantity {
   plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass, stress, stress_rate, rate,
-  consistency, surface_tension
+  consistency, surface_tension, stiffness
 };
 
 struct Unit {
@@ -65,6 +65,7 @@ QuantityInfo quantity_info(Quantity quantity) {
   static constexpr Unit kRate[] = {{"1/s", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
   static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
   static constexpr Unit kSurfaceTension[] = {{"N/m", 1}, {"mN/m", 1e-3}, {"J/m^2", 1}, {"J/m2", 1}};
+  static constexpr Unit kStiffness[] = {{"N/m", 1}, {"N/mm", 1e3}, {"kN/m", 1e3}};
   switch (quantity) {
     case Quantity::mass: return {"mass", "kg", kMass};
     case Quantity::length: return {"length", "m", kLength};
@@ -80,6 +81,7 @@ QuantityInfo quantity_info(Quantity quantity) {
     case Quantity::rate: return {"rate", "1/s", kRate};
     case Quantity::consistency: return {"consistency", "Pa*s^n", kConsistency};
     case Quantity::surface_tension: return {"surface tension", "N/m", kSurfaceTension};
+    case Quantity::stiffness: return {"stiffness", "N/m", kStiffness};
     case Quantity::plain_number: break;
   }
   return {"plain number", "", {}};
@@ -220,6 +222,7 @@ class SceneReader {
     std::optional<double> density;  // empty when <density> itself was wrong
     SourceLocation where;
     bool used = false;
+    bool granular = false;
   };
   struct MaterialUse {
     std::string material;
@@ -303,6 +306,7 @@ class SceneReader {
   std::optional<material::Material> read_material_values(const pugi::xml_node& element, const material::Material* base);
   std::optional<material::Rheology> read_rheology(const pugi::xml_node& element, const material::Rheology* base);
   void read_ageing(const pugi::xml_node& element, material::Ageing& ageing);
+  void read_granular(const pugi::xml_node& element, material::Granular& granular);
   /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
   const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
@@ -1207,7 +1211,8 @@ void SceneReader::read_material(const pugi::xml_node& element) {
     return;
   }
   defined_materials_.push_back(
-      DefinedMaterial{*name, material ? std::optional<double>(material->density) : std::nullopt, where(element)});
+      DefinedMaterial{*name, material ? std::optional<double>(material->density) : std::nullopt, where(element), false,
+                      material && material->granular.enabled});
   if (!material) return;
   material->name = *name;
   if (preset) material->preset = preset->material.name;
@@ -1217,7 +1222,7 @@ void SceneReader::read_material(const pugi::xml_node& element) {
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base) {
   check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
-                           "source"});
+                           "granular", "source"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
@@ -1267,6 +1272,7 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
   if (const auto adhesion = read_scalar(element, "adhesion", Quantity::surface_tension, Limits::non_negative(),
                                         Presence::optional))
     material.adhesion = Real(*adhesion);
+  if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular);
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;
@@ -1362,6 +1368,20 @@ void SceneReader::read_ageing(const pugi::xml_node& element, material::Ageing& a
     ageing.structuration_rate = Real(*rate);
   if (const auto growth = read_scalar(element, "viscosity_growth", Quantity::rate, Limits::non_negative(), Presence::optional))
     ageing.viscosity_growth = Real(*growth);
+}
+
+void SceneReader::read_granular(const pugi::xml_node& element, material::Granular& granular) {
+  // <granular/> on its own switches the material to discrete spheres with the default contact law.
+  check_attributes(element, {});
+  check_children(element, {"stiffness", "restitution", "friction"});
+  granular.enabled = true;
+  if (const auto stiffness = read_scalar(element, "stiffness", Quantity::stiffness, Limits::positive(), Presence::optional))
+    granular.stiffness = Real(*stiffness);
+  if (const auto restitution = read_scalar(element, "restitution", Quantity::plain_number, Limits::positive_up_to(1),
+                                           Presence::optional))
+    granular.restitution = Real(*restitution);
+  if (const auto friction = read_scalar(element, "friction", Quantity::plain_number, Limits::non_negative(), Presence::optional))
+    granular.friction = Real(*friction);
 }
 
 const std::vector<MaterialEntry>& SceneReader::material_presets() {
@@ -1752,6 +1772,15 @@ void SceneReader::check_materials() {
                          defined.name, *defined.density, reference->name, reference->where.line,
                          *reference->density));
     }
+  }
+  // Fluids and discrete spheres do not interact yet.
+  for (const DefinedMaterial& defined : defined_materials_) {
+    if (defined.granular == defined_materials_.front().granular) continue;
+    const DefinedMaterial& first = defined_materials_.front();
+    report(defined.where, fmt::format("material '{}' is {} but material '{}' (line {}) is {}; a scene's materials are all "
+                                      "fluids or all <granular> for now",
+                                      defined.name, defined.granular ? "granular" : "a fluid", first.name, first.where.line,
+                                      first.granular ? "granular" : "a fluid"));
   }
 }
 

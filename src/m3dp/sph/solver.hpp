@@ -190,6 +190,13 @@ struct SurfaceTensionCalibration {
 SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real rest_density,
                                                      Real fluid_spacing, Real wall_spacing, Real boundary_volume_scale);
 
+/// A granular phase's contact law as the solver uses it (derived once from the material).
+struct GranularContact {
+  Real stiffness = 0;      // N/m, normal spring
+  Real damping_ratio = 0;  // ζ of the normal dashpot, from the restitution
+  Real friction = 0;       // Coulomb μ
+};
+
 /// Derived, immutable data of a nozzle: disc sample offsets and layer period.
 struct NozzleGeometry {
   std::vector<Vec3> disc_offsets;  // in the nozzle frame, z = 0
@@ -239,6 +246,10 @@ class Solver {
   [[nodiscard]] Real boundary_volume_scale() const { return boundary_volume_scale_; }
   [[nodiscard]] const ViscosityCalibration& viscosity_calibration() const { return viscosity_calibration_; }
   [[nodiscard]] const SurfaceTensionCalibration& surface_tension_calibration() const { return surface_tension_calibration_; }
+  /// True when the materials are granular (discrete spheres with contacts, no fluid forces).
+  [[nodiscard]] bool granular() const { return granular_; }
+  /// Contact law of a granular phase: the material's stiffness (N/m) or the derived default, and ζ.
+  [[nodiscard]] const GranularContact& granular_contact(std::uint16_t phase) const { return granular_contacts_[phase]; }
 
  private:
   void update_bodies();
@@ -255,6 +266,8 @@ class Solver {
   void search_neighbors();
   void keep_out_of_boundaries();
   void check_state() const;
+  /// Granular mode's step after the neighbour search: contacts, time step, integration.
+  Real step_granular(StepStats& stats);
 
   Parameters parameters_;
   Real boundary_volume_scale_ = 1;      // see calibrated_boundary_volume_scale() in solver.cpp
@@ -262,6 +275,9 @@ class Solver {
   ViscosityCalibration viscosity_calibration_;  // Σ V_b W on a geometric surface; see keep_out_of_boundaries()
   SurfaceTensionCalibration surface_tension_calibration_;
   Real largest_surface_tension_ = 0;    // N/m, over the phases (capillary time-step limit)
+  bool granular_ = false;
+  std::vector<GranularContact> granular_contacts_;  // per phase
+  Real granular_time_step_ = 0;          // s, a tenth of the shortest contact duration
   std::vector<NozzleGeometry> nozzle_geometry_;
   State state_;
 };
@@ -284,6 +300,9 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
 /// boundary friction to the body wrenches. Returns conjugate-gradient iterations.
 int solve_implicit_viscosity(const Parameters& parameters, State& state, Real time_step,
                              const ViscosityCalibration& calibration);
+/// Granular mode (Cundall & Strack 1979): gravity plus each particle's contact forces over its mass into
+/// state.fluid.acceleration; the walls' share goes to the body wrenches. One GranularContact per phase.
+void compute_granular_contacts(const Parameters& parameters, State& state, std::span<const GranularContact> phases);
 /// Surface tension and wall adhesion (Akinci et al. 2013), added to state.fluid.acceleration; the
 /// adhesion's reaction goes to the body wrenches.
 void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration);
