@@ -750,3 +750,19 @@ TEST(SceneFiles, EverySceneShippedInScenesLoads) {
   }
   EXPECT_GE(scenes, 10);
 }
+
+TEST(SceneAir, AnAirBlockSwitchesDragOnWithItsValues) {
+  const auto scene = load_scene_from_string(replaced(valid_scene(), R"(<plugin name="m3dp" filename="m3dp">)",
+                                                     R"(<plugin name="m3dp" filename="m3dp">
+      <air>
+        <density>1.1</density>
+        <viscosity unit="mPa*s">0.019</viscosity>
+        <velocity unit="mm/s">500 0 0</velocity>
+      </air>)"),
+                                            "windy.sdf");
+  EXPECT_TRUE(scene.solver.air_drag);
+  EXPECT_FLOAT_EQ(scene.solver.air_density, 1.1f);
+  EXPECT_FLOAT_EQ(scene.solver.air_viscosity, 1.9e-5f);
+  EXPECT_FLOAT_EQ(scene.solver.air_velocity.x(), 0.5f);
+  EXPECT_FALSE(load_scene_from_string(valid_scene(), "still.sdf").solver.air_drag);
+}

@@ -307,6 +307,7 @@ class SceneReader {
   std::optional<material::Rheology> read_rheology(const pugi::xml_node& element, const material::Rheology* base);
   void read_ageing(const pugi::xml_node& element, material::Ageing& ageing);
   void read_granular(const pugi::xml_node& element, material::Granular& granular);
+  void read_air(const pugi::xml_node& air);
   /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
   const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
@@ -1086,10 +1087,11 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
 // ---- the m3dp plugin ----
 
 void SceneReader::read_plugin(const pugi::xml_node& plugin) {
-  check_children(plugin, {"solver", "material", "fluid_block", "print_head", "robot", "output", "meshing"},
+  check_children(plugin, {"solver", "air", "material", "fluid_block", "print_head", "robot", "output", "meshing"},
                  {"material", "fluid_block", "print_head", "robot"});
   // The solver comes first: other checks need the particle radius and the bounds.
   if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
+  if (const pugi::xml_node air = plugin.child("air")) read_air(air);
   for (const auto& material : child_elements(plugin, "material")) read_material(material);
   for (const auto& block : child_elements(plugin, "fluid_block")) read_fluid_block(block);
   for (const auto& robot : child_elements(plugin, "robot")) read_robot_settings(robot);
@@ -1101,6 +1103,20 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
     report(plugin, "the scene has no fluid: add a <fluid_block> or a <print_head>");
   }
   check_materials();
+}
+
+void SceneReader::read_air(const pugi::xml_node& air) {
+  // The air around the print: its drag on the material's surface (Gissler et al. 2017) is on when
+  // the block is there, unless <drag>false</drag>.
+  check_attributes(air, {});
+  check_children(air, {"drag", "density", "viscosity", "velocity"});
+  sph::SolverSettings& settings = scene_.solver;
+  settings.air_drag = read_bool(air, "drag").value_or(true);
+  if (const auto density = read_scalar(air, "density", Quantity::density, Limits::positive(), Presence::optional))
+    settings.air_density = Real(*density);
+  if (const auto viscosity = read_scalar(air, "viscosity", Quantity::dynamic_viscosity, Limits::positive(), Presence::optional))
+    settings.air_viscosity = Real(*viscosity);
+  if (const auto velocity = read_vector(air, "velocity", Quantity::speed, Presence::optional)) settings.air_velocity = *velocity;
 }
 
 void SceneReader::read_solver(const pugi::xml_node& solver) {

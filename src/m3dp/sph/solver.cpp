@@ -167,6 +167,9 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   boundary_share_at_surface_ =
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
   for (const auto& phase : parameters_.phases) largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
+  full_neighbourhood_ = full_neighbourhood_count(support_radius(), particle_diameter());
+  if (settings.air_drag && !(settings.air_density > 0 && settings.air_viscosity > 0))
+    throw Error("sph::Solver: air drag needs a positive air density and viscosity");
   // Granular mode: every phase or none (a fluid and discrete spheres do not interact yet).
   granular_ = parameters_.phases.front().granular.enabled;
   for (const auto& phase : parameters_.phases)
@@ -443,6 +446,7 @@ const StepStats& Solver::step() {
   const Real largest_kinematic_viscosity = stages::update_effective_viscosity(parameters_, state_, viscosity_calibration_);
   stages::compute_non_pressure_accelerations(parameters_, state_, viscosity_calibration_);
   stages::add_surface_tension(parameters_, state_, surface_tension_calibration_);
+  stages::add_air_drag(parameters_, state_, full_neighbourhood_);
   // CFL (Courant) condition on the velocity after the non-pressure forces.
   const Real previous_step = state_.time_step;
   const Real max_speed_squared = tbb::parallel_reduce(

@@ -58,6 +58,12 @@ struct SolverSettings {
   // fixed neighbour of the material still moving. It wakes when a moving neighbour (fluid faster than
   // wake_speed, or a moving body's surface) comes within a support radius.
   bool rest_detection = true;
+  // Air drag on the material's surface (Gissler et al. 2017), off by default: still air exerts
+  // ½ ρ_air C_D A v² on each exposed particle; wind is air_velocity.
+  bool air_drag = false;
+  Real air_density = Real(1.204);             // kg/m³, dry air at 20 °C
+  Real air_viscosity = Real(1.825e-5);        // Pa·s, dry air at 20 °C
+  Vec3 air_velocity = Vec3::Zero();           // m/s
   Real rest_speed = Real(2e-3);               // m/s
   Real rest_duration = Real(0.05);            // s
   Real wake_speed = Real(5e-3);               // m/s
@@ -197,6 +203,11 @@ struct GranularContact {
   Real friction = 0;       // Coulomb μ
 };
 
+/// Drag coefficient of a sphere at Reynolds number Re (Schiller & Naumann 1933; 0.44 from Re = 1000).
+Real sphere_drag_coefficient(Real reynolds_number);
+/// Neighbours (excluding itself) of a particle on the rest lattice of spacing `spacing`.
+int full_neighbourhood_count(Real support_radius, Real spacing);
+
 /// Derived, immutable data of a nozzle: disc sample offsets and layer period.
 struct NozzleGeometry {
   std::vector<Vec3> disc_offsets;  // in the nozzle frame, z = 0
@@ -275,6 +286,7 @@ class Solver {
   ViscosityCalibration viscosity_calibration_;  // Σ V_b W on a geometric surface; see keep_out_of_boundaries()
   SurfaceTensionCalibration surface_tension_calibration_;
   Real largest_surface_tension_ = 0;    // N/m, over the phases (capillary time-step limit)
+  int full_neighbourhood_ = 1;           // neighbours of an interior particle on the rest lattice
   bool granular_ = false;
   std::vector<GranularContact> granular_contacts_;  // per phase
   Real granular_time_step_ = 0;          // s, a tenth of the shortest contact duration
@@ -303,6 +315,9 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 /// Granular mode (Cundall & Strack 1979): gravity plus each particle's contact forces over its mass into
 /// state.fluid.acceleration; the walls' share goes to the body wrenches. One GranularContact per phase.
 void compute_granular_contacts(const Parameters& parameters, State& state, std::span<const GranularContact> phases);
+/// Air drag (Gissler et al. 2017) on the exposed particles, added to state.fluid.acceleration.
+/// `full_neighbourhood`: the neighbour count of a particle inside the material.
+void add_air_drag(const Parameters& parameters, State& state, int full_neighbourhood);
 /// Surface tension and wall adhesion (Akinci et al. 2013), added to state.fluid.acceleration; the
 /// adhesion's reaction goes to the body wrenches.
 void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration);
