@@ -766,3 +766,17 @@ TEST(SceneAir, AnAirBlockSwitchesDragOnWithItsValues) {
   EXPECT_FLOAT_EQ(scene.solver.air_velocity.x(), 0.5f);
   EXPECT_FALSE(load_scene_from_string(valid_scene(), "still.sdf").solver.air_drag);
 }
+
+TEST(SceneMaterials, MicropolarBlockTurnsTheModelOn) {
+  const auto scene = load_scene_from_string(with_material(R"(<material name="water" preset="water">
+        <micropolar>
+          <vortex_viscosity unit="mPa*s">5</vortex_viscosity>
+          <microinertia unit="mm^2">0.5</microinertia>
+        </micropolar>
+      </material>)"), "vortices.sdf");
+  const auto& micropolar = scene.find_material("water")->material.micropolar;
+  EXPECT_TRUE(micropolar.enabled);
+  EXPECT_FLOAT_EQ(micropolar.vortex_viscosity, 0.005f);
+  EXPECT_FLOAT_EQ(micropolar.microinertia, 5e-7f);
+  EXPECT_FLOAT_EQ(micropolar.angular_smoothing, 0.1f);  // the default
+}

@@ -34,7 +34,7 @@ constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
 enum class Quantity {
   plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass, stress, stress_rate, rate,
-  consistency, surface_tension, stiffness
+  consistency, surface_tension, stiffness, area
 };
 
 struct Unit {
@@ -66,6 +66,7 @@ QuantityInfo quantity_info(Quantity quantity) {
   static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
   static constexpr Unit kSurfaceTension[] = {{"N/m", 1}, {"mN/m", 1e-3}, {"J/m^2", 1}, {"J/m2", 1}};
   static constexpr Unit kStiffness[] = {{"N/m", 1}, {"N/mm", 1e3}, {"kN/m", 1e3}};
+  static constexpr Unit kArea[] = {{"m^2", 1}, {"m2", 1}, {"mm^2", 1e-6}, {"mm2", 1e-6}};
   switch (quantity) {
     case Quantity::mass: return {"mass", "kg", kMass};
     case Quantity::length: return {"length", "m", kLength};
@@ -82,6 +83,7 @@ QuantityInfo quantity_info(Quantity quantity) {
     case Quantity::consistency: return {"consistency", "Pa*s^n", kConsistency};
     case Quantity::surface_tension: return {"surface tension", "N/m", kSurfaceTension};
     case Quantity::stiffness: return {"stiffness", "N/m", kStiffness};
+    case Quantity::area: return {"area", "m^2", kArea};
     case Quantity::plain_number: break;
   }
   return {"plain number", "", {}};
@@ -308,6 +310,7 @@ class SceneReader {
   void read_ageing(const pugi::xml_node& element, material::Ageing& ageing);
   void read_granular(const pugi::xml_node& element, material::Granular& granular);
   void read_air(const pugi::xml_node& air);
+  void read_micropolar(const pugi::xml_node& element, material::Micropolar& micropolar);
   /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
   const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
@@ -1238,7 +1241,7 @@ void SceneReader::read_material(const pugi::xml_node& element) {
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base) {
   check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
-                           "granular", "source"});
+                           "granular", "micropolar", "source"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
@@ -1289,6 +1292,7 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
                                         Presence::optional))
     material.adhesion = Real(*adhesion);
   if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular);
+  if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material.micropolar);
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;
@@ -1398,6 +1402,21 @@ void SceneReader::read_granular(const pugi::xml_node& element, material::Granula
     granular.restitution = Real(*restitution);
   if (const auto friction = read_scalar(element, "friction", Quantity::plain_number, Limits::non_negative(), Presence::optional))
     granular.friction = Real(*friction);
+}
+
+void SceneReader::read_micropolar(const pugi::xml_node& element, material::Micropolar& micropolar) {
+  // <micropolar/> on its own turns the model on with its defaults.
+  check_attributes(element, {});
+  check_children(element, {"vortex_viscosity", "microinertia", "angular_smoothing"});
+  micropolar.enabled = true;
+  if (const auto viscosity = read_scalar(element, "vortex_viscosity", Quantity::dynamic_viscosity, Limits::positive(),
+                                         Presence::optional))
+    micropolar.vortex_viscosity = Real(*viscosity);
+  if (const auto inertia = read_scalar(element, "microinertia", Quantity::area, Limits::positive(), Presence::optional))
+    micropolar.microinertia = Real(*inertia);
+  if (const auto smoothing = read_scalar(element, "angular_smoothing", Quantity::fraction, Limits{std::nullopt, 0.0, 1.0},
+                                         Presence::optional))
+    micropolar.angular_smoothing = Real(*smoothing);
 }
 
 const std::vector<MaterialEntry>& SceneReader::material_presets() {

@@ -38,7 +38,8 @@ class ParticleFrameWriter {
                    io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
                    io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time),
                    io::PointArray::of("viscosity", fluid.viscosity), io::PointArray::of("shear_rate", fluid.shear_rate),
-                   io::PointArray::of("rest_time", fluid.rest_time)},
+                   io::PointArray::of("rest_time", fluid.rest_time),
+                   io::PointArray::of("angular_velocity", fluid.angular_velocity)},
                   {{"particle_radius", solver.parameters().settings.particle_radius}, {"time", solver.time()}});
     collection_.add(solver.time(), file);
   }

@@ -29,6 +29,7 @@ struct FluidParticles {
   std::vector<Real> shear_rate;          // (n) 1/s, √(2 D:D) of this step (non-Newtonian phases only)
   std::vector<Vec3> viscous_change;      // (n) m/s, last step's velocity change by the implicit viscosity (warm start)
   std::vector<Real> rest_time;           // (n) s the particle has been at rest (see SolverSettings::rest_detection)
+  std::vector<Vec3> angular_velocity;    // (n) rad/s, micro-rotation ω (micropolar materials; zero otherwise)
 
   [[nodiscard]] std::size_t size() const { return position.size(); }
 
@@ -51,6 +52,7 @@ struct FluidParticles {
     visit(shear_rate);
     visit(viscous_change);
     visit(rest_time);
+    visit(angular_velocity);
   }
   void reserve(std::size_t capacity) {
     for_each_field([&](auto& field) { field.reserve(capacity); });

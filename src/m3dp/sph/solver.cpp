@@ -168,6 +168,12 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
   for (const auto& phase : parameters_.phases) largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
   full_neighbourhood_ = full_neighbourhood_count(support_radius(), particle_diameter());
+  for (const auto& phase : parameters_.phases) {
+    // Micropolar: Θ of the sphere of one particle's volume unless the material gives one.
+    const Real sphere_radius = particle_diameter() * std::cbrt(Real(3) / (4 * kPi));
+    microinertia_.push_back(phase.micropolar.microinertia > 0 ? phase.micropolar.microinertia
+                                                              : Real(0.4) * sphere_radius * sphere_radius);
+  }
   if (settings.air_drag && !(settings.air_density > 0 && settings.air_viscosity > 0))
     throw Error("sph::Solver: air drag needs a positive air density and viscosity");
   // Granular mode: every phase or none (a fluid and discrete spheres do not interact yet).
@@ -273,6 +279,7 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.shear_rate[i] = 0;
     fluid.viscous_change[i] = Vec3::Zero();
     fluid.rest_time[i] = 0;
+    fluid.angular_velocity[i] = Vec3::Zero();
     ++added;
   }
   activate_appended(first_new);
@@ -298,6 +305,7 @@ void Solver::update_rest_partition() {
     if (i != last) fluid.swap(i, last);
     fluid.velocity[last] = Vec3::Zero();
     fluid.viscous_change[last] = Vec3::Zero();
+    fluid.angular_velocity[last] = Vec3::Zero();
     fluid.kappa_density[last] = 0;
     fluid.kappa_divergence[last] = 0;
   }
@@ -480,6 +488,8 @@ const StepStats& Solver::step() {
   if (gravity_norm > 0) time_step = std::min(time_step, std::sqrt(diameter / (50 * gravity_norm)));
   time_step = std::max(time_step, settings.min_time_step);
   state_.time_step = time_step;
+  // Micro-rotation (its relaxation is integrated implicitly, so it sets no limit of its own).
+  stages::apply_micropolar(parameters_, state_, time_step, microinertia_);
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.velocity[i] += time_step * state_.fluid.acceleration[i]; }, 1024);
   stats.stage_ms.forces = elapsed_ms(start);
 
@@ -732,6 +742,7 @@ void Solver::emit(StepStats& stats) {
         fluid.shear_rate[i] = 0;
         fluid.viscous_change[i] = Vec3::Zero();
         fluid.rest_time[i] = 0;
+        fluid.angular_velocity[i] = Vec3::Zero();
         state_.mass_emitted_total += mass;
       }
       activate_appended(first);

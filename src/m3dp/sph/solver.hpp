@@ -286,6 +286,7 @@ class Solver {
   ViscosityCalibration viscosity_calibration_;  // Σ V_b W on a geometric surface; see keep_out_of_boundaries()
   SurfaceTensionCalibration surface_tension_calibration_;
   Real largest_surface_tension_ = 0;    // N/m, over the phases (capillary time-step limit)
+  std::vector<Real> microinertia_;      // m² per phase (micropolar)
   int full_neighbourhood_ = 1;           // neighbours of an interior particle on the rest lattice
   bool granular_ = false;
   std::vector<GranularContact> granular_contacts_;  // per phase
@@ -315,6 +316,10 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 /// Granular mode (Cundall & Strack 1979): gravity plus each particle's contact forces over its mass into
 /// state.fluid.acceleration; the walls' share goes to the body wrenches. One GranularContact per phase.
 void compute_granular_contacts(const Parameters& parameters, State& state, std::span<const GranularContact> phases);
+/// Micropolar materials (Bender et al. 2017): adds μ_t ∇×ω / ρ to state.fluid.acceleration and advances
+/// each particle's micro-rotation over `time_step` (the −2ω relaxation implicitly). `microinertia`: Θ
+/// (m²) per phase.
+void apply_micropolar(const Parameters& parameters, State& state, Real time_step, std::span<const Real> microinertia);
 /// Air drag (Gissler et al. 2017) on the exposed particles, added to state.fluid.acceleration.
 /// `full_neighbourhood`: the neighbour count of a particle inside the material.
 void add_air_drag(const Parameters& parameters, State& state, int full_neighbourhood);
