@@ -780,3 +780,28 @@ TEST(SceneMaterials, MicropolarBlockTurnsTheModelOn) {
   EXPECT_FLOAT_EQ(micropolar.microinertia, 5e-7f);
   EXPECT_FLOAT_EQ(micropolar.angular_smoothing, 0.1f);  // the default
 }
+
+TEST(SceneMaterials, ElasticityInPascalsAndSeconds) {
+  const auto scene = load_scene_from_string(with_material(R"(<material name="water" preset="clay_paste">
+        <elasticity>
+          <shear_modulus unit="kPa">20</shear_modulus>
+          <poisson_ratio>0.4</poisson_ratio>
+          <relaxation_time unit="ms">500</relaxation_time>
+        </elasticity>
+      </material>)"), "springy.sdf");
+  const auto& elasticity = scene.find_material("water")->material.elasticity;
+  EXPECT_TRUE(elasticity.enabled);
+  EXPECT_FLOAT_EQ(elasticity.shear_modulus, 2e4f);
+  EXPECT_FLOAT_EQ(elasticity.poisson_ratio, 0.4f);
+  EXPECT_FLOAT_EQ(elasticity.relaxation_time, 0.5f);
+  try {
+    load_scene_from_string(with_material(R"(<material name="water" preset="clay_paste">
+        <elasticity><poisson_ratio>0.5</poisson_ratio></elasticity>
+      </material>)"), "rubber.sdf");
+    FAIL() << "no error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), "rubber.sdf:");
+    EXPECT_CONTAINS(error.what(), "shear_modulus");
+    EXPECT_CONTAINS(error.what(), "poisson_ratio");
+  }
+}

@@ -5,6 +5,7 @@
 
 #include "m3dp/core/types.hpp"
 #include "m3dp/material/ageing/roussel2006.hpp"
+#include "m3dp/material/elasticity/peer2018.hpp"
 #include "m3dp/material/granular/cundall_strack1979.hpp"
 #include "m3dp/material/rheology/generalized_newtonian.hpp"
 #include "m3dp/material/vorticity/micropolar_bender2017.hpp"
@@ -23,6 +24,7 @@ struct Material {
   Real adhesion = 0;                   // N/m, work of adhesion to walls, σ(1 + cos θ) by Young–Dupré; 0 = none
   Granular granular;                   // enabled: discrete spheres with contacts instead of a fluid
   Micropolar micropolar;               // enabled: particles carry a micro-rotation (vorticity kept)
+  Elasticity elasticity;               // enabled: a shear stress from the deformation of a reference shape
 
   [[nodiscard]] bool has_surface_forces() const { return surface_tension > 0 || adhesion > 0; }
   [[nodiscard]] bool has_wall_friction() const { return sticks_to_walls || boundary_viscosity > 0; }

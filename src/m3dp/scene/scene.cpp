@@ -311,6 +311,7 @@ class SceneReader {
   void read_granular(const pugi::xml_node& element, material::Granular& granular);
   void read_air(const pugi::xml_node& air);
   void read_micropolar(const pugi::xml_node& element, material::Micropolar& micropolar);
+  void read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity);
   /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
   const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
@@ -1241,7 +1242,7 @@ void SceneReader::read_material(const pugi::xml_node& element) {
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base) {
   check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
-                           "granular", "micropolar", "source"});
+                           "granular", "micropolar", "elasticity", "source"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
@@ -1293,6 +1294,7 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
     material.adhesion = Real(*adhesion);
   if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular);
   if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material.micropolar);
+  if (const pugi::xml_node elasticity = element.child("elasticity")) read_elasticity(elasticity, material.elasticity);
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;
@@ -1417,6 +1419,19 @@ void SceneReader::read_micropolar(const pugi::xml_node& element, material::Micro
   if (const auto smoothing = read_scalar(element, "angular_smoothing", Quantity::fraction, Limits{std::nullopt, 0.0, 1.0},
                                          Presence::optional))
     micropolar.angular_smoothing = Real(*smoothing);
+}
+
+void SceneReader::read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity) {
+  check_attributes(element, {});
+  check_children(element, {"shear_modulus", "poisson_ratio", "relaxation_time"});
+  elasticity.enabled = true;
+  if (const auto modulus = read_scalar(element, "shear_modulus", Quantity::stress, Limits::positive(), Presence::required))
+    elasticity.shear_modulus = Real(*modulus);
+  if (const auto ratio = read_scalar(element, "poisson_ratio", Quantity::plain_number, Limits{std::nullopt, 0.0, 0.49},
+                                     Presence::optional))
+    elasticity.poisson_ratio = Real(*ratio);
+  if (const auto relaxation = read_scalar(element, "relaxation_time", Quantity::time, Limits::non_negative(), Presence::optional))
+    elasticity.relaxation_time = Real(*relaxation);
 }
 
 const std::vector<MaterialEntry>& SceneReader::material_presets() {

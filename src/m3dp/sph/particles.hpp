@@ -30,6 +30,7 @@ struct FluidParticles {
   std::vector<Vec3> viscous_change;      // (n) m/s, last step's velocity change by the implicit viscosity (warm start)
   std::vector<Real> rest_time;           // (n) s the particle has been at rest (see SolverSettings::rest_detection)
   std::vector<Vec3> angular_velocity;    // (n) rad/s, micro-rotation ω (micropolar materials; zero otherwise)
+  std::vector<Vec3> reference_position;  // (n) m, where the particle sits in the unstrained shape (elastic materials)
 
   [[nodiscard]] std::size_t size() const { return position.size(); }
 
@@ -53,6 +54,7 @@ struct FluidParticles {
     visit(viscous_change);
     visit(rest_time);
     visit(angular_velocity);
+    visit(reference_position);
   }
   void reserve(std::size_t capacity) {
     for_each_field([&](auto& field) { field.reserve(capacity); });

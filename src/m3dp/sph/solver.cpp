@@ -169,6 +169,17 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   for (const auto& phase : parameters_.phases) largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
   full_neighbourhood_ = full_neighbourhood_count(support_radius(), particle_diameter());
   for (const auto& phase : parameters_.phases) {
+    if (!phase.elasticity.enabled) continue;
+    any_elastic_ = true;
+    if (settings.viscosity_solver != ViscositySolver::implicit_weiler2018)
+      throw Error(fmt::format("sph::Solver: material '{}' is elastic, which needs the implicit viscosity solver", phase.name));
+    if (!(phase.elasticity.shear_modulus > 0))
+      throw Error(fmt::format("sph::Solver: material '{}': shear modulus must be > 0 Pa", phase.name));
+    if (!(phase.elasticity.poisson_ratio >= 0 && phase.elasticity.poisson_ratio <= Real(0.49)))
+      throw Error(fmt::format("sph::Solver: material '{}': Poisson's ratio must be in [0, 0.49], got {}", phase.name,
+                              phase.elasticity.poisson_ratio));
+  }
+  for (const auto& phase : parameters_.phases) {
     // Micropolar: Θ of the sphere of one particle's volume unless the material gives one.
     const Real sphere_radius = particle_diameter() * std::cbrt(Real(3) / (4 * kPi));
     microinertia_.push_back(phase.micropolar.microinertia > 0 ? phase.micropolar.microinertia
@@ -280,6 +291,7 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.viscous_change[i] = Vec3::Zero();
     fluid.rest_time[i] = 0;
     fluid.angular_velocity[i] = Vec3::Zero();
+    fluid.reference_position[i] = point;
     ++added;
   }
   activate_appended(first_new);
@@ -336,7 +348,8 @@ void Solver::update_rest_clocks(Real time_step) {
     // Only a yield-stress material can stop for good (any other creeps on); it rests while slow and
     // while its shear stress μ γ̇ stays below its (aged) yield stress.
     bool resting = false;
-    if (material::has_yield_stress(phase.rheology.model) && speed_squared < rest_speed_squared) {
+    // An elastic material never rests: its stress depends on where its neighbours are.
+    if (material::has_yield_stress(phase.rheology.model) && !phase.elasticity.enabled && speed_squared < rest_speed_squared) {
       const Real age = time - fluid.birth_time[i];
       resting = fluid.viscosity[i] * fluid.shear_rate[i] < phase.ageing.yield_stress(phase.rheology.yield_stress, age);
     }
@@ -379,6 +392,7 @@ void Solver::reserve(std::size_t capacity) {
   system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);
   system.inverse_diagonal.reserve(capacity);
   state_.surface_normal.reserve(capacity);
+  state_.elastic_stress.reserve(capacity);
   for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product,
                        &system.start_velocity})
     vector->reserve(capacity);
@@ -455,6 +469,7 @@ const StepStats& Solver::step() {
   stages::compute_non_pressure_accelerations(parameters_, state_, viscosity_calibration_);
   stages::add_surface_tension(parameters_, state_, surface_tension_calibration_);
   stages::add_air_drag(parameters_, state_, full_neighbourhood_);
+  stages::add_elastic_forces(parameters_, state_);
   // CFL (Courant) condition on the velocity after the non-pressure forces.
   const Real previous_step = state_.time_step;
   const Real max_speed_squared = tbb::parallel_reduce(
@@ -503,6 +518,13 @@ const StepStats& Solver::step() {
   // g Δt (2 cm/s at 2 ms steps) and never stands. The next step's divergence solve corrects what the
   // viscous smoothing changes in the divergence.
   start = Clock::now();
+  // Elastic materials: their shear stiffness enters the implicit velocity solve as a viscosity G·Δt
+  // (elasticity_peer2018.cpp); the stress of the current shape was added with the other forces.
+  if (any_elastic_)
+    parallel_for_each_index(count, [&](std::size_t i) {
+      const auto& elasticity = parameters_.phases[state_.fluid.phase[i]].elasticity;
+      if (elasticity.enabled) state_.fluid.viscosity[i] += elasticity.shear_modulus * time_step;
+    }, 1024);
   if (!explicit_viscosity) stats.viscosity_iterations = stages::solve_implicit_viscosity(parameters_, state_, time_step, viscosity_calibration_);
   stages::apply_xsph(parameters_, state_);
   stats.stage_ms.viscosity = elapsed_ms(start);
@@ -510,6 +532,7 @@ const StepStats& Solver::step() {
   start = Clock::now();
   push_out_of_nozzles();
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.position[i] += time_step * state_.fluid.velocity[i]; }, 1024);
+  if (any_elastic_) stages::relax_reference_shape(parameters_, state_, time_step);
   if (settings.rest_detection) update_rest_clocks(time_step);
   stats.particles_at_rest = state_.fluid.size() - state_.active_count;
   keep_out_of_boundaries();
@@ -743,6 +766,7 @@ void Solver::emit(StepStats& stats) {
         fluid.viscous_change[i] = Vec3::Zero();
         fluid.rest_time[i] = 0;
         fluid.angular_velocity[i] = Vec3::Zero();
+        fluid.reference_position[i] = fluid.position[i];
         state_.mass_emitted_total += mass;
       }
       activate_appended(first);

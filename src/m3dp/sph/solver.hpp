@@ -175,6 +175,7 @@ struct State {
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
     std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
   } viscosity_system;
+  std::vector<Mat3> elastic_stress;  // (n) R σ L of elastic particles this step (Peer et al. 2018)
   std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij of this step (surface tension only)
 };
 
@@ -287,6 +288,7 @@ class Solver {
   SurfaceTensionCalibration surface_tension_calibration_;
   Real largest_surface_tension_ = 0;    // N/m, over the phases (capillary time-step limit)
   std::vector<Real> microinertia_;      // m² per phase (micropolar)
+  bool any_elastic_ = false;
   int full_neighbourhood_ = 1;           // neighbours of an interior particle on the rest lattice
   bool granular_ = false;
   std::vector<GranularContact> granular_contacts_;  // per phase
@@ -316,6 +318,11 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 /// Granular mode (Cundall & Strack 1979): gravity plus each particle's contact forces over its mass into
 /// state.fluid.acceleration; the walls' share goes to the body wrenches. One GranularContact per phase.
 void compute_granular_contacts(const Parameters& parameters, State& state, std::span<const GranularContact> phases);
+/// Elastic materials (Peer et al. 2018): the corotated deviatoric stress of each particle's deformation
+/// against its reference shape, as accelerations into state.fluid.acceleration.
+void add_elastic_forces(const Parameters& parameters, State& state);
+/// Elastic materials with a relaxation time: the reference shape creeps towards the current one.
+void relax_reference_shape(const Parameters& parameters, State& state, Real time_step);
 /// Micropolar materials (Bender et al. 2017): adds μ_t ∇×ω / ρ to state.fluid.acceleration and advances
 /// each particle's micro-rotation over `time_step` (the −2ω relaxation implicitly). `microinertia`: Θ
 /// (m²) per phase.

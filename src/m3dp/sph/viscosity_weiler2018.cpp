@@ -118,7 +118,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   const bool any_viscosity =
       std::any_of(parameters.phases.begin(), parameters.phases.end(), [](const FluidPhase& phase) {
         return phase.rheology.model != material::RheologyModel::newtonian || phase.rheology.viscosity > 0 ||
-               phase.has_wall_friction();
+               phase.has_wall_friction() || phase.elasticity.enabled;
       });
   if (!any_viscosity) return 0;
 
