@@ -475,21 +475,29 @@ TEST(RestDetection, RestedMaterialCostsNothingAndWakesWhenABoxLandsOnIt) {
   EXPECT_GT(box_height, 0.0f);
 }
 
-TEST(MaterialMatrix, NineMaterialsInOneWorldSpreadByTheirRheology) {
-  // scenes/material_matrix.sdf: nine nozzles, each its own material, lay the same line. The beads
-  // spread more the lower the yield stress and, without one, the lower the viscosity.
-  scene::Scene scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / "material_matrix.sdf");
+namespace {
+
+struct BeadMatrix {
+  double width[3][3] = {};   // m, [row][column]
+  double height[3][3] = {};  // m
+};
+
+/// Runs a 3 × 3 matrix scene (nine 6 cm lines, columns 0.12 m apart in x, rows 0.08 m in y) to its end
+/// and measures each bead's width and height in the middle of its line.
+BeadMatrix run_bead_matrix(const char* scene_name, const char* row_label, const double (&rows)[3], const char* column_label,
+                           const double (&columns)[3]) {
+  scene::Scene scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / scene_name);
   scene.output.write_particles = false;
-  ASSERT_EQ(scene.materials.size(), 9u);
+  EXPECT_EQ(scene.materials.size(), 9u);
   sim::Simulation simulation(scene);
   while (simulation.time() < scene.end_time) simulation.step();
   const auto& fluid = simulation.solver().fluid();
   const Real d = simulation.solver().particle_diameter();
-  const double viscosities[] = {1, 10, 100}, yield_stresses[] = {0, 50, 300};
-  double width[3][3] = {}, height[3][3] = {};
-  std::printf("bead width / height (mm) in the middle of each line; rows: plastic viscosity, columns: yield stress\n");
+  BeadMatrix beads;
+  std::printf("%s: bead width / height (mm) in the middle of each line; rows: %s, columns: %s\n", scene_name, row_label,
+              column_label);
   for (int row = 0; row < 3; ++row) {
-    std::printf("  %5.0f Pa s:", viscosities[row]);
+    std::printf("  %7.3g:", rows[row]);
     for (int column = 0; column < 3; ++column) {
       const Real x0 = Real(0.12) * Real(column), y0 = Real(0.08) * Real(row);
       Real y_min = 1, y_max = -1, top = 0;
@@ -500,16 +508,38 @@ TEST(MaterialMatrix, NineMaterialsInOneWorldSpreadByTheirRheology) {
         y_max = std::max(y_max, p.y());
         top = std::max(top, p.z());
       }
-      width[row][column] = double(y_max - y_min + d);
-      height[row][column] = double(top + d / 2);
-      std::printf("  tau %3.0f Pa: %5.1f / %4.1f", yield_stresses[column], 1e3 * width[row][column], 1e3 * height[row][column]);
+      beads.width[row][column] = double(y_max - y_min + d);
+      beads.height[row][column] = double(top + d / 2);
+      std::printf("  %6.3g: %5.1f / %4.1f", columns[column], 1e3 * beads.width[row][column], 1e3 * beads.height[row][column]);
     }
     std::printf("\n");
   }
+  return beads;
+}
+
+}  // namespace
+
+TEST(MaterialMatrix, NineMaterialsInOneWorldSpreadByTheirRheology) {
+  // scenes/rheology_matrix.sdf: nine nozzles, each its own material, lay the same line. The beads
+  // spread more the lower the yield stress and, without one, the lower the viscosity.
+  const double viscosities[] = {1, 10, 100}, yield_stresses[] = {0, 50, 300};
+  const BeadMatrix beads =
+      run_bead_matrix("rheology_matrix.sdf", "plastic viscosity (Pa s)", viscosities, "yield stress (Pa)", yield_stresses);
   for (int row = 0; row < 3; ++row)
-    EXPECT_GT(width[row][0], width[row][2]) << "a yield stress keeps the bead narrower, at " << viscosities[row] << " Pa s";
-  EXPECT_GT(width[0][0], width[2][0]) << "a thin Newtonian fluid spreads wider than a thick one";
-  EXPECT_LT(height[0][0], height[0][2]) << "and lies flatter than a bead with a yield stress";
+    EXPECT_GT(beads.width[row][0], beads.width[row][2]) << "a yield stress keeps the bead narrower, at " << viscosities[row] << " Pa s";
+  EXPECT_GT(beads.width[0][0], beads.width[2][0]) << "a thin Newtonian fluid spreads wider than a thick one";
+  EXPECT_LT(beads.height[0][0], beads.height[0][2]) << "and lies flatter than a bead with a yield stress";
+}
+
+TEST(MaterialMatrix, SurfaceTensionHoldsAThinBeadTogether) {
+  // scenes/material_matrix.sdf, the classic figure: viscosity × surface tension. A thin liquid
+  // spreads into a film; surface tension keeps it a narrower, higher bead. The thick ones have not
+  // spread far in the time, with or without it.
+  const double viscosities[] = {1, 10, 100}, tensions[] = {0, 0.07, 0.3};
+  const BeadMatrix beads = run_bead_matrix("material_matrix.sdf", "viscosity (Pa s)", viscosities, "surface tension (N/m)", tensions);
+  EXPECT_GT(beads.width[0][0], beads.width[0][2]) << "surface tension keeps the 1 Pa s bead narrower";
+  EXPECT_LT(beads.height[0][0], beads.height[0][2]) << "and higher";
+  EXPECT_GT(beads.width[0][0], beads.width[2][0]) << "a thin liquid spreads wider than a thick one";
 }
 
 namespace {
