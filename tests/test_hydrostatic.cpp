@@ -126,3 +126,79 @@ TEST_F(Hydrostatic, NoParticleBelowTheFloorOrLost) {
   EXPECT_GT(lowest, 0);
   EXPECT_EQ(simulation_->solver().state().particles_removed_total, 0u);
 }
+
+namespace {
+
+/// A 40 mm square tank with two 20 mm layers of Newtonian liquids of 1000 and 2000 kg/m³ (d = 2.5 mm),
+/// the `lower` one at the bottom.
+scene::Scene two_layer_tank(const char* lower, const char* upper) {
+  sim::HydrostaticSetup setup;
+  setup.width = Real(0.04);
+  setup.height = Real(0.04);
+  setup.particle_radius = Real(0.00125);
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.output.write_particles = false;
+  scene.materials.clear();
+  scene.materials.push_back(scene::MaterialEntry{material::newtonian("light", 1000, Real(0.01)), {}});
+  scene.materials.push_back(scene::MaterialEntry{material::newtonian("heavy", 2000, Real(0.01)), {}});
+  scene.fluid_blocks.clear();
+  scene::FluidBlock bottom, top;
+  bottom.name = "bottom";
+  bottom.material = lower;
+  bottom.box.min = Vec3::Zero();
+  bottom.box.max = Vec3(setup.width, setup.width, setup.height / 2);
+  top.name = "top";
+  top.material = upper;
+  top.box.min = Vec3(0, 0, setup.height / 2);
+  top.box.max = Vec3(setup.width, setup.width, setup.height);
+  scene.fluid_blocks.push_back(bottom);
+  scene.fluid_blocks.push_back(top);
+  return scene;
+}
+
+/// Mean height (m) of the particles of one material.
+double mean_height(const sph::Solver& solver, std::uint16_t phase) {
+  double sum = 0;
+  int count = 0;
+  for (std::size_t i = 0; i < solver.fluid().size(); ++i)
+    if (solver.fluid().phase[i] == phase) {
+      sum += solver.fluid().position[i].z();
+      ++count;
+    }
+  return sum / count;
+}
+
+}  // namespace
+
+TEST(TwoDensities, ALightLiquidOnAHeavyOneWeighsWhatBothWeigh) {
+  const scene::Scene scene = two_layer_tank("heavy", "light");
+  sim::Simulation simulation(scene);
+  const auto& solver = simulation.solver();
+  while (solver.time() < 0.6) simulation.step();
+  double impulse = 0, duration = 0;
+  while (solver.time() < 0.8) {
+    const auto& stats = simulation.step();
+    for (const auto& body : solver.bodies()) impulse -= body.fluid_force.z() * stats.time_step;
+    duration += stats.time_step;
+  }
+  const double weight = solver.total_fluid_mass() * 9.81, force = impulse / duration;
+  const double light = mean_height(solver, 0), heavy = mean_height(solver, 1);
+  std::printf("two layers (1000 on 2000 kg/m^3): force on the tank %.4f N, weight %.4f N: error %+.2f %% (tolerance 2 %%); "
+              "mean heights light %.1f mm, heavy %.1f mm (stacked: 30 and 10)\n",
+              force, weight, 100 * (force / weight - 1), light * 1e3, heavy * 1e3);
+  EXPECT_NEAR(force / weight, 1.0, 0.02);
+  EXPECT_NEAR(heavy, 0.01, 0.002);  // stays below
+  EXPECT_NEAR(light, 0.03, 0.002);
+}
+
+TEST(TwoDensities, AHeavyLiquidOnALightOneSinksThroughIt) {
+  // Rayleigh–Taylor: the heavy layer on top is unstable and ends at the bottom.
+  const scene::Scene scene = two_layer_tank("light", "heavy");
+  sim::Simulation simulation(scene);
+  const auto& solver = simulation.solver();
+  while (solver.time() < 1.5) simulation.step();
+  const double light = mean_height(solver, 0), heavy = mean_height(solver, 1);
+  std::printf("heavy (2000 kg/m^3) on light (1000): after 1.5 s mean heights heavy %.1f mm, light %.1f mm (started 30 and 10)\n",
+              heavy * 1e3, light * 1e3);
+  EXPECT_LT(heavy, light);
+}

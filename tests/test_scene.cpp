@@ -252,12 +252,13 @@ TEST(Scene, UndefinedMaterial) {
                   "material 'clay' used by <fluid_block name=\"column\"> is not defined; defined: water");
 }
 
-TEST(Scene, MaterialsMustShareTheirDensity) {
+TEST(Scene, MaterialsMayDifferInDensity) {
   const std::string text = replaced(valid_scene(), "<fluid_block name=\"column\" material=\"water\">",
                                     "<material name=\"clay\"><density unit=\"g/cm^3\">1.8</density>"
                                     "<viscosity>10</viscosity></material>\n"
                                     "      <fluid_block name=\"column\" material=\"clay\">");
-  expect_error_at(text, "<material name=\"clay\">", "material 'clay' has density 1800 kg/m^3 but material 'water'");
+  const auto scene = load_scene_from_string(text, "two_materials.sdf");
+  EXPECT_FLOAT_EQ(scene.find_material("clay")->material.density, 1800.0f);
 }
 
 TEST(Scene, NozzleNarrowerThanAParticle) {

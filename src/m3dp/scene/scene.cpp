@@ -221,7 +221,6 @@ class SceneReader {
   // A <material> as defined, for the checks that need all of them.
   struct DefinedMaterial {
     std::string name;
-    std::optional<double> density;  // empty when <density> itself was wrong
     SourceLocation where;
     bool used = false;
     bool granular = false;
@@ -1216,7 +1215,7 @@ void SceneReader::read_material(const pugi::xml_node& element) {
       for (const auto& entry : presets) known += (known.empty() ? "" : ", ") + entry.material.name;
       report(element, fmt::format("unknown material preset '{}'; the presets ({}) are: {}", *preset_name,
                                   material_presets_file().string(), known.empty() ? "none" : known));
-      if (name) defined_materials_.push_back(DefinedMaterial{*name, std::nullopt, where(element)});
+      if (name) defined_materials_.push_back(DefinedMaterial{*name, where(element)});
       return;
     }
     preset = &*found;
@@ -1231,7 +1230,7 @@ void SceneReader::read_material(const pugi::xml_node& element) {
     return;
   }
   defined_materials_.push_back(
-      DefinedMaterial{*name, material ? std::optional<double>(material->density) : std::nullopt, where(element), false,
+      DefinedMaterial{*name, where(element), false,
                       material && material->granular.enabled});
   if (!material) return;
   material->name = *name;
@@ -1807,20 +1806,6 @@ void SceneReader::check_materials() {
       report(defined.where, fmt::format("material '{}' is not used by any <fluid_block> or <print_head>; remove it "
                                         "or use it",
                                         defined.name));
-    }
-  }
-  // One rest density per scene for now: the solver's pressure solve assumes it.
-  const DefinedMaterial* reference = nullptr;
-  for (const DefinedMaterial& defined : defined_materials_) {
-    if (!defined.density) continue;
-    if (!reference) {
-      reference = &defined;
-    } else if (std::abs(*defined.density - *reference->density) > 1e-9 * *reference->density) {
-      report(defined.where,
-             fmt::format("material '{}' has density {} kg/m^3 but material '{}' (line {}) has {} kg/m^3; all "
-                         "materials of a scene must have the same density for now (one rest density per scene)",
-                         defined.name, *defined.density, reference->name, reference->where.line,
-                         *reference->density));
     }
   }
   // Fluids and discrete spheres do not interact yet.

@@ -3,10 +3,14 @@
 // "Divergence-Free SPH for Incompressible and Viscous Fluids", IEEE TVCG 23(3), 2017.
 // Boundaries: N. Akinci et al., "Versatile Rigid-Fluid Coupling for Incompressible SPH", SIGGRAPH 2012.
 //
-// Densities are handled relative to the rest density (ρ/ρ0), volumes V_j = m_j/ρ0, and
-// κ_i = ρ0 p_i / ρ_i² so that a pressure velocity update reads
-//   v_i −= Δt Σ_j V_j (κ_i + κ_j) ∇W_ij + Δt Σ_b V_b κ_i ∇W_ib          (eq. 9 with eq. 12)
-// The force of that update on boundary particle b is m_i κ_i V_b ∇W_ib (Akinci 2012, eq. 10).
+// Densities are handled relative to each particle's own rest density (ρ/ρ0_i), with volumes: every
+// fluid particle has the rest volume V = d³ (m_i = ρ0_i V), so ρ_i/ρ0_i = Σ_j V W_ij + Σ_b V_b W_ib
+// whatever the phases (the number-density form of Solenthaler & Pajarola 2008, which keeps
+// interfaces between fluids of different densities free of spurious tension). κ_i = ρ0_i p_i / ρ_i²
+// (≈ p_i/ρ0_i), and a pressure velocity update conserves momentum between unequal masses:
+//   v_i −= (Δt/m_i) Σ_j V_j (m_i κ_i + m_j κ_j) ∇W_ij + Δt Σ_b V_b κ_i ∇W_ib   (eq. 9 with eq. 12)
+// The force of that update on boundary particle b is m_i κ_i V_b ∇W_ib (Akinci 2012, eq. 10). With
+// one rest density this is Bender & Koschier's form exactly; the factor α gains m_i/m_j in its sum.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>  // parallel_deterministic_reduce: sums independent of thread count
@@ -31,9 +35,10 @@ struct SolverView {
   const Vec3* position;
   Vec3* velocity;
   const Real* density;
+  const Real* mass;
   const Real* factor;
   Real* density_advected;
-  Real* kappa;
+  Real* kappa;  // m_i κ_i of the current iteration (mass-weighted: see the update)
   const Vec3* boundary_position;
   const Vec3* boundary_velocity;
   const Index* boundary_body;
@@ -54,6 +59,7 @@ SolverView view_of(State& state) {
   return SolverView{fluid.position.data(),
                     fluid.velocity.data(),
                     fluid.density.data(),
+                    fluid.mass.data(),
                     fluid.dfsph_factor.data(),
                     fluid.density_advected.data(),
                     state.kappa.data(),
@@ -71,7 +77,7 @@ SolverView view_of(State& state) {
                     state.boundary_neighbors.stride};
 }
 
-Real rest_density_of(const Parameters& parameters) { return parameters.phases.front().density; }
+Real rest_volume_of(const Parameters& parameters) { return particle_rest_volume(parameters.settings.particle_radius); }
 
 template <class Body>
 void for_each_particle_range(std::size_t count, Body&& body) {
@@ -99,37 +105,36 @@ Real density_change_rate(const SolverView& view, std::size_t i) {
   return rate;
 }
 
-/// One pressure velocity update with the κ in view.kappa; adds the reaction on the bodies.
+/// One pressure velocity update with the m κ in view.kappa; adds the reaction on the bodies.
 void apply_pressure_velocity_update(const SolverView& view, State& state, Real time_step) {
   for_each_particle_range(state.active_count, [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<Wrench>& wrenches = thread_body_wrenches(state);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const Real kappa_i = view.kappa[i];
+      const Real weighted_kappa_i = view.kappa[i];  // m_i κ_i
       const Vec3 position_i = view.position[i];
-      Vec3 velocity_change = Vec3::Zero();
+      Vec3 momentum_change = Vec3::Zero();  // per Δt: m_i Δv_i / Δt
       const std::size_t fluid_first = i * view.fluid_stride;
       const Index fluid_count = view.fluid_neighbor_count[i];
       for (Index k = 0; k < fluid_count; ++k) {
         const Index j = view.fluid_neighbor[fluid_first + k];
-        velocity_change -= ((kappa_i + view.kappa[j]) * view.fluid_pair_gradient[fluid_first + k]) * (position_i - view.position[j]);
+        momentum_change -= ((weighted_kappa_i + view.kappa[j]) * view.fluid_pair_gradient[fluid_first + k]) * (position_i - view.position[j]);
       }
-      if (kappa_i != 0) {
-        const Real mass_i = state.fluid.mass[i];
+      if (weighted_kappa_i != 0) {
         const std::size_t boundary_first = i * view.boundary_stride;
         const Index boundary_count = view.boundary_neighbor_count[i];
         for (Index k = 0; k < boundary_count; ++k) {
           const Index b = view.boundary_neighbor[boundary_first + k];
           const Vec3 boundary_position = view.boundary_position[b];
-          const Vec3 change = -(kappa_i * view.boundary_pair_gradient[boundary_first + k]) * (position_i - boundary_position);
-          velocity_change += change;
-          // Reaction on the body: −m_i Δv_i / Δt, with Δv_i = Δt · change.
-          const Vec3 force = -mass_i * change;
+          const Vec3 change = -(weighted_kappa_i * view.boundary_pair_gradient[boundary_first + k]) * (position_i - boundary_position);
+          momentum_change += change;
+          // Reaction on the body: −m_i Δv_i / Δt.
+          const Vec3 force = -change;
           Wrench& wrench = wrenches[view.boundary_body[b]];
           wrench.force += force;
           wrench.torque += (boundary_position - state.bodies[view.boundary_body[b]].pose.position).cross(force);
         }
       }
-      view.velocity[i] += time_step * velocity_change;
+      view.velocity[i] += (time_step / view.mass[i]) * momentum_change;
     }
   });
 }
@@ -153,8 +158,7 @@ void collect_body_wrenches(State& state) {
 }
 
 Real compute_density_and_factor(const Parameters& parameters, State& state) {
-  const Real rest_density = rest_density_of(parameters);
-  const Real inverse_rest_density = Real(1) / rest_density;
+  const Real volume = rest_volume_of(parameters);  // every fluid particle's V = m/ρ0
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const auto& fluid_lists = state.fluid_neighbors;
@@ -170,7 +174,8 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                            [&](const tbb::blocked_range<std::size_t>& range, Real max_error) {
                              for (std::size_t i = range.begin(); i != range.end(); ++i) {
                                const Vec3 position_i = fluid.position[i];
-                               Real density_ratio = fluid.mass[i] * inverse_rest_density * kernel.W_zero();
+                               Real density_ratio = volume * kernel.W_zero();
+                               const Real mass_i = fluid.mass[i];
                                Vec3 gradient_sum = Vec3::Zero();
                                Real gradient_squares = 0;
                                const std::size_t fluid_first = i * fluid_lists.stride;
@@ -178,13 +183,12 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  const Index j = fluid_lists.indices[fluid_first + k];
                                  const Vec3 r = position_i - fluid.position[j];
                                  const Real distance = r.norm();
-                                 const Real volume_j = fluid.mass[j] * inverse_rest_density;
-                                 density_ratio += volume_j * kernel.W(distance);
-                                 const Real pair_gradient = volume_j * kernel.gradient_factor(distance);
+                                 density_ratio += volume * kernel.W(distance);
+                                 const Real pair_gradient = volume * kernel.gradient_factor(distance);
                                  state.fluid_pair_gradient[fluid_first + k] = pair_gradient;
                                  const Vec3 gradient = pair_gradient * r;
                                  gradient_sum += gradient;
-                                 gradient_squares += gradient.squaredNorm();
+                                 gradient_squares += (mass_i / fluid.mass[j]) * gradient.squaredNorm();
                                }
                                const std::size_t boundary_first = i * boundary_lists.stride;
                                for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
@@ -196,7 +200,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  state.boundary_pair_gradient[boundary_first + k] = pair_gradient;
                                  gradient_sum += pair_gradient * r;
                                }
-                               fluid.density[i] = density_ratio * rest_density;
+                               fluid.density[i] = density_ratio * (mass_i / volume);
                                const Real denominator = gradient_sum.squaredNorm() + gradient_squares;
                                fluid.dfsph_factor[i] = denominator > kFactorEpsilon ? Real(1) / denominator : Real(0);
                                // Boundary neighbours counted as the fluid particles they stand for: a wall
@@ -241,8 +245,8 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
       // Half of last step's κ as the initial guess, where the flow diverges now (as the density solve).
       update_divergence();
       parallel_for_each_index(count, [&](std::size_t i) {
-        view.kappa[i] = view.density_advected[i] > Real(0) ? Real(0.5) * kappa_total[i] : Real(0);
-        kappa_total[i] = view.kappa[i];
+        kappa_total[i] = view.density_advected[i] > Real(0) ? Real(0.5) * kappa_total[i] : Real(0);
+        view.kappa[i] = view.mass[i] * kappa_total[i];
       });
       apply_pressure_velocity_update(view, state, time_step);
     } else {
@@ -253,8 +257,9 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
     int iterations = 0;
     while ((iterations < 1 || mean_error > settings.divergence_tolerance) && iterations < settings.max_divergence_iterations) {
       parallel_for_each_index(count, [&](std::size_t i) {
-        view.kappa[i] = view.density_advected[i] * view.factor[i] * inverse_time_step;
-        kappa_total[i] += view.kappa[i];
+        const Real kappa = view.density_advected[i] * view.factor[i] * inverse_time_step;
+        kappa_total[i] += kappa;
+        view.kappa[i] = view.mass[i] * kappa;
       });
       apply_pressure_velocity_update(view, state, time_step);
       mean_error = update_divergence() / Real(count) * time_step;
@@ -272,7 +277,7 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
   const SolverView view = view_of(state);
   const Real inverse_time_step_squared = Real(1) / (time_step * time_step);
   auto& kappa_total = state.fluid.kappa_density;  // Σ κ over this step's updates (a pressure, see above)
-  const Real rest_density = rest_density_of(parameters);
+  const Real volume = rest_volume_of(parameters);
 
   {
     // ρ*/ρ0 = ρ/ρ0 + Δt · (rate of change), clamped at 1: the solver only pushes, never pulls (free surface).
@@ -281,7 +286,7 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
           tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
           [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
             for (std::size_t i = range.begin(); i != range.end(); ++i) {
-              const Real predicted = view.density[i] / rest_density + time_step * density_change_rate(view, i);
+              const Real predicted = view.density[i] * volume / view.mass[i] + time_step * density_change_rate(view, i);
               view.density_advected[i] = std::max(predicted, Real(1));
               sum += view.density_advected[i] - Real(1);
             }
@@ -297,8 +302,8 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
       // gains energy at large time steps.
       update_predicted_density();
       parallel_for_each_index(count, [&](std::size_t i) {
-        view.kappa[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
-        kappa_total[i] = view.kappa[i];
+        kappa_total[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
+        view.kappa[i] = view.mass[i] * kappa_total[i];
       });
       apply_pressure_velocity_update(view, state, time_step);
     } else {
@@ -310,8 +315,9 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
     while ((iterations < settings.min_density_iterations || mean_density_error > settings.density_tolerance) &&
            iterations < settings.max_density_iterations) {
       parallel_for_each_index(count, [&](std::size_t i) {
-        view.kappa[i] = (view.density_advected[i] - Real(1)) * view.factor[i] * inverse_time_step_squared;
-        kappa_total[i] += view.kappa[i];
+        const Real kappa = (view.density_advected[i] - Real(1)) * view.factor[i] * inverse_time_step_squared;
+        kappa_total[i] += kappa;
+        view.kappa[i] = view.mass[i] * kappa;
       });
       apply_pressure_velocity_update(view, state, time_step);
       mean_density_error = update_predicted_density() / Real(count);

@@ -46,7 +46,7 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
   if (!any) return;
   auto& fluid = state.fluid;
   const std::size_t count = state.active_count;
-  const Real rest_density = parameters.phases.front().density;
+  const Real volume = particle_rest_volume(parameters.settings.particle_radius);  // m/ρ0 of every particle
   const auto& lists = state.fluid_neighbors;
   const Real support_radius = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
   auto& stress = state.elastic_stress;  // R σ L per particle
@@ -68,7 +68,7 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
         const Index j = lists.indices[first + k];
         if (!same_material(i, j)) continue;
         const Vec3 reference_offset = reference_i - fluid.reference_position[j];  // X_ij
-        const Vec3 gradient = (fluid.mass[j] / rest_density) * kernel.gradW(reference_offset);
+        const Vec3 gradient = volume * kernel.gradW(reference_offset);
         moment -= gradient * reference_offset.transpose();                           // ∇W ⊗ X_ji
         stretch -= (position_i - fluid.position[j]) * gradient.transpose();          // x_ji ⊗ ∇W
       }
@@ -90,14 +90,13 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
     parallel_for_each_index(count, [&](std::size_t i) {
       if (!parameters.phases[fluid.phase[i]].elasticity.enabled) return;
       const Vec3 reference_i = fluid.reference_position[i];
-      const Real volume_i = fluid.mass[i] / rest_density;
-      Vec3 force = Vec3::Zero();
+            Vec3 force = Vec3::Zero();
       const std::size_t first = i * lists.stride;
       for (Index k = 0; k < lists.counts[i]; ++k) {
         const Index j = lists.indices[first + k];
         if (!same_material(i, j)) continue;
         const Vec3 gradient = kernel.gradW(Vec3(reference_i - fluid.reference_position[j]));
-        force += (volume_i * fluid.mass[j] / rest_density) * ((stress[i] + stress[j]) * gradient);
+        force += (volume * volume) * ((stress[i] + stress[j]) * gradient);
       }
       fluid.acceleration[i] += force / fluid.mass[i];
     }, 256);

@@ -22,7 +22,7 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const std::size_t count = state.active_count;
-  const Real rest_density = parameters.phases.front().density;
+  const Real inverse_volume = 1 / particle_rest_volume(parameters.settings.particle_radius);  // ρ0_j = m_j / V
   const auto& fluid_lists = state.fluid_neighbors;
   const auto& boundary_lists = state.boundary_neighbors;
   const Real support_radius = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
@@ -49,8 +49,8 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
         for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
           const Index j = fluid_lists.indices[fluid_first + k];
           const Vec3 r = position_i - fluid.position[j];
-          // V_j ∇W_ij with V_j = m_j/ρ_j: the stored pair gradient holds m_j/ρ0.
-          const Vec3 gradient = ((rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k]) * r;
+          // V_j ∇W_ij with V_j = m_j/ρ_j: the stored pair gradient holds V = m_j/ρ0_j.
+          const Vec3 gradient = ((fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k]) * r;
           curl_omega += (omega_i - fluid.angular_velocity[j]).cross(gradient);
           curl_velocity += (velocity_i - fluid.velocity[j]).cross(gradient);
           const Real weight = fluid.mass[j] / fluid.density[j] * kernel.W(r.norm());

@@ -146,11 +146,7 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   if (!(settings.particle_radius > 0)) throw Error("sph::Solver: particle_radius must be > 0");
   if (parameters_.phases.empty()) throw Error("sph::Solver: at least one fluid phase is needed");
   for (const auto& phase : parameters_.phases)
-    if (phase.density != parameters_.phases.front().density)
-      throw Error(fmt::format("sph::Solver: phase '{}' has rest density {} kg/m³ but '{}' has {}; one scene uses one "
-                              "rest density for now",
-                              phase.name, phase.density, parameters_.phases.front().name,
-                              parameters_.phases.front().density));
+    if (!(phase.density > 0)) throw Error(fmt::format("sph::Solver: phase '{}' needs a rest density > 0 kg/m³", phase.name));
   for (const auto& nozzle : parameters_.nozzles) {
     if (nozzle.phase >= parameters_.phases.size()) throw Error("sph::Solver: nozzle '" + nozzle.name + "' has no phase");
     nozzle_geometry_.push_back(make_nozzle_geometry(nozzle, particle_diameter()));
@@ -162,11 +158,14 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   // in front of it, so that rounding never leaves a centre on the wrong side.
   viscosity_calibration_ = calibrated_viscosity(settings.kernel, support_radius(), particle_diameter(), wall_spacing,
                                                 boundary_volume_scale_);
-  surface_tension_calibration_ = calibrated_surface_tension(settings.kernel, support_radius(), parameters_.phases.front().density,
-                                                           particle_diameter(), wall_spacing, boundary_volume_scale_);
+  surface_tension_calibration_ =
+      calibrated_surface_tension(settings.kernel, support_radius(), particle_diameter(), wall_spacing, boundary_volume_scale_);
   boundary_share_at_surface_ =
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
-  for (const auto& phase : parameters_.phases) largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
+  for (const auto& phase : parameters_.phases) {
+    largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
+    lightest_rest_density_ = std::min(lightest_rest_density_, phase.density);
+  }
   full_neighbourhood_ = full_neighbourhood_count(support_radius(), particle_diameter());
   for (const auto& phase : parameters_.phases) {
     if (!phase.elasticity.enabled) continue;
@@ -497,7 +496,7 @@ const StepStats& Solver::step() {
   // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
   // Capillary waves (Brackbill et al. 1992): Δt ≤ √(ρ d³ / (2π σ)).
   if (largest_surface_tension_ > 0)
-    time_step = std::min(time_step, std::sqrt(parameters_.phases.front().density * diameter * diameter * diameter /
+    time_step = std::min(time_step, std::sqrt(lightest_rest_density_ * diameter * diameter * diameter /
                                               (2 * kPi * largest_surface_tension_)));
   const Real gravity_norm = settings.gravity.norm();
   if (gravity_norm > 0) time_step = std::min(time_step, std::sqrt(diameter / (50 * gravity_norm)));
@@ -925,7 +924,7 @@ void Solver::check_state() const {
 
 Real Solver::pressure(std::size_t i) const {
   const auto& fluid = state_.fluid;
-  const Real rest_density = parameters_.phases.front().density;
+  const Real rest_density = fluid.mass[i] / particle_rest_volume(parameters_.settings.particle_radius);  // its phase's
   // κ = ρ0 p / ρ² summed over both solvers' updates of the last step.
   return (fluid.kappa_density[i] + fluid.kappa_divergence[i]) * fluid.density[i] * fluid.density[i] / rest_density;
 }

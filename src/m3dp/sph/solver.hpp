@@ -6,6 +6,7 @@
 #include <tbb/enumerable_thread_specific.h>
 
 #include <array>
+#include <limits>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -20,8 +21,12 @@
 namespace m3dp::sph {
 
 /// A fluid as the solver sees it: a material (density, rheology, ageing, boundary viscosity).
-/// All phases of one scene share the rest density (for now).
+/// Phases may differ in rest density: every particle has the rest volume d³ (its mass is its phase's
+/// rest density × d³), and the solver works with volumes (see dfsph_bender2017.cpp).
 using FluidPhase = material::Material;
+
+/// Rest volume of every fluid particle (m³): the particle diameter cubed.
+inline Real particle_rest_volume(Real particle_radius) { return 8 * particle_radius * particle_radius * particle_radius; }
 
 /// How viscous forces are integrated.
 enum class ViscositySolver {
@@ -188,14 +193,15 @@ struct ViscosityCalibration {
 };
 
 /// Surface tension (Akinci et al. 2013) coefficients per unit of the material's physical values:
-/// γ = cohesion_per_tension × σ (N/m), β = adhesion_per_work × W_a (N/m); see surface_tension_akinci2013.cpp.
+/// γ = cohesion_per_tension × σ / (ρ0_i ρ0_j), β = adhesion_per_work × W_a / ρ0_i² (σ, W_a in N/m); see
+/// surface_tension_akinci2013.cpp.
 struct SurfaceTensionCalibration {
   Real cohesion_per_tension = 0;
   Real adhesion_per_work = 0;
 };
 /// The mean-field surface energy of Akinci's cohesion and adhesion forces on the rest lattice.
-SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real rest_density,
-                                                     Real fluid_spacing, Real wall_spacing, Real boundary_volume_scale);
+SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real fluid_spacing,
+                                                     Real wall_spacing, Real boundary_volume_scale);
 
 /// A granular phase's contact law as the solver uses it (derived once from the material).
 struct GranularContact {
@@ -287,6 +293,7 @@ class Solver {
   ViscosityCalibration viscosity_calibration_;  // Σ V_b W on a geometric surface; see keep_out_of_boundaries()
   SurfaceTensionCalibration surface_tension_calibration_;
   Real largest_surface_tension_ = 0;    // N/m, over the phases (capillary time-step limit)
+  Real lightest_rest_density_ = std::numeric_limits<Real>::max();  // kg/m³, over the phases
   std::vector<Real> microinertia_;      // m² per phase (micropolar)
   bool any_elastic_ = false;
   int full_neighbourhood_ = 1;           // neighbours of an interior particle on the rest lattice

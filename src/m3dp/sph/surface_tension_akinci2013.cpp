@@ -1,7 +1,8 @@
 // Surface tension and wall adhesion after N. Akinci, G. Akinci, M. Teschner, "Versatile Surface
 // Tension and Adhesion for SPH Fluids", ACM Trans. Graph. 32(6), 182, 2013.
 //
-// On particle i, with K_ij = 2ρ0/(ρ_i + ρ_j) (stronger where the neighbourhood is thin):
+// On particle i, with K_ij = 2ρ0/(ρ_i + ρ_j) (stronger where the neighbourhood is thin; with unequal rest
+// densities, 2/(ρ_i/ρ0_i + ρ_j/ρ0_j)):
 //   cohesion   F_i = −γ Σ_j K_ij m_i m_j C(|x_ij|) x_ij/|x_ij|                                (eq. 1)
 //   curvature  F_i = −γ Σ_j K_ij m_i (n_i − n_j),  n_i = h Σ_j (m_j/ρ_j) ∇W_ij                 (eqs. 4, 5)
 //   adhesion   F_i = −β Σ_b m_i Ψ_b A(|x_ib|) x_ib/|x_ib|,  Ψ_b = ρ0 V_b                          (eq. 7)
@@ -52,19 +53,19 @@ Real adhesion_kernel(Real distance, Real h) {
 
 }  // namespace
 
-SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real rest_density,
-                                                     Real fluid_spacing, Real wall_spacing, Real boundary_volume_scale) {
+SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real fluid_spacing,
+                                                     Real wall_spacing, Real boundary_volume_scale) {
   const double h = support_radius;
   constexpr int kSamples = 4000;
   const double dr = h / kSamples;
-  // Cohesion: γ per σ = 8 / (π ρ0² ∫ C r⁴ dr) (midpoint rule).
+  // Cohesion: γ per σ = 8 / (π ρ0_i ρ0_j ∫ C r⁴ dr) (midpoint rule); stored without the densities.
   double cohesion_moment = 0;
   for (int k = 0; k < kSamples; ++k) {
     const double r = (k + 0.5) * dr;
     cohesion_moment += double(cohesion_kernel(Real(r), Real(h))) * r * r * r * r * dr;
   }
   SurfaceTensionCalibration calibration;
-  calibration.cohesion_per_tension = Real(8 / (kPi * double(rest_density) * rest_density * cohesion_moment));
+  calibration.cohesion_per_tension = Real(8 / (kPi * cohesion_moment));
 
   // Adhesion: a wall layer of area density 1/s² with Ψ_b = ρ0 V_b against fluid of density ρ0 from
   // z = d/2 on. Pair potential φ(r) = −β m Ψ_b G(r), G(r) = ∫_r^h A ds; the energy per area is
@@ -87,8 +88,9 @@ SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Rea
   double layer_integral = 0;
   const int first = static_cast<int>(std::lround(0.5 * fluid_spacing / dr));
   for (int k = first; k < kSamples; ++k) layer_integral += 0.5 * (radial_integral[k] + radial_integral[k + 1]) * dr;
-  const double wall_density_per_area = double(rest_density) * wall_volume / (double(wall_spacing) * wall_spacing);
-  calibration.adhesion_per_work = Real(1 / (double(rest_density) * wall_density_per_area * 2 * kPi * layer_integral));
+  // β ρ0² per W_a (the fluid's ρ0 twice: its number density × mass, and Ψ_b = ρ0 V_b).
+  const double wall_volume_per_area = wall_volume / (double(wall_spacing) * wall_spacing);
+  calibration.adhesion_per_work = Real(1 / (wall_volume_per_area * 2 * kPi * layer_integral));
   return calibration;
 }
 
@@ -103,7 +105,8 @@ void add_surface_tension(const Parameters& parameters, State& state, const Surfa
   const auto& boundary = state.boundary;
   const std::size_t count = state.active_count;
   const Real h = settings.support_radius_factor * settings.particle_radius;
-  const Real rest_density = parameters.phases.front().density;
+  const Real volume = particle_rest_volume(settings.particle_radius);  // every particle's m/ρ0
+  const Real inverse_volume = 1 / volume;
   const auto& fluid_lists = state.fluid_neighbors;
   const auto& boundary_lists = state.boundary_neighbors;
 
@@ -116,7 +119,8 @@ void add_surface_tension(const Parameters& parameters, State& state, const Surfa
     const std::size_t first = i * fluid_lists.stride;
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = fluid_lists.indices[first + k];
-      sum += ((rest_density / fluid.density[j]) * state.fluid_pair_gradient[first + k]) * (fluid.position[i] - fluid.position[j]);
+      sum += ((fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[first + k]) *
+             (fluid.position[i] - fluid.position[j]);
     }
     // Walls count as material here: a face resting on a wall is no free surface, and the curvature
     // term would push it into the wall (a drop without adhesion would be kicked off a ceiling).
@@ -131,31 +135,33 @@ void add_surface_tension(const Parameters& parameters, State& state, const Surfa
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
       const Vec3 position_i = fluid.position[i];
-      const Real density_i = fluid.density[i];
+      const Real density_ratio_i = fluid.density[i] * volume / fluid.mass[i];  // ρ_i/ρ0_i
+      const Real rest_density_i = fluid.mass[i] * inverse_volume;
       Vec3 acceleration = Vec3::Zero();
       const std::size_t fluid_first = i * fluid_lists.stride;
       for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
         const Index j = fluid_lists.indices[fluid_first + k];
         const Real tension = Real(0.5) * (phase_i.surface_tension + parameters.phases[fluid.phase[j]].surface_tension);
         if (tension <= 0) continue;
-        const Real gamma = calibration.cohesion_per_tension * tension;
+        const Real rest_density_j = fluid.mass[j] * inverse_volume;
+        const Real gamma = calibration.cohesion_per_tension * tension / (rest_density_i * rest_density_j);
         const Vec3 r = position_i - fluid.position[j];
         const Real distance = r.norm();
-        const Real correction = 2 * rest_density / (density_i + fluid.density[j]);
+        const Real correction = 2 / (density_ratio_i + fluid.density[j] * volume / fluid.mass[j]);
         Vec3 pair = Vec3::Zero();
         if (distance > Real(1e-9) * h) pair -= (fluid.mass[j] * cohesion_kernel(distance, h) / distance) * r;
         if (j < count) pair -= normal[i] - normal[j];
         acceleration += (correction * gamma) * pair;
       }
       if (phase_i.adhesion > 0) {
-        const Real beta = calibration.adhesion_per_work * phase_i.adhesion;
+        const Real beta = calibration.adhesion_per_work * phase_i.adhesion / (rest_density_i * rest_density_i);
         const std::size_t boundary_first = i * boundary_lists.stride;
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[boundary_first + k];
           const Vec3 r = position_i - boundary.position[b];
           const Real distance = r.norm();
           if (distance <= Real(1e-9) * h) continue;
-          const Vec3 a = (-beta * rest_density * boundary.volume[b] * adhesion_kernel(distance, h) / distance) * r;
+          const Vec3 a = (-beta * rest_density_i * boundary.volume[b] * adhesion_kernel(distance, h) / distance) * r;
           acceleration += a;
           const Vec3 force = -fluid.mass[i] * a;
           Wrench& wrench = wrenches[boundary.body[b]];

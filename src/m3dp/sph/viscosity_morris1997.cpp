@@ -21,7 +21,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
   const Real support_radius = settings.support_radius_factor * settings.particle_radius;
   const Real regularisation = Real(0.01) * support_radius * support_radius;
   constexpr Real kDimensionFactor = 2 * (3 + 2);
-  const Real rest_density = parameters.phases.front().density;
+  const Real inverse_volume = 1 / particle_rest_volume(settings.particle_radius);  // ρ0_j = m_j / V
   if (!explicit_viscosity) {
     parallel_for_each_index(state.active_count, [&](std::size_t i) { fluid.acceleration[i] = settings.gravity; }, 1024);
     return;
@@ -47,7 +47,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
           const Index j = fluid_lists.indices[first + k];
           const Vec3 r = position_i - fluid.position[j];
           const Real mu_ij = pair_viscosity(mu_i, fluid.viscosity[j]);
-          viscous += mu_ij * (rest_density / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
+          viscous += mu_ij * (fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
                      (velocity_i - fluid.velocity[j]).dot(r) / (r.squaredNorm() + regularisation) * r;
         }
         acceleration += kDimensionFactor * calibration.fluid * inverse_density_i * viscous;

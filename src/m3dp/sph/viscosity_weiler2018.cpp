@@ -59,7 +59,7 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const std::size_t count = state.active_count;
-  const Real rest_density = parameters.phases.front().density;
+  const Real inverse_volume = 1 / particle_rest_volume(parameters.settings.particle_radius);  // ρ0_j = m_j / V
   const bool any_shear_rate = std::any_of(parameters.phases.begin(), parameters.phases.end(), phase_needs_shear_rate);
   const auto& fluid_lists = state.fluid_neighbors;
   const auto& boundary_lists = state.boundary_neighbors;
@@ -73,7 +73,7 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
             fluid.viscosity[i] = phase.rheology.viscosity;
             fluid.shear_rate[i] = 0;
           } else {
-            // ∇v_i = Σ_j V_j (v_j − v_i) x_ijᵀ (dW/dr)/r, V_j f = (ρ0/ρ_j) × the pair gradient.
+            // ∇v_i = Σ_j V_j (v_j − v_i) x_ijᵀ (dW/dr)/r, V_j f = (ρ0_j/ρ_j) × the pair gradient.
             const Vec3 position_i = fluid.position[i];
             const Vec3 velocity_i = fluid.velocity[i];
             Mat3 gradient = Mat3::Zero();
@@ -81,7 +81,7 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
             for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
               const Index j = fluid_lists.indices[fluid_first + k];
               const Real weight =
-                  calibration.fluid_gradient * (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k];
+                  calibration.fluid_gradient * (fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k];
               gradient += (weight * (fluid.velocity[j] - velocity_i)) * (position_i - fluid.position[j]).transpose();
             }
             // Walls shear the material only where it sticks to them.
@@ -122,7 +122,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
       });
   if (!any_viscosity) return 0;
 
-  const Real rest_density = parameters.phases.front().density;
+  const Real inverse_volume = 1 / particle_rest_volume(settings.particle_radius);  // ρ0_j = m_j / V
   const Real support_radius = settings.support_radius_factor * settings.particle_radius;
   const Real regularisation = Real(0.01) * support_radius * support_radius;
   const auto& fluid_lists = state.fluid_neighbors;
@@ -151,9 +151,9 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
       const Index j = fluid_lists.indices[fluid_first + k];
       const Vec3 r = position_i - fluid.position[j];
       const Real mu_ij = pair_viscosity(mu_i, fluid.viscosity[j]);
-      // V_j (dW/dr)/r = (ρ0/ρ_j) × pair gradient (which holds (m_j/ρ0)(dW/dr)/r); negative.
+      // V_j (dW/dr)/r = (ρ0_j/ρ_j) × pair gradient (which holds (m_j/ρ0_j)(dW/dr)/r); negative.
       const Real coefficient = -time_step * kDimensionFactor * calibration.fluid * mu_ij * volume_i *
-                               (rest_density / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k] /
+                               (fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k] /
                                (r.squaredNorm() + regularisation);
       system.fluid_pair_coefficient[fluid_first + k] = coefficient;
       diagonal += coefficient * r * r.transpose();
