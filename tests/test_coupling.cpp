@@ -266,7 +266,8 @@ TEST(Coupling, Ur10DepositsAlongItsPath) {
 }
 
 TEST(Coupling, ThreeMobileRobotsPrintOneStrandWithoutTouching) {
-  // scenes/multi_robot.sdf: three TurtleBots drive in a row, each printing a third of one strand.
+  // scenes/multi_robot.sdf: three TurtleBots drive in a row, each printing a third of one strand, the
+  // middle one in a mortar of another density than the others' clay paste.
   scene::Scene scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / "multi_robot.sdf");
   scene.output.write_particles = false;
   scene.meshing.enabled = false;
@@ -300,6 +301,10 @@ TEST(Coupling, ThreeMobileRobotsPrintOneStrandWithoutTouching) {
       std::printf("no material in x = [%.2f, %.2f) m\n", x, x + Real(0.03));
     }
   }
-  std::printf("strand: %zu particles, %d empty 3 cm stretches along 1.05 m\n", fluid.size(), empty);
+  std::size_t mortar = 0;
+  for (std::size_t i = 0; i < fluid.size(); ++i) mortar += simulation.solver().parameters().phases[fluid.phase[i]].name == "mortar";
+  std::printf("strand: %zu particles (%zu of them mortar), %d empty 3 cm stretches along 1.05 m\n", fluid.size(), mortar, empty);
   EXPECT_EQ(empty, 0);
+  EXPECT_GT(mortar, fluid.size() / 5);
+  EXPECT_LT(mortar, fluid.size() / 2);
 }
