@@ -1293,7 +1293,12 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
     material.adhesion = Real(*adhesion);
   if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular);
   if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material.micropolar);
-  if (const pugi::xml_node elasticity = element.child("elasticity")) read_elasticity(elasticity, material.elasticity);
+  if (const pugi::xml_node elasticity = element.child("elasticity")) {
+    read_elasticity(elasticity, material.elasticity);
+    if (scene_.solver.viscosity_solver != sph::ViscositySolver::implicit_weiler2018)
+      report(elasticity, "an elastic material needs the implicit viscosity solver (its stiffness is solved with the "
+                         "viscosity); remove <viscosity_solver>explicit</viscosity_solver>");
+  }
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;

@@ -162,6 +162,12 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
       calibrated_surface_tension(settings.kernel, support_radius(), particle_diameter(), wall_spacing, boundary_volume_scale_);
   boundary_share_at_surface_ =
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
+  derive_material_data();
+  state_.time_step = settings.max_time_step;
+}
+
+void Solver::derive_material_data() {
+  // Per-phase data of the optional models, and the checks that need the solver's settings.
   for (const auto& phase : parameters_.phases) {
     largest_surface_tension_ = std::max(largest_surface_tension_, phase.surface_tension);
     lightest_rest_density_ = std::min(lightest_rest_density_, phase.density);
@@ -170,7 +176,7 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   for (const auto& phase : parameters_.phases) {
     if (!phase.elasticity.enabled) continue;
     any_elastic_ = true;
-    if (settings.viscosity_solver != ViscositySolver::implicit_weiler2018)
+    if (parameters_.settings.viscosity_solver != ViscositySolver::implicit_weiler2018)
       throw Error(fmt::format("sph::Solver: material '{}' is elastic, which needs the implicit viscosity solver", phase.name));
     if (!(phase.elasticity.shear_modulus > 0))
       throw Error(fmt::format("sph::Solver: material '{}': shear modulus must be > 0 Pa", phase.name));
@@ -184,7 +190,7 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
     microinertia_.push_back(phase.micropolar.microinertia > 0 ? phase.micropolar.microinertia
                                                               : Real(0.4) * sphere_radius * sphere_radius);
   }
-  if (settings.air_drag && !(settings.air_density > 0 && settings.air_viscosity > 0))
+  if (parameters_.settings.air_drag && !(parameters_.settings.air_density > 0 && parameters_.settings.air_viscosity > 0))
     throw Error("sph::Solver: air drag needs a positive air density and viscosity");
   // Granular mode: every phase or none (a fluid and discrete spheres do not interact yet).
   granular_ = parameters_.phases.front().granular.enabled;
@@ -197,7 +203,7 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
   if (granular_) {
     // The default spring: a column of ten particles under gravity compresses each contact by 1 % of
     // a diameter (stiff enough to keep the particle size, soft enough for ~1e-4 s steps at d = 2 mm).
-    const Real gravity = settings.gravity.norm() > 0 ? settings.gravity.norm() : Real(9.81);
+    const Real gravity = parameters_.settings.gravity.norm() > 0 ? parameters_.settings.gravity.norm() : Real(9.81);
     for (std::uint16_t p = 0; p < parameters_.phases.size(); ++p) {
       const auto& granular = parameters_.phases[p].granular;
       if (!(granular.restitution > 0 && granular.restitution <= 1))
@@ -210,7 +216,6 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
       granular_time_step_ = granular_time_step_ > 0 ? std::min(granular_time_step_, contact_time / 10) : contact_time / 10;
     }
   }
-  state_.time_step = settings.max_time_step;
 }
 
 Real Solver::particle_mass(std::uint16_t phase) const {
@@ -491,13 +496,13 @@ const StepStats& Solver::step() {
     time_step = std::min(time_step, Real(0.125) * diameter * diameter /
                                         (largest_kinematic_viscosity *
                                          std::max(viscosity_calibration_.fluid, viscosity_calibration_.boundary)));
-  // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
-  // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
-  // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
   // Capillary waves (Brackbill et al. 1992): Δt ≤ √(ρ d³ / (2π σ)).
   if (largest_surface_tension_ > 0)
     time_step = std::min(time_step, std::sqrt(lightest_rest_density_ * diameter * diameter * diameter /
                                               (2 * kPi * largest_surface_tension_)));
+  // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
+  // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
+  // push-only pressure solve removes cleanly, and deep columns start to ring (seen from ~5 %).
   const Real gravity_norm = settings.gravity.norm();
   if (gravity_norm > 0) time_step = std::min(time_step, std::sqrt(diameter / (50 * gravity_norm)));
   time_step = std::max(time_step, settings.min_time_step);

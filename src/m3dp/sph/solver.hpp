@@ -284,6 +284,8 @@ class Solver {
   void search_neighbors();
   void keep_out_of_boundaries();
   void check_state() const;
+  /// Checks the materials' optional models and derives their per-phase data (constructor).
+  void derive_material_data();
   /// Granular mode's step after the neighbour search: contacts, time step, integration.
   Real step_granular(StepStats& stats);
 
