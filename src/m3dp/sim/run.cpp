@@ -110,6 +110,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"mean_density_iterations", summary.mean_density_iterations},
       {"mean_divergence_iterations", summary.mean_divergence_iterations},
       {"mean_viscosity_iterations", summary.mean_viscosity_iterations},
+      {"granular", summary.granular},
       {"particles_at_rest", summary.particles_at_rest},
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
@@ -287,6 +288,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     }
     summary.robots.push_back(robot);
   }
+  summary.granular = solver.granular();
   if (summary.steps > 0) {
     summary.mean_density_iterations = density_iterations_sum / static_cast<double>(summary.steps);
     summary.mean_divergence_iterations = divergence_iterations_sum / static_cast<double>(summary.steps);
@@ -318,10 +320,14 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         summary.blocked_layers);
   text += fmt::format("  mass        {:.6g} kg initial + {:.6g} emitted - {:.6g} lost = {:.6g} kg\n", summary.mass_initial,
                       summary.mass_emitted, summary.mass_lost, summary.mass_final);
-  text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step, max mean "
-                      "density error {:.3f} %\n",
-                      summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations,
-                      100 * summary.max_density_error);
+  if (summary.granular)
+    text += fmt::format("  solver      granular contacts (spring-dashpot), mean time step {:.3g} ms\n",
+                        summary.steps > 0 ? 1e3 * summary.simulated_time / double(summary.steps) : 0.0);
+  else
+    text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step, max mean "
+                        "density error {:.3f} %\n",
+                        summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations,
+                        100 * summary.max_density_error);
   if (!output_directory.empty())
     text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
                         summary.frames_written);

@@ -93,6 +93,7 @@ struct RunSummary {
   double mean_density_iterations = 0;
   double mean_divergence_iterations = 0;
   double mean_viscosity_iterations = 0;   // conjugate-gradient iterations of the implicit viscosity solve
+  bool granular = false;                  // the materials are discrete spheres: no pressure or viscosity solve
   std::size_t frames_written = 0;
   std::size_t meshes_written = 0;    // surface meshes in meshes/ (scene <meshing>)
   std::size_t meshes_skipped = 0;    // requests that came while the mesher was still busy
