@@ -806,3 +806,18 @@ TEST(SceneMaterials, ElasticityInPascalsAndSeconds) {
     EXPECT_CONTAINS(error.what(), "poisson_ratio");
   }
 }
+
+TEST(SceneMaterials, AnElasticMaterialNeedsTheImplicitSolver) {
+  std::string text = replaced(valid_scene(), "<end_time>2</end_time>",
+                              "<end_time>2</end_time><viscosity_solver>explicit</viscosity_solver>");
+  text = replaced(text, R"(<material name="water">
+        <density>1000</density>
+        <viscosity unit="mPa*s">1</viscosity>
+        <boundary_viscosity unit="cP">2</boundary_viscosity>
+      </material>)", R"(<material name="water">
+        <density>1000</density>
+        <viscosity unit="mPa*s">1</viscosity>
+        <elasticity><shear_modulus>1000</shear_modulus></elasticity>
+      </material>)");
+  expect_error_at(text, "<elasticity>", "an elastic material needs the implicit viscosity solver");
+}
