@@ -539,17 +539,20 @@ const StepStats& Solver::step() {
   if (any_elastic_) stages::relax_reference_shape(parameters_, state_, time_step);
   if (settings.rest_detection) update_rest_clocks(time_step);
   stats.particles_at_rest = state_.fluid.size() - state_.active_count;
+  finish_step(stats, time_step, start);
+  return state_.last_step;
+}
+
+void Solver::finish_step(StepStats& stats, Real time_step, std::chrono::steady_clock::time_point advect_start) {
   keep_out_of_boundaries();
   stages::collect_body_wrenches(state_);
   // Impulses were summed as forces of velocity updates applied over one step each; see the update.
   state_.time += time_step;
   ++state_.step;
   check_state();
-  stats.stage_ms.advect = elapsed_ms(start);
-
+  stats.stage_ms.advect = elapsed_ms(advect_start);
   stats.time_step = time_step;
   state_.last_step = stats;
-  return state_.last_step;
 }
 
 Real Solver::step_granular(StepStats& stats) {
@@ -578,14 +581,7 @@ Real Solver::step_granular(StepStats& stats) {
     fluid.velocity[i] += time_step * fluid.acceleration[i];
     fluid.position[i] += time_step * fluid.velocity[i];
   }, 1024);
-  keep_out_of_boundaries();
-  stages::collect_body_wrenches(state_);
-  state_.time += time_step;
-  ++state_.step;
-  check_state();
-  stats.stage_ms.advect = elapsed_ms(start);
-  stats.time_step = time_step;
-  state_.last_step = stats;
+  finish_step(stats, time_step, start);
   return time_step;
 }
 

@@ -6,6 +6,7 @@
 #include <tbb/enumerable_thread_specific.h>
 
 #include <array>
+#include <chrono>
 #include <limits>
 #include <cstdint>
 #include <span>
@@ -288,6 +289,8 @@ class Solver {
   void derive_material_data();
   /// Granular mode's step after the neighbour search: contacts, time step, integration.
   Real step_granular(StepStats& stats);
+  /// The end of every step once the particles have moved: walls, body wrenches, clock, state check, stats.
+  void finish_step(StepStats& stats, Real time_step, std::chrono::steady_clock::time_point advect_start);
 
   Parameters parameters_;
   Real boundary_volume_scale_ = 1;      // see calibrated_boundary_volume_scale() in solver.cpp
