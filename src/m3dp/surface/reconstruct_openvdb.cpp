@@ -187,8 +187,10 @@ struct ParticleList {
 };
 
 openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats) {
-  constexpr float kHalfWidthVoxels = 3;
-  const Real reach = settings.sphere_radius + kHalfWidthVoxels * settings.voxel_size;
+  constexpr float kHalfWidthVoxels = 2;
+  // Cells of the deep region a voxel wider than a splat reaches: at 3.5 r the lattice fills cells too
+  // unevenly (1 or 2 particles a side) for the 60 % rule, and no cell counts as interior.
+  const Real reach = settings.sphere_radius + (kHalfWidthVoxels + 1) * settings.voxel_size;
   const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
   stats.surface_particles = region.contributing.size();
   std::vector<Vec3> near_surface(region.contributing.size());
