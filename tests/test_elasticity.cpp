@@ -17,13 +17,9 @@ using namespace m3dp;
 
 namespace {
 
+/// nx × ny × nz particles of spacing d, centred on the z axis, standing on z = 0.
 std::vector<Vec3> lattice_block(int nx, int ny, int nz, Real d) {
-  std::vector<Vec3> points;
-  for (int i = 0; i < nx; ++i)
-    for (int j = 0; j < ny; ++j)
-      for (int k = 0; k < nz; ++k)
-        points.emplace_back((i + Real(0.5) - nx / Real(2)) * d, (j + Real(0.5) - ny / Real(2)) * d, (k + Real(0.5)) * d);
-  return points;
+  return sph::lattice_in_box(Aabb{Vec3(-nx * d / 2, -ny * d / 2, 0), Vec3(nx * d / 2, ny * d / 2, nz * d)}, d);
 }
 
 double height_of(const sph::Solver& solver) {

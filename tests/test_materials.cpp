@@ -572,13 +572,9 @@ double stacked_column_height(double structuration_rate) {
   constexpr int kLayers = 8, kAcross = 12, kLayerParticles = 2;
   const double layer_period = 0.25;
   for (int layer = 0; layer < kLayers; ++layer) {
-    std::vector<Vec3> points;
-    for (int i = 0; i < kAcross; ++i)
-      for (int j = 0; j < kAcross; ++j)
-        for (int k = 0; k < kLayerParticles; ++k)
-          points.emplace_back((i + Real(0.5) - kAcross / Real(2)) * d, (j + Real(0.5) - kAcross / Real(2)) * d,
-                              (layer * kLayerParticles + k + Real(0.5)) * d);
-    solver.add_particles(points, Vec3::Zero(), 0);
+    const Real half = kAcross * d / 2, bottom = Real(layer * kLayerParticles) * d;
+    solver.add_particles(sph::lattice_in_box(Aabb{Vec3(-half, -half, bottom), Vec3(half, half, bottom + kLayerParticles * d)}, d),
+                         Vec3::Zero(), 0);
     while (solver.time() < (layer + 1) * layer_period) solver.step();
   }
   Real top = 0;

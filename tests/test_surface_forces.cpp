@@ -16,14 +16,6 @@ using namespace m3dp;
 
 namespace {
 
-std::vector<Vec3> lattice_box(const Vec3& low, const Vec3& high, Real spacing) {
-  std::vector<Vec3> points;
-  for (Real x = low.x() + spacing / 2; x < high.x(); x += spacing)
-    for (Real y = low.y() + spacing / 2; y < high.y(); y += spacing)
-      for (Real z = low.z() + spacing / 2; z < high.z(); z += spacing) points.emplace_back(x, y, z);
-  return points;
-}
-
 /// A cube of water (side `side`, 12 particles across) floating without gravity for `seconds`; returns
 /// the largest distance of a particle from the centre of mass, over the side.
 double cube_corner_distance_after(double surface_tension, double seconds) {
@@ -39,7 +31,7 @@ double cube_corner_distance_after(double surface_tension, double seconds) {
   water.surface_tension = Real(surface_tension);
   parameters.phases.push_back(water);
   sph::Solver solver(parameters);
-  solver.add_particles(lattice_box(Vec3::Constant(-side / 2), Vec3::Constant(side / 2), d), Vec3::Zero(), 0);
+  solver.add_particles(sph::lattice_in_box(Aabb{Vec3::Constant(-side / 2), Vec3::Constant(side / 2)}, d), Vec3::Zero(), 0);
   while (solver.time() < seconds) solver.step();
   const auto& fluid = solver.fluid();
   Vec3 centre = Vec3::Zero();
@@ -67,7 +59,7 @@ double hanging_drop_fall(double adhesion, double seconds) {
   const BoxShape plate{Vec3(0.01f, 0.01f, 4 * d)};
   // The ceiling's lower surface at z = 0.
   solver.add_body("ceiling", sph::sample_box_surface(plate, d, -d / 2).points, Pose{Vec3(0, 0, 2 * d), Quat::Identity()}, true);
-  solver.add_particles(lattice_box(Vec3(-4 * d, -4 * d, -3 * d), Vec3(4 * d, 4 * d, 0), d), Vec3::Zero(), 0);
+  solver.add_particles(sph::lattice_in_box(Aabb{Vec3(-4 * d, -4 * d, -3 * d), Vec3(4 * d, 4 * d, 0)}, d), Vec3::Zero(), 0);
   auto centre_height = [&] {
     double sum = 0;
     for (const Vec3& p : solver.fluid().position) sum += p.z();
@@ -153,7 +145,7 @@ TEST(AirDrag, WindPushesTheSurfaceOfABlockNotItsInside) {
   parameters.settings.gravity = Vec3::Zero();
   parameters.settings.air_velocity = Vec3(5, 0, 0);
   sph::Solver solver(parameters);
-  solver.add_particles(lattice_box(Vec3::Constant(-5 * diameter), Vec3::Constant(5 * diameter), diameter), Vec3::Zero(), 0);
+  solver.add_particles(sph::lattice_in_box(Aabb{Vec3::Constant(-5 * diameter), Vec3::Constant(5 * diameter)}, diameter), Vec3::Zero(), 0);
   solver.step();
   const auto& fluid = solver.fluid();
   const int full = sph::full_neighbourhood_count(solver.support_radius(), diameter);

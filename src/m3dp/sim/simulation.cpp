@@ -30,18 +30,6 @@ std::uint16_t phase_index(const scene::Scene& scene, const std::string& material
   return 0;
 }
 
-std::vector<Vec3> lattice_in_box(const Aabb& box, Real spacing) {
-  std::vector<Vec3> points;
-  const Vec3 size = box.size();
-  // Whole particles only: a block never reaches past its box (into a wall at its edge).
-  auto count_along = [&](Real length) { return std::max(1, static_cast<int>(std::floor(length / spacing + Real(1e-3)))); };
-  const int nx = count_along(size.x()), ny = count_along(size.y()), nz = count_along(size.z());
-  points.reserve(static_cast<std::size_t>(nx) * ny * nz);
-  for (int k = 0; k < nz; ++k)
-    for (int j = 0; j < ny; ++j)
-      for (int i = 0; i < nx; ++i) points.push_back(box.min + spacing * Vec3(i + Real(0.5), j + Real(0.5), k + Real(0.5)));
-  return points;
-}
 }  // namespace
 
 Simulation::Simulation(const scene::Scene& scene)
@@ -69,7 +57,7 @@ Simulation::Simulation(const scene::Scene& scene)
   coupling_ = std::make_unique<coupling::FluidBodyCoupling>(world_, solver_);
   std::size_t initial_particles = 0;
   for (const auto& block : scene_.fluid_blocks) {
-    auto points = lattice_in_box(block.box, spacing);
+    auto points = sph::lattice_in_box(block.box, spacing);
     if (block.cylinder_radius) {
       const Vec3 axis_point = (block.box.min + block.box.max) / 2;
       const Real radius = *block.cylinder_radius;

@@ -177,4 +177,16 @@ void remove_close_points(SurfaceSamples& samples, Real min_distance) {
   samples.normals.resize(kept);
 }
 
+std::vector<Vec3> lattice_in_box(const Aabb& box, Real spacing) {
+  std::vector<Vec3> points;
+  const Vec3 size = box.size();
+  auto count_along = [&](Real length) { return std::max(1, static_cast<int>(std::floor(length / spacing + Real(1e-3)))); };
+  const int nx = count_along(size.x()), ny = count_along(size.y()), nz = count_along(size.z());
+  points.reserve(static_cast<std::size_t>(nx) * ny * nz);
+  for (int k = 0; k < nz; ++k)
+    for (int j = 0; j < ny; ++j)
+      for (int i = 0; i < nx; ++i) points.push_back(box.min + spacing * Vec3(i + Real(0.5), j + Real(0.5), k + Real(0.5)));
+  return points;
+}
+
 }  // namespace m3dp::sph

@@ -32,6 +32,10 @@ SurfaceSamples sample_plane(const PlaneShape& plane, Real spacing, Real offset =
 /// Offsets along area-weighted vertex normals (outward for a closed, counter-clockwise wound mesh).
 SurfaceSamples sample_mesh_surface(const TriangleMesh& mesh, Real spacing, Real offset = 0);
 
+/// Fluid particles on a cubic lattice of spacing `spacing` filling `box`, centres half a spacing in from
+/// its faces. Whole particles only: a block never reaches past its box (into a wall at its edge).
+std::vector<Vec3> lattice_in_box(const Aabb& box, Real spacing);
+
 /// Removes points closer than `min_distance` to an earlier point (edges shared by faces, mesh seams).
 void remove_close_points(SurfaceSamples& samples, Real min_distance);
 
