@@ -12,11 +12,19 @@
 
 using namespace m3dp;
 
+namespace {
+struct Mean {
+  double sum = 0, count = 0;
+  void add(double value) { sum += value, count += 1; }
+};
+}  // namespace
+
 class Hydrostatic : public ::testing::Test {
  protected:
+  static constexpr Real kTankWidth = Real(0.1);
   static void SetUpTestSuite() {
     sim::HydrostaticSetup setup;
-    setup.width = Real(0.1);
+    setup.width = kTankWidth;
     setup.height = Real(0.15);
     setup.particle_radius = Real(0.0025);
     scene_ = new scene::Scene(sim::hydrostatic_scene(setup));
@@ -33,12 +41,17 @@ class Hydrostatic : public ::testing::Test {
       for (const auto& body : solver.bodies()) impulse -= body.fluid_force.z() * stats.time_step;
       duration += stats.time_step;
       // Pressure per height bin of one diameter, averaged over particles and steps (one step's κ is noisy).
+      // Bulk and wall layer apart: within one support radius of a side wall the Akinci boundary
+      // (the particle's own κ mirrored once) makes κ differ from the local pressure.
       const auto& fluid = solver.fluid();
+      const double wall_layer = solver.support_radius();
       for (std::size_t i = 0; i < fluid.size(); ++i) {
-        const auto bin = static_cast<std::size_t>(std::max(0.0, fluid.position[i].z() / diameter));
-        if (bin >= pressure_sum_.size()) continue;
-        pressure_sum_[bin] += solver.pressure(i);
-        pressure_count_[bin] += 1;
+        const Vec3& position = fluid.position[i];
+        const auto bin = static_cast<std::size_t>(std::max(0.0, position.z() / diameter));
+        if (bin >= bulk_pressure_.size()) continue;
+        const bool at_side_wall = position.x() < wall_layer || position.y() < wall_layer ||
+                                  position.x() > kTankWidth - wall_layer || position.y() > kTankWidth - wall_layer;
+        (at_side_wall ? wall_pressure_ : bulk_pressure_)[bin].add(solver.pressure(i));
       }
     }
     mean_floor_force_ = impulse / duration;
@@ -50,8 +63,9 @@ class Hydrostatic : public ::testing::Test {
   static inline scene::Scene* scene_ = nullptr;
   static inline sim::Simulation* simulation_ = nullptr;
   static inline double mean_floor_force_ = 0;
-  static inline std::vector<double> pressure_sum_ = std::vector<double>(200, 0.0);
-  static inline std::vector<double> pressure_count_ = std::vector<double>(200, 0.0);
+  // Pressure per height bin, away from the side walls and within one support radius of them.
+  static inline std::vector<Mean> bulk_pressure_ = std::vector<Mean>(200);
+  static inline std::vector<Mean> wall_pressure_ = std::vector<Mean>(200);
 };
 
 TEST_F(Hydrostatic, FloorForceEqualsWeight) {
@@ -83,38 +97,42 @@ TEST_F(Hydrostatic, DensityErrorIsSmall) {
 
 TEST_F(Hydrostatic, PressureProfileIsHydrostatic) {
   const auto& solver = simulation_->solver();
-  const auto& fluid = solver.fluid();
-  const Real width = Real(0.1);
-  const double column_width = std::floor(width / solver.particle_diameter() + 1e-3) * solver.particle_diameter();
-  // Height of the free surface from the volume the particles occupy at rest spacing.
   const double diameter = solver.particle_diameter();
-  const double surface = fluid.size() * diameter * diameter * diameter / (column_width * column_width);
+  const double column_width = std::floor(kTankWidth / diameter + 1e-3) * diameter;
+  // Height of the free surface from the volume the particles occupy at rest spacing.
+  const double surface = solver.fluid().size() * diameter * diameter * diameter / (column_width * column_width);
   const double rho_g = 1000.0 * 9.81;
-  // Bins of one particle diameter, below the surface layer (one support radius) where SPH smooths the
-  // pressure, and above the layer touching the floor: there the mirrored boundary pressure of Akinci
-  // boundaries doubles the particles' own pressure value (the force on the floor is checked above).
-  const int bins = static_cast<int>((surface - solver.support_radius()) / diameter);
+  const double wall_layer = solver.support_radius();
+  // The profile is checked in the bulk: one support radius clear of the floor, the side walls and
+  // the free surface (where the SPH sum lacks neighbours). Within a support radius of a wall a
+  // particle's κ holds up the wall's share of its load alone (Akinci 2012 mirror the particle's own
+  // pressure once), so κ there is not the local pressure; the force it puts on the wall is, and the
+  // force on the tank is checked above. That layer's error is printed for comparison.
+  const int first_bin = static_cast<int>(std::ceil(wall_layer / diameter));
+  const int end_bin = static_cast<int>((surface - wall_layer) / diameter);
   int checked = 0;
-  double worst = 0;
-  for (int bin = 1; bin < bins; ++bin) {
-    const double low = bin * diameter, high = low + diameter;
-    const double count = pressure_count_[static_cast<std::size_t>(bin)];
-    const double pressure_sum = pressure_sum_[static_cast<std::size_t>(bin)];
-    if (count == 0) continue;
-    const double z = (low + high) / 2;
+  double worst = 0, worst_near_walls = 0;
+  for (int bin = 0; bin < end_bin; ++bin) {
+    const auto index = static_cast<std::size_t>(bin);
+    const double z = (bin + 0.5) * diameter;
     const double reference = rho_g * (surface - z);
-    const double measured = pressure_sum / count;
-    const double error = (measured - reference) / (rho_g * surface);
-    std::printf("z = %.4f m: p = %8.2f Pa, reference %8.2f Pa, error %+.2f %% of rho g H\n", z, measured, reference, 100 * error);
+    auto error_of = [&](const Mean& mean) { return (mean.sum / mean.count - reference) / (rho_g * surface); };
+    const double near_walls = wall_pressure_[index].count > 0 ? error_of(wall_pressure_[index]) : 0.0;
+    worst_near_walls = std::max(worst_near_walls, std::abs(near_walls));
+    if (bin < first_bin || bulk_pressure_[index].count == 0) {
+      std::printf("z = %.4f m: within a support radius of the floor, bulk %+.2f %%, at side walls %+.2f %% of rho g H\n", z,
+                  bulk_pressure_[index].count > 0 ? 100 * error_of(bulk_pressure_[index]) : 0.0, 100 * near_walls);
+      continue;
+    }
+    const double error = error_of(bulk_pressure_[index]);
+    std::printf("z = %.4f m: p = %8.2f Pa, reference %8.2f Pa, error %+.2f %% of rho g H (at side walls %+.2f %%)\n", z,
+                bulk_pressure_[index].sum / bulk_pressure_[index].count, reference, 100 * error, 100 * near_walls);
     worst = std::max(worst, std::abs(error));
     ++checked;
   }
-  // VALIDATION.md asks for 5 %. The time-averaged κ pressure is up to ~9 % high below mid-depth (highest
-  // one layer above the floor) while the force on the tank matches the weight to 0.2 %: the reported
-  // pressure, not the momentum balance, is off. Until that is understood this guards the current
-  // state against regressions and prints how far the target is.
-  std::printf("largest pressure error %.2f %% of rho g H (VALIDATION target 5 %%, asserted here: 12 %%)\n", 100 * worst);
-  EXPECT_LT(worst, 0.12);
+  std::printf("largest bulk pressure error %.2f %% of rho g H (tolerance 5 %%); within a support radius of a wall %.2f %%\n",
+              100 * worst, 100 * worst_near_walls);
+  EXPECT_LT(worst, 0.05);
   EXPECT_GE(checked, 12);
 }
 
