@@ -162,3 +162,90 @@ TEST(Surface, MethodNamesRoundTrip) {
 INSTANTIATE_TEST_SUITE_P(Surface, EveryMethod,
                          ::testing::Values(Method::spherical, Method::sph_blobby, Method::zhu_bridson, Method::anisotropic),
                          name_of);
+
+namespace {
+
+/// One 20 × 4 layer of a printed wall, `layer` layers up, its particles shaken off the lattice by up
+/// to 0.15 spacings (a fixed pseudo-random pattern) as deposited material is.
+std::vector<Vec3> wall_layer(int layer) {
+  std::vector<Vec3> points = block(20, 4, 1, Vec3(0, 0, layer * kSpacing));
+  for (std::size_t n = 0; n < points.size(); ++n) {
+    const Real phase = Real(n * 7 + layer * 13);
+    points[n] += Real(0.15) * kSpacing * Vec3(std::sin(phase), std::cos(1.3f * phase), std::sin(2.1f * phase));
+  }
+  return points;
+}
+
+}  // namespace
+
+TEST(IncrementalSurface, KeepsTheRestingFieldAndMeshesWhatTheWholeFrameGives) {
+  // A wall printed layer by layer: in frame f the layers below f rest and layer f still moves. Each
+  // frame adds only the layer that came to rest since the last one to the kept field.
+  for (const Method method : {Method::spherical, Method::sph_blobby, Method::anisotropic}) {
+    IncrementalSurface incremental(settings_for(method));
+    std::vector<Vec3> resting;
+    std::vector<std::uint64_t> ids;
+    double worst_volume = 0, worst_triangles = 0;
+    for (int frame = 0; frame < 6; ++frame) {
+      if (frame > 0) {
+        for (const Vec3& p : wall_layer(frame - 1)) {
+          ids.push_back(resting.size());
+          resting.push_back(p);
+        }
+      }
+      const auto moving = wall_layer(frame);
+      SurfaceStats stats;
+      const TriangleMesh mesh = incremental.reconstruct(moving, resting, ids, &stats);
+      std::vector<Vec3> all = moving;
+      all.insert(all.end(), resting.begin(), resting.end());
+      const TriangleMesh whole = reconstruct_surface(all, settings_for(method));
+      EXPECT_EQ(stats.reused_particles, frame > 1 ? resting.size() - 80 : 0u) << method_name(method) << " frame " << frame;
+      EXPECT_EQ(stats.added_particles, frame > 0 ? 80u : 0u) << method_name(method) << " frame " << frame;
+      EXPECT_FALSE(stats.rebuilt);
+      // Kernels under the new layer are remade (they were the flat kernels of a top face).
+      if (method == Method::anisotropic && frame > 1) EXPECT_GT(stats.refreshed_kernels, 0u);
+      EXPECT_TRUE(check_edges(mesh).watertight()) << method_name(method) << " frame " << frame;
+      EXPECT_EQ(connected_components(mesh), connected_components(whole)) << method_name(method) << " frame " << frame;
+      worst_volume = std::max(worst_volume, std::abs(signed_volume(mesh) / signed_volume(whole) - 1));
+      worst_triangles = std::max(worst_triangles, std::abs(double(mesh.triangles.size()) / double(whole.triangles.size()) - 1));
+    }
+    std::printf("%s: incremental against whole-frame meshes, largest difference: volume %.4f %%, triangles %.3f %%\n",
+                std::string(method_name(method)).c_str(), 100 * worst_volume, 100 * worst_triangles);
+    // A union and sums split into parts: the same field up to rounding.
+    EXPECT_LT(worst_volume, 1e-4) << method_name(method);
+    EXPECT_LT(worst_triangles, 1e-3) << method_name(method);
+  }
+}
+
+TEST(IncrementalSurface, RebuildsWhenARestingParticleWakesOrMoves) {
+  IncrementalSurface incremental(settings_for(Method::sph_blobby));
+  std::vector<Vec3> resting = block(10, 4, 3);
+  std::vector<std::uint64_t> ids(resting.size());
+  for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = i;
+  SurfaceStats stats;
+  (void)incremental.reconstruct({}, resting, ids, &stats);
+  EXPECT_EQ(stats.added_particles, resting.size());
+  (void)incremental.reconstruct({}, resting, ids, &stats);
+  EXPECT_EQ(stats.reused_particles, resting.size());
+  EXPECT_EQ(stats.added_particles, 0u);
+  // Particle 7 woke up (it moves now), and particle 3 moved and rested again.
+  const Vec3 woken = resting[7];
+  resting[3].z() += kSpacing;
+  std::vector<Vec3> still_resting;
+  std::vector<std::uint64_t> still_ids;
+  for (std::size_t i = 0; i < resting.size(); ++i)
+    if (i != 7) {
+      still_resting.push_back(resting[i]);
+      still_ids.push_back(ids[i]);
+    }
+  const std::vector<Vec3> moving{woken + Vec3(0, 0, 4 * kSpacing)};
+  const TriangleMesh mesh = incremental.reconstruct(moving, still_resting, still_ids, &stats);
+  EXPECT_TRUE(stats.rebuilt);
+  EXPECT_EQ(stats.reused_particles, 0u);
+  std::vector<Vec3> all = moving;
+  all.insert(all.end(), still_resting.begin(), still_resting.end());
+  const TriangleMesh whole = reconstruct_surface(all, settings_for(Method::sph_blobby));
+  EXPECT_NEAR(signed_volume(mesh), signed_volume(whole), 1e-4 * signed_volume(whole));
+  const std::vector<std::uint64_t> too_few_ids(still_ids.begin(), still_ids.end() - 1);
+  EXPECT_THROW((void)incremental.reconstruct(moving, still_resting, too_few_ids), Error);
+}

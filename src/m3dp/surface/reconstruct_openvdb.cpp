@@ -11,10 +11,12 @@
 #include <tbb/parallel_sort.h>
 
 #include <chrono>
+#include <climits>
 #include <cmath>
 #include <mutex>
 #include <numeric>
 #include <unordered_map>
+#include <unordered_set>
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/sph/kernels.hpp"
@@ -192,7 +194,7 @@ openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const S
   // unevenly (1 or 2 particles a side) for the 60 % rule, and no cell counts as interior.
   const Real reach = settings.sphere_radius + (kHalfWidthVoxels + 1) * settings.voxel_size;
   const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
-  stats.surface_particles = region.contributing.size();
+  stats.surface_particles += region.contributing.size();
   std::vector<Vec3> near_surface(region.contributing.size());
   for (std::size_t n = 0; n < near_surface.size(); ++n) near_surface[n] = positions[region.contributing[n]];
   auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(settings.voxel_size, kHalfWidthVoxels);
@@ -239,7 +241,7 @@ openvdb::FloatGrid::Ptr blobby_field(std::span<const Vec3> positions, const Surf
   const Real voxel = settings.voxel_size;
   const Vec3 half_extent = Vec3::Constant(settings.kernel_radius);
   const DeepRegion region = find_deep_region(positions, settings.kernel_radius, settings.particle_radius);
-  stats.surface_particles = region.contributing.size();
+  stats.surface_particles += region.contributing.size();
   const Eigen::Matrix3f to_unit = Eigen::Matrix3f::Identity() / settings.kernel_radius;
   auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
     for_each_voxel_in_ellipsoid(positions[particle], to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
@@ -252,30 +254,54 @@ openvdb::FloatGrid::Ptr blobby_field(std::span<const Vec3> positions, const Surf
   return grid;
 }
 
-openvdb::FloatGrid::Ptr anisotropic_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats) {
-  // Kernels reach at most the kernel radius (their axes are capped at the isotropic one's), and
-  // smoothing moves a centre by less than the neighbourhood radius times λ.
-  const Real reach = settings.kernel_radius + settings.centre_smoothing * settings.anisotropy_neighborhood;
-  const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
-  stats.surface_particles = region.contributing.size();
-  const AnisotropicKernels kernels = compute_anisotropic_kernels(positions, settings, region.contributing);
+/// Adds −sign · V W_i(x) of every kernel to a new grid (volume fractions are stored negated; sign −1
+/// takes kernels back out, for incremental meshing).
+openvdb::FloatGrid::Ptr splat_anisotropic_kernels(const AnisotropicKernels& kernels, const SurfaceSettings& settings,
+                                                  const openvdb::math::Transform::Ptr& transform, float sign) {
   const Real spacing = 2 * settings.particle_radius;
   const Real volume = spacing * spacing * spacing;
   const sph::CubicSplineKernel unit_kernel(1);
   const Real voxel = settings.voxel_size;
-  std::vector<Index> order(region.contributing.size());
-  std::iota(order.begin(), order.end(), Index(0));  // kernels are stored in the contributing order
+  std::vector<Index> order(kernels.centre.size());
+  std::iota(order.begin(), order.end(), Index(0));
   auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    const Real scale = volume * kernels.determinant[particle];
+    const Real scale = sign * volume * kernels.determinant[particle];
     for_each_voxel_in_ellipsoid(kernels.centre[particle], kernels.transform[particle], kernels.half_extent[particle], voxel,
                                 [&](const openvdb::Coord& ijk, Real q) {
                                   const float weight = scale * unit_kernel.W(q);
                                   accessor.modifyValue(ijk, [weight](float& value) { value -= weight; });
                                 });
   };
-  auto grid = splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
-  fill_interior(*grid, region, voxel, -1.f);
+  return splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
+}
+
+/// The kernels an anisotropic field splatted, and for which of its particles.
+struct SplattedKernels {
+  std::vector<Index> particles;
+  AnisotropicKernels kernels;
+};
+
+/// `also_neighbours`: particles whose field is made elsewhere but that the kernels of `positions`
+/// must see as neighbours (incremental meshing). `splatted`, if given, receives the kernels.
+openvdb::FloatGrid::Ptr anisotropic_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
+                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats,
+                                          std::span<const Vec3> also_neighbours, SplattedKernels* splatted) {
+  // Kernels reach at most the kernel radius (their axes are capped at the isotropic one's), and
+  // smoothing moves a centre by less than the neighbourhood radius times λ.
+  const Real reach = settings.kernel_radius + settings.centre_smoothing * settings.anisotropy_neighborhood;
+  DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
+  stats.surface_particles += region.contributing.size();
+  std::vector<Vec3> with_neighbours;  // `positions` first, so region.contributing indexes it unchanged
+  if (!also_neighbours.empty()) {
+    with_neighbours.reserve(positions.size() + also_neighbours.size());
+    with_neighbours.assign(positions.begin(), positions.end());
+    with_neighbours.insert(with_neighbours.end(), also_neighbours.begin(), also_neighbours.end());
+  }
+  AnisotropicKernels kernels = compute_anisotropic_kernels(
+      also_neighbours.empty() ? positions : std::span<const Vec3>(with_neighbours), settings, region.contributing);
+  auto grid = splat_anisotropic_kernels(kernels, settings, transform, 1.f);
+  fill_interior(*grid, region, settings.voxel_size, -1.f);
+  if (splatted) *splatted = SplattedKernels{std::move(region.contributing), std::move(kernels)};
   return grid;
 }
 
@@ -286,7 +312,7 @@ openvdb::FloatGrid::Ptr zhu_bridson_field(std::span<const Vec3> positions, const
   const Real voxel = settings.voxel_size;
   const Vec3 half_extent = Vec3::Constant(support);
   const DeepRegion region = find_deep_region(positions, support, settings.particle_radius);
-  stats.surface_particles = region.contributing.size();
+  stats.surface_particles += region.contributing.size();
   const std::vector<Index>& order = region.contributing;
   // x̄ needs Σk and Σk·x: a float grid and a Vec3 grid (OpenVDB registers no Vec4 float grid).
   const Eigen::Matrix3f to_unit = Eigen::Matrix3f::Identity() / support;
@@ -355,6 +381,103 @@ TriangleMesh extract_mesh(const openvdb::FloatGrid& grid, double isovalue) {
   return mesh;
 }
 
+/// A field and the value of the surface in it.
+struct Field {
+  openvdb::FloatGrid::Ptr grid;
+  double isovalue = 0;
+};
+
+/// Volume fractions are stored negated (see blobby_field); level sets have their surface at 0.
+double isovalue_of(const SurfaceSettings& settings) {
+  const bool volume_fraction = settings.method == Method::sph_blobby || settings.method == Method::anisotropic;
+  return volume_fraction ? -static_cast<double>(settings.iso_level) : 0.0;
+}
+
+/// The field of `positions` by `settings.method` (resolved settings). `also_neighbours` and
+/// `splatted` only matter to the anisotropic kernels (see anisotropic_field).
+Field field_of(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats,
+               std::span<const Vec3> also_neighbours = {}, SplattedKernels* splatted = nullptr) {
+  const auto transform = openvdb::math::Transform::createLinearTransform(settings.voxel_size);
+  const double isovalue = isovalue_of(settings);
+  switch (settings.method) {
+    case Method::spherical:
+      return {spherical_field(positions, settings, stats), isovalue};
+    case Method::sph_blobby:
+      return {blobby_field(positions, settings, transform, stats), isovalue};
+    case Method::anisotropic:
+      return {anisotropic_field(positions, settings, transform, stats, also_neighbours, splatted), isovalue};
+    case Method::zhu_bridson:
+      return {zhu_bridson_field(positions, settings, transform, stats), isovalue};
+  }
+  throw Error("surface reconstruction: unknown method");
+}
+
+/// `into` becomes the field of both particle sets; `from` is emptied. Spherical level sets combine
+/// by union (min), volume fractions by sum: both are exactly the field of the union of the sets.
+void merge_field(Method method, openvdb::FloatGrid& into, openvdb::FloatGrid& from) {
+  if (method == Method::spherical)
+    openvdb::tools::csgUnion(into, from);
+  else
+    openvdb::tools::compSum(into, from);
+}
+
+TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, SurfaceStats& stats) {
+  stats.active_voxels = field.grid->activeVoxelCount();
+  stats.grid_bytes = std::max<std::size_t>(stats.grid_bytes, field.grid->memUsage());
+  const auto start = Clock::now();
+  TriangleMesh mesh = extract_mesh(*field.grid, field.isovalue);
+  remove_unused_vertices(mesh);
+  // The mesher winds triangles one way for every field here; make them face outwards.
+  if (signed_volume(mesh) < 0) flip_orientation(mesh);
+  // Spheres leave closed pockets between them (a lattice cell's centre is √3 r from its corners):
+  // each is a small inside-out shell. Pockets smaller than a particle are gaps, not holes in the material.
+  if (settings.method == Method::spherical) {
+    const Real spacing = 2 * settings.particle_radius;
+    remove_small_cavities(mesh, spacing * spacing * spacing);
+  }
+  taubin_smooth(mesh, settings.smoothing_iterations, settings.smoothing_lambda, settings.smoothing_mu);
+  stats.mesh_seconds = seconds_since(start);
+  return mesh;
+}
+
+/// Cells of a given size that hold a particle of a set. A point whose 27 surrounding cells include
+/// an occupied one may lie within that size of the set; every point that does is found.
+class OccupiedCells {
+ public:
+  OccupiedCells(std::span<const Vec3> positions, Real cell_size) : inverse_(Real(1) / cell_size) {
+    cells_.reserve(positions.size() / 8 + 16);
+    for (const Vec3& p : positions) {
+      const auto c = cell_of(p);
+      cells_.insert(key(c));
+      for (int k = 0; k < 3; ++k) {
+        low_[k] = std::min(low_[k], c[k] - 1);
+        high_[k] = std::max(high_[k], c[k] + 1);
+      }
+    }
+  }
+  [[nodiscard]] bool near(const Vec3& p) const {
+    const auto c = cell_of(p);
+    // Most points of a large set are far from a small one: the box around the cells answers first.
+    for (int k = 0; k < 3; ++k)
+      if (c[k] < low_[k] || c[k] > high_[k]) return false;
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx)
+          if (cells_.count(key({c[0] + dx, c[1] + dy, c[2] + dz}))) return true;
+    return false;
+  }
+
+ private:
+  [[nodiscard]] std::array<std::int32_t, 3> cell_of(const Vec3& p) const {
+    return {static_cast<std::int32_t>(std::floor(p.x() * inverse_)), static_cast<std::int32_t>(std::floor(p.y() * inverse_)),
+            static_cast<std::int32_t>(std::floor(p.z() * inverse_))};
+  }
+  static std::uint64_t key(const std::array<std::int32_t, 3>& c) { return sph::morton_code(c[0], c[1], c[2]); }
+  Real inverse_;
+  std::unordered_set<std::uint64_t> cells_;
+  std::array<std::int32_t, 3> low_{INT32_MAX, INT32_MAX, INT32_MAX}, high_{INT32_MIN, INT32_MIN, INT32_MIN};
+};
+
 }  // namespace
 
 TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceSettings& input_settings, SurfaceStats* stats) {
@@ -367,44 +490,191 @@ TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceS
     return mesh;
   }
   initialize_openvdb();
-  auto start = Clock::now();
-  const auto transform = openvdb::math::Transform::createLinearTransform(settings.voxel_size);
-  openvdb::FloatGrid::Ptr field;
-  double isovalue = 0;
-  switch (settings.method) {
-    case Method::spherical:
-      field = spherical_field(positions, settings, local_stats);
-      break;
-    case Method::sph_blobby:
-      field = blobby_field(positions, settings, transform, local_stats);
-      isovalue = -settings.iso_level;
-      break;
-    case Method::anisotropic:
-      field = anisotropic_field(positions, settings, transform, local_stats);
-      isovalue = -settings.iso_level;
-      break;
-    case Method::zhu_bridson:
-      field = zhu_bridson_field(positions, settings, transform, local_stats);
-      break;
-  }
-  local_stats.active_voxels = field->activeVoxelCount();
-  local_stats.grid_bytes = std::max<std::size_t>(local_stats.grid_bytes, field->memUsage());
+  const auto start = Clock::now();
+  Field field = field_of(positions, settings, local_stats);
   local_stats.field_seconds = seconds_since(start);
+  mesh = mesh_of_field(field, settings, local_stats);
+  if (stats) *stats = local_stats;
+  return mesh;
+}
 
-  start = Clock::now();
-  mesh = extract_mesh(*field, isovalue);
-  field.reset();
-  remove_unused_vertices(mesh);
-  // The mesher winds triangles one way for every field here; make them face outwards.
-  if (signed_volume(mesh) < 0) flip_orientation(mesh);
-  // Spheres leave closed pockets between them (a lattice cell's centre is √3 r from its corners):
-  // each is a small inside-out shell. Pockets smaller than a particle are gaps, not holes in the material.
-  if (settings.method == Method::spherical) {
-    const Real spacing = 2 * settings.particle_radius;
-    remove_small_cavities(mesh, spacing * spacing * spacing);
+/// The kernel an anisotropic field splatted for one particle (to take it back out when it changes).
+struct KernelRecord {
+  Vec3 centre;
+  Eigen::Matrix3f transform;
+  Real determinant;
+  Vec3 half_extent;
+};
+
+struct IncrementalSurface::Cache {
+  SurfaceSettings settings;                 // resolved
+  openvdb::FloatGrid::Ptr resting_field;    // field of the particles in `kept`; null when none
+  std::unordered_map<std::uint64_t, Vec3> kept;  // id → position of every particle in resting_field
+  std::unordered_map<std::uint64_t, KernelRecord> kernels;  // anisotropic: id → kernel in resting_field
+
+  void clear() {
+    kept.clear();
+    kernels.clear();
+    resting_field.reset();
   }
-  taubin_smooth(mesh, settings.smoothing_iterations, settings.smoothing_lambda, settings.smoothing_mu);
-  local_stats.mesh_seconds = seconds_since(start);
+  void add_to_resting_field(openvdb::FloatGrid::Ptr part) {
+    if (resting_field)
+      merge_field(settings.method, *resting_field, *part);
+    else
+      resting_field = std::move(part);
+  }
+  void record_kernels(const SplattedKernels& splatted, std::span<const std::uint64_t> ids) {
+    const auto& k = splatted.kernels;
+    for (std::size_t n = 0; n < splatted.particles.size(); ++n)
+      kernels[ids[splatted.particles[n]]] = KernelRecord{k.centre[n], k.transform[n], k.determinant[n], k.half_extent[n]};
+  }
+  std::size_t refresh_kernels(std::span<const Vec3> moving, std::span<const Vec3> resting, std::span<const std::uint64_t> ids,
+                              const std::vector<char>& is_added);
+};
+
+/// Anisotropic kernels depend on their neighbours: a kept particle near material that arrived or
+/// moved since its kernel was made gets a new kernel, and the field swaps the old one for it. Only
+/// kernels that change are swapped. Returns how many.
+std::size_t IncrementalSurface::Cache::refresh_kernels(std::span<const Vec3> moving, std::span<const Vec3> resting,
+                                                       std::span<const std::uint64_t> ids, const std::vector<char>& is_added) {
+  const Real radius = settings.anisotropy_neighborhood;
+  std::vector<Vec3> changing(moving.begin(), moving.end());
+  for (std::size_t i = 0; i < resting.size(); ++i)
+    if (is_added[i]) changing.push_back(resting[i]);
+  if (changing.empty()) return 0;
+  const OccupiedCells near_change(changing, radius);
+  // Kept particles with a kernel near the change first, then every other particle near them.
+  std::vector<Vec3> local;
+  std::vector<std::uint64_t> candidate_ids;
+  std::vector<char> is_candidate(resting.size(), 0);
+  for (std::size_t i = 0; i < resting.size(); ++i)
+    if (!is_added[i] && near_change.near(resting[i]) && kernels.count(ids[i])) {
+      is_candidate[i] = 1;
+      local.push_back(resting[i]);
+      candidate_ids.push_back(ids[i]);
+    }
+  if (local.empty()) return 0;
+  const std::size_t candidates = local.size();
+  const OccupiedCells near_candidates(std::span<const Vec3>(local), radius);
+  for (std::size_t i = 0; i < resting.size(); ++i)
+    if (!is_candidate[i] && near_candidates.near(resting[i])) local.push_back(resting[i]);
+  for (const Vec3& p : moving)
+    if (near_candidates.near(p)) local.push_back(p);
+  std::vector<Index> which(candidates);
+  std::iota(which.begin(), which.end(), Index(0));
+  const AnisotropicKernels fresh = compute_anisotropic_kernels(local, settings, which);
+
+  AnisotropicKernels added_kernels, removed_kernels;
+  auto push = [](AnisotropicKernels& list, const KernelRecord& k) {
+    list.centre.push_back(k.centre);
+    list.transform.push_back(k.transform);
+    list.determinant.push_back(k.determinant);
+    list.half_extent.push_back(k.half_extent);
+  };
+  const Real position_tolerance = Real(1e-5) * settings.particle_radius;
+  for (std::size_t n = 0; n < candidates; ++n) {
+    KernelRecord& old_kernel = kernels[candidate_ids[n]];
+    const KernelRecord new_kernel{fresh.centre[n], fresh.transform[n], fresh.determinant[n], fresh.half_extent[n]};
+    // Same neighbours give the same kernel up to the order of the sums.
+    if ((new_kernel.centre - old_kernel.centre).norm() < position_tolerance &&
+        (new_kernel.transform - old_kernel.transform).norm() < Real(1e-5) * old_kernel.transform.norm())
+      continue;
+    push(removed_kernels, old_kernel);
+    push(added_kernels, new_kernel);
+    old_kernel = new_kernel;
+  }
+  if (added_kernels.centre.empty()) return 0;
+  const auto transform = openvdb::math::Transform::createLinearTransform(settings.voxel_size);
+  auto change = splat_anisotropic_kernels(added_kernels, settings, transform, 1.f);
+  auto removal = splat_anisotropic_kernels(removed_kernels, settings, transform, -1.f);
+  openvdb::tools::compSum(*change, *removal);
+  add_to_resting_field(change);
+  return added_kernels.centre.size();
+}
+
+IncrementalSurface::IncrementalSurface(const SurfaceSettings& settings) : cache_(std::make_unique<Cache>()) {
+  cache_->settings = settings.resolved();
+}
+
+IncrementalSurface::~IncrementalSurface() = default;
+
+TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::span<const Vec3> resting,
+                                             std::span<const std::uint64_t> resting_ids, SurfaceStats* stats) {
+  if (resting.size() != resting_ids.size()) throw Error("incremental surface: one id per resting particle is needed");
+  const SurfaceSettings& settings = cache_->settings;
+  if (settings.method == Method::zhu_bridson) {
+    std::vector<Vec3> all(moving.begin(), moving.end());
+    all.insert(all.end(), resting.begin(), resting.end());
+    return reconstruct_surface(all, settings, stats);
+  }
+  initialize_openvdb();
+  SurfaceStats local_stats;
+  local_stats.particles = moving.size() + resting.size();
+  const auto start = Clock::now();
+
+  // Which resting particles are new; drop the kept field if a kept one woke, moved or left.
+  std::vector<char> is_added(resting.size(), 0);
+  std::size_t still_kept = 0;
+  bool changed = false;
+  for (std::size_t i = 0; i < resting.size() && !changed; ++i) {
+    const auto found = cache_->kept.find(resting_ids[i]);
+    if (found == cache_->kept.end())
+      is_added[i] = 1;
+    else if (found->second == resting[i])
+      ++still_kept;
+    else
+      changed = true;
+  }
+  if (changed || still_kept != cache_->kept.size()) {
+    local_stats.rebuilt = !cache_->kept.empty();
+    cache_->clear();
+    std::fill(is_added.begin(), is_added.end(), 1);
+  }
+  std::vector<Vec3> added, kept;
+  std::vector<std::uint64_t> added_ids;
+  for (std::size_t i = 0; i < resting.size(); ++i) {
+    (is_added[i] ? added : kept).push_back(resting[i]);
+    if (is_added[i]) added_ids.push_back(resting_ids[i]);
+  }
+  local_stats.reused_particles = cache_->kept.size();
+  local_stats.added_particles = added.size();
+
+  // Anisotropic kernels see every particle near them, whichever part it belongs to. The other
+  // fields are sums over particles alone.
+  const bool anisotropic = settings.method == Method::anisotropic;
+  auto neighbours_of = [&](std::span<const Vec3> part, std::span<const Vec3> first, std::span<const Vec3> second) {
+    std::vector<Vec3> near;
+    if (!anisotropic) return near;
+    const OccupiedCells cells(part, settings.anisotropy_neighborhood);
+    for (const auto list : {first, second})
+      for (const Vec3& p : list)
+        if (cells.near(p)) near.push_back(p);
+    return near;
+  };
+  if (anisotropic) local_stats.refreshed_kernels = cache_->refresh_kernels(moving, resting, resting_ids, is_added);
+  if (!added.empty()) {
+    SplattedKernels splatted;
+    Field part = field_of(added, settings, local_stats, neighbours_of(added, kept, moving), anisotropic ? &splatted : nullptr);
+    cache_->add_to_resting_field(part.grid);
+    if (anisotropic) cache_->record_kernels(splatted, added_ids);
+    for (std::size_t n = 0; n < added.size(); ++n) cache_->kept.emplace(added_ids[n], added[n]);
+  }
+
+  Field field;
+  field.isovalue = isovalue_of(settings);
+  if (!moving.empty()) {
+    field = field_of(moving, settings, local_stats, neighbours_of(moving, resting, {}));
+    if (cache_->resting_field) {
+      openvdb::FloatGrid::Ptr copy = cache_->resting_field->deepCopy();
+      merge_field(settings.method, *copy, *field.grid);
+      field.grid = copy;
+    }
+  } else if (cache_->resting_field) {
+    field.grid = cache_->resting_field->deepCopy();
+  }
+  local_stats.field_seconds = seconds_since(start);
+  TriangleMesh mesh;
+  if (field.grid) mesh = mesh_of_field(field, settings, local_stats);
   if (stats) *stats = local_stats;
   return mesh;
 }

@@ -10,6 +10,8 @@
 //  anisotropic  Yu & Turk 2013, "Reconstructing surfaces of particle-based fluids using
 //               anisotropic kernels": smoothed centres and one ellipsoidal kernel per particle from
 //               its neighbourhood's covariance; volume fraction, surface at iso_level.
+#include <cstdint>
+#include <memory>
 #include <optional>
 #include <span>
 #include <string>
@@ -65,11 +67,43 @@ struct SurfaceStats {
   std::size_t grid_bytes = 0;     // memory of the field grid(s) at their largest
   double field_seconds = 0;       // particles → grid
   double mesh_seconds = 0;        // grid → triangles (+ smoothing)
+  // IncrementalSurface only:
+  std::size_t reused_particles = 0;  // resting particles whose field was kept from earlier frames
+  std::size_t added_particles = 0;   // resting particles added to that field in this frame
+  std::size_t refreshed_kernels = 0; // anisotropic: kept kernels remade because their neighbours changed
+  bool rebuilt = false;              // the kept field was dropped (a resting particle woke or moved)
 };
 
 /// Reconstructs the surface of the particles at `positions` (m). Returns a closed, outward-oriented
 /// mesh (empty for no particles). Runs in parallel (TBB).
 [[nodiscard]] TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceSettings& settings,
                                                SurfaceStats* stats = nullptr);
+
+/// Meshes a sequence of frames in which printed material comes to rest (issue 4, incremental
+/// meshing). The field of the resting particles is kept between frames: each frame adds the
+/// particles that came to rest since the last one and the field of the moving ones, so the field's
+/// cost follows what changed, not the whole print (the mesher still walks the whole surface).
+/// A resting particle keeps its id and position; if one wakes up, moves or leaves, the kept field
+/// is rebuilt from the current resting set.
+///  spherical, sph_blobby  the result is the whole frame's (a union and a sum split into parts).
+///  anisotropic            the same too: Yu & Turk's kernels depend on the neighbours, so a kept
+///                         particle near material that arrived or moved gets its kernel remade and
+///                         swapped in the kept field (a flat kernel under a new layer turns round).
+///  zhu_bridson            not a sum of contributions: every frame is reconstructed whole.
+class IncrementalSurface {
+ public:
+  explicit IncrementalSurface(const SurfaceSettings& settings);
+  ~IncrementalSurface();
+  IncrementalSurface(const IncrementalSurface&) = delete;
+  IncrementalSurface& operator=(const IncrementalSurface&) = delete;
+
+  /// The surface of `moving` ∪ `resting` (m); `resting_ids` are the resting particles' stable ids.
+  [[nodiscard]] TriangleMesh reconstruct(std::span<const Vec3> moving, std::span<const Vec3> resting,
+                                         std::span<const std::uint64_t> resting_ids, SurfaceStats* stats = nullptr);
+
+ private:
+  struct Cache;
+  std::unique_ptr<Cache> cache_;
+};
 
 }  // namespace m3dp::surface
