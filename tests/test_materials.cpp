@@ -12,6 +12,7 @@
 
 #include "m3dp/sph/boundary_sampling.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/presets.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/sph/solver.hpp"
 
@@ -342,13 +343,7 @@ StrandSection print_strand(double speed_ratio) {
   parameters.settings.max_time_step = Real(2e-3);
   parameters.settings.bounds.min = Vec3(-0.1f, -0.1f, -0.05f);
   parameters.settings.bounds.max = Vec3(0.25f, 0.1f, 0.1f);
-  // A paste that holds a 1 cm bead (τ0 ≥ ρgh/√3 ≈ 85 Pa) and sticks to the bed.
-  material::Material paste = material::newtonian("paste", 1500, 0);
-  paste.rheology.model = material::RheologyModel::bingham;
-  paste.rheology.yield_stress = 150;
-  paste.rheology.viscosity = 5;
-  paste.sticks_to_walls = true;
-  parameters.phases.push_back(paste);
+  parameters.phases.push_back(sim::bingham_test_paste());  // holds a 1 cm bead, sticks to the bed
   parameters.nozzles.push_back(sph::NozzleSettings{"nozzle", diameter, exit_speed, 0});
   sph::Solver solver(parameters);
   solver.add_body("bed", sph::sample_box_surface(BoxShape{Vec3(0.34f, 0.16f, 4 * d)}, d, -d / 2).points,
@@ -410,27 +405,7 @@ TEST(Strand, AreaIsFlowOverSpeedAndShapeFlattensAsTheNozzleSlows) {
 TEST(RestDetection, RestedMaterialCostsNothingAndWakesWhenABoxLandsOnIt) {
   // A slab of yield-stress paste settles on a floor and comes to rest: its particles leave the solve.
   // A box dropped on it sets the material it reaches moving again.
-  scene::Scene scene;
-  scene.file = "wake-up (built in)";
-  scene.solver.particle_radius = Real(0.0025);
-  scene.solver.max_time_step = Real(2e-3);
-  scene.solver.bounds.min = Vec3(-0.3f, -0.3f, -0.1f);
-  scene.solver.bounds.max = Vec3(0.3f, 0.3f, 0.6f);
-  material::Material paste = material::newtonian("paste", 1500, 0);
-  paste.rheology.model = material::RheologyModel::bingham;
-  paste.rheology.yield_stress = 150;
-  paste.rheology.viscosity = 5;
-  paste.sticks_to_walls = true;
-  scene.materials.push_back(scene::MaterialEntry{paste, {}});
-  scene.bodies.push_back(scene::StaticBody{
-      "floor", {scene::CollisionShape{"floor", BoxShape{Vec3(0.4f, 0.4f, 0.02f)}, Pose{Vec3(0, 0, -0.01f), Quat::Identity()}, {}}}, {}});
-  scene::FluidBlock slab;
-  slab.name = "slab";
-  slab.material = "paste";
-  slab.box.min = Vec3(-0.06f, -0.06f, 0);
-  slab.box.max = Vec3(0.06f, 0.06f, 0.03f);
-  scene.fluid_blocks.push_back(slab);
-  scene.output.write_particles = false;
+  scene::Scene scene = sim::paste_slab_scene(sim::PasteSlabSetup{});
   scene::DynamicBody box;
   box.name = "box";
   box.collisions.push_back(scene::CollisionShape{"box/link/box", BoxShape{Vec3::Constant(0.04f)}, Pose{}, {}});

@@ -9,9 +9,12 @@
 #include <sstream>
 
 #include "m3dp/core/progress.hpp"
+#include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/vtk_writer.hpp"
 #include "m3dp/sim/presets.hpp"
 #include "m3dp/sim/simulation.hpp"
+#include "m3dp/surface/mesh_tools.hpp"
+#include "m3dp/surface/surface.hpp"
 
 using namespace m3dp;
 namespace fs = std::filesystem;
@@ -206,5 +209,43 @@ TEST(Outputs, RobotRunsReportRobotsNozzlesAndWorldTimes) {
   // The robot's stages have their own columns in the timing table.
   const std::string timing = read_text(directory / "timing.csv");
   EXPECT_NE(timing.find(",ms_coupling,ms_world,"), std::string::npos);
+  fs::remove_all(directory);
+}
+
+TEST(Outputs, MaterialAtRestIsMeshedIncrementallyAndGivesTheWholeFramesMesh) {
+  // A slab of yield-stress paste settles and comes to rest; it is meshed every 0.05 s. Once at rest
+  // its field is kept between meshes, and the last mesh is the one the whole frame gives.
+  sim::PasteSlabSetup setup;
+  setup.half_width = Real(0.03);
+  setup.end_time = 0.3;
+  scene::Scene scene = sim::paste_slab_scene(setup);
+  scene.meshing.enabled = true;
+  scene.meshing.period = Real(0.05);
+  scene.meshing.format = "obj";
+  scene.meshing.surface.method = surface::Method::sph_blobby;
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("incremental_meshing");
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  options.wait_for_meshes = true;
+  const auto summary = sim::run_simulation(simulation, options);
+  ASSERT_EQ(summary.status, "completed");
+  ASSERT_GT(summary.particles_at_rest, summary.particles * 9 / 10);
+
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  const auto& meshes = json["meshes"];
+  ASSERT_GE(meshes.size(), 5u);
+  std::printf("particles reused from the kept field, mesh by mesh:");
+  for (const auto& mesh : meshes) std::printf(" %zu/%zu", mesh["reused_particles"].get<std::size_t>(), mesh["particles"].get<std::size_t>());
+  std::printf("\n");
+  const auto& last = meshes.back();
+  EXPECT_GT(last["reused_particles"].get<std::size_t>(), summary.particles * 9 / 10);
+  const TriangleMesh written = io::read_triangle_mesh(directory / last["file"].get<std::string>());
+  surface::SurfaceSettings settings = scene.meshing.surface;
+  settings.particle_radius = scene.solver.particle_radius;
+  const TriangleMesh whole = surface::reconstruct_surface(simulation.solver().fluid().position, settings);
+  EXPECT_EQ(written.triangles.size(), whole.triangles.size());
+  EXPECT_NEAR(surface::signed_volume(written), surface::signed_volume(whole), 1e-4 * surface::signed_volume(whole));
   fs::remove_all(directory);
 }

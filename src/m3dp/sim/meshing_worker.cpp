@@ -4,12 +4,13 @@
 
 #include <chrono>
 
+#include "m3dp/core/error.hpp"
 #include "m3dp/io/mesh_io.hpp"
 
 namespace m3dp::sim {
 
 MeshingWorker::MeshingWorker(surface::SurfaceSettings settings, std::filesystem::path folder, std::string format)
-    : settings_(settings.resolved()), folder_(std::move(folder)), format_(std::move(format)) {
+    : settings_(settings.resolved()), folder_(std::move(folder)), format_(std::move(format)), surface_(settings_) {
   std::filesystem::create_directories(folder_);
   thread_ = std::thread([this] { run(); });
 }
@@ -23,14 +24,18 @@ MeshingWorker::~MeshingWorker() {
   thread_.join();
 }
 
-bool MeshingWorker::submit(double time, std::span<const Vec3> positions) {
+bool MeshingWorker::submit(double time, std::span<const Vec3> moving, std::span<const Vec3> resting,
+                           std::span<const std::uint64_t> resting_ids) {
+  if (resting.size() != resting_ids.size()) throw Error("meshing: one id per resting particle is needed");
   {
     std::lock_guard lock(mutex_);
     if (busy_) {
       ++skipped_;
       return false;
     }
-    pending_positions_.assign(positions.begin(), positions.end());
+    pending_moving_.assign(moving.begin(), moving.end());
+    pending_resting_.assign(resting.begin(), resting.end());
+    pending_resting_ids_.assign(resting_ids.begin(), resting_ids.end());
     pending_time_ = time;
     busy_ = true;
   }
@@ -64,7 +69,8 @@ std::string MeshingWorker::error() const {
 }
 
 void MeshingWorker::run() {
-  std::vector<Vec3> positions;
+  std::vector<Vec3> moving, resting;
+  std::vector<std::uint64_t> resting_ids;
   for (;;) {
     double time = 0;
     std::size_t index = 0;
@@ -72,19 +78,23 @@ void MeshingWorker::run() {
       std::unique_lock lock(mutex_);
       work_ready_.wait(lock, [this] { return busy_ || stopping_; });
       if (!busy_) return;  // stopping with nothing to do
-      positions.swap(pending_positions_);
+      moving.swap(pending_moving_);
+      resting.swap(pending_resting_);
+      resting_ids.swap(pending_resting_ids_);
       time = pending_time_;
       index = meshes_.size();
     }
     const auto start = std::chrono::steady_clock::now();
     Mesh mesh;
     mesh.time = time;
-    mesh.particles = positions.size();
+    mesh.particles = moving.size() + resting.size();
     mesh.file = folder_ / fmt::format("mesh_{:06}.{}", index, format_);
     std::shared_ptr<TriangleMesh> surface;
     std::string failure;
     try {
-      surface = std::make_shared<TriangleMesh>(surface::reconstruct_surface(positions, settings_));
+      surface::SurfaceStats stats;
+      surface = std::make_shared<TriangleMesh>(surface_.reconstruct(moving, resting, resting_ids, &stats));
+      mesh.reused_particles = stats.reused_particles;
       io::write_triangle_mesh(mesh.file, *surface);
       mesh.triangles = surface->triangles.size();
     } catch (const std::exception& error) {

@@ -2,8 +2,10 @@
 // Surface meshes during a run (issue 4): the run loop hands a copy of the particle positions to a
 // worker thread and steps on; the worker reconstructs the surface and writes meshes/mesh_NNNNNN.EXT.
 // While the worker is busy, a new request is skipped (and counted), never queued: the solver
-// does not wait, and meshes never fall further and further behind.
+// does not wait, and meshes never fall further and further behind. Material at rest is meshed
+// incrementally: its field is kept between meshes (surface::IncrementalSurface).
 #include <condition_variable>
+#include <cstdint>
 #include <filesystem>
 #include <memory>
 #include <mutex>
@@ -23,6 +25,7 @@ class MeshingWorker {
     double time = 0;                 // s, simulated time of the particles it was made from
     std::filesystem::path file;
     std::size_t particles = 0, triangles = 0;
+    std::size_t reused_particles = 0;  // resting particles whose field was kept from earlier meshes
     double seconds = 0;              // wall time to reconstruct and write
   };
 
@@ -32,8 +35,10 @@ class MeshingWorker {
   MeshingWorker(const MeshingWorker&) = delete;
   MeshingWorker& operator=(const MeshingWorker&) = delete;
 
-  /// Copies `positions` for a mesh at `time`. Returns false (and counts a skip) if the worker is busy.
-  bool submit(double time, std::span<const Vec3> positions);
+  /// Copies the particles for a mesh at `time`: those still moving, and those at rest with their
+  /// stable ids. Returns false (and counts a skip) if the worker is busy.
+  bool submit(double time, std::span<const Vec3> moving, std::span<const Vec3> resting = {},
+              std::span<const std::uint64_t> resting_ids = {});
   /// Blocks until the worker is idle.
   void wait_idle();
 
@@ -55,7 +60,10 @@ class MeshingWorker {
   std::condition_variable work_ready_, work_done_;
   bool busy_ = false, stopping_ = false;
   double pending_time_ = 0;
-  std::vector<Vec3> pending_positions_;   // filled by submit, swapped out by the worker
+  // Filled by submit, swapped out by the worker.
+  std::vector<Vec3> pending_moving_, pending_resting_;
+  std::vector<std::uint64_t> pending_resting_ids_;
+  surface::IncrementalSurface surface_;   // used by the worker thread only
   std::vector<Mesh> meshes_;
   std::size_t skipped_ = 0;
   std::shared_ptr<const TriangleMesh> latest_;

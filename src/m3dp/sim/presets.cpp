@@ -173,4 +173,35 @@ scene::Scene hydrostatic_scene(const HydrostaticSetup& setup) {
   return scene;
 }
 
+material::Material bingham_test_paste() {
+  material::Material paste = material::newtonian("paste", 1500, 0);
+  paste.rheology.model = material::RheologyModel::bingham;
+  paste.rheology.yield_stress = 150;
+  paste.rheology.viscosity = 5;
+  paste.sticks_to_walls = true;
+  return paste;
+}
+
+scene::Scene paste_slab_scene(const PasteSlabSetup& setup) {
+  scene::Scene scene;
+  scene.file = "paste slab (built in)";
+  scene.world_name = "paste_slab";
+  scene.end_time = setup.end_time;
+  scene.solver.particle_radius = setup.particle_radius;
+  scene.solver.max_time_step = Real(2e-3);
+  scene.solver.bounds.min = Vec3(-0.3f, -0.3f, -0.1f);
+  scene.solver.bounds.max = Vec3(0.3f, 0.3f, 0.6f);
+  scene.materials.push_back(scene::MaterialEntry{bingham_test_paste(), {}});
+  scene.bodies.push_back(scene::StaticBody{
+      "floor", {scene::CollisionShape{"floor", BoxShape{Vec3(0.4f, 0.4f, 0.02f)}, Pose{Vec3(0, 0, -0.01f), Quat::Identity()}, {}}}, {}});
+  scene::FluidBlock slab;
+  slab.name = "slab";
+  slab.material = "paste";
+  slab.box.min = Vec3(-setup.half_width, -setup.half_width, 0);
+  slab.box.max = Vec3(setup.half_width, setup.half_width, setup.height);
+  scene.fluid_blocks.push_back(slab);
+  scene.output.write_particles = false;
+  return scene;
+}
+
 }  // namespace m3dp::sim

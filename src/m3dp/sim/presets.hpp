@@ -57,4 +57,18 @@ struct WallPrintSetup {
 
 scene::Scene wall_print_scene(const WallPrintSetup& setup);
 
+/// A test paste: Bingham, 150 Pa yield stress, 5 Pa·s, 1500 kg/m³, sticking to walls. It holds a
+/// 1 cm bead (τ0 ≥ ρ g h/√3 ≈ 85 Pa).
+material::Material bingham_test_paste();
+
+/// A slab of bingham_test_paste() on a floor: it settles and comes to rest within about 0.2 s. The slab is centred on the origin and sits on z = 0.
+struct PasteSlabSetup {
+  Real half_width = Real(0.06);  // m, the slab's half side
+  Real height = Real(0.03);      // m
+  Real particle_radius = Real(0.0025);
+  double end_time = 1.0;
+};
+
+scene::Scene paste_slab_scene(const PasteSlabSetup& setup);
+
 }  // namespace m3dp::sim

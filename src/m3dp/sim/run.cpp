@@ -64,6 +64,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                         {"file", std::filesystem::relative(mesh.file, std::filesystem::path(summary.output_directory)).generic_string()},
                         {"particles", mesh.particles},
                         {"triangles", mesh.triangles},
+                        {"reused_particles", mesh.reused_particles},
                         {"seconds", mesh.seconds}});
   nlohmann::json nozzles = nlohmann::json::array();
   const auto& solver = simulation.solver();
@@ -186,21 +187,32 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   std::optional<std::uint16_t> meshed_phase;
   for (std::size_t m = 0; m < simulation.scene().materials.size(); ++m)
     if (simulation.scene().materials[m].material.name == meshing_settings.material) meshed_phase = static_cast<std::uint16_t>(m);
-  std::vector<Vec3> meshed_positions;
-  auto select_meshed = [&]() -> std::span<const Vec3> {
+  // Moving and resting particles apart: the worker keeps the resting ones' field between meshes.
+  std::vector<Vec3> meshed_moving, meshed_resting;
+  std::vector<std::uint64_t> meshed_resting_ids;
+  auto submit_mesh = [&]() {
     const auto& fluid = solver.fluid();
-    if (meshing_settings.material.empty() && !meshing_settings.region) return fluid.position;
-    meshed_positions.clear();
-    for (std::size_t i = 0; i < fluid.size(); ++i)
-      if ((!meshed_phase || fluid.phase[i] == *meshed_phase) &&
-          (!meshing_settings.region || meshing_settings.region->contains(fluid.position[i])))
-        meshed_positions.push_back(fluid.position[i]);
-    return meshed_positions;
+    const std::size_t active = solver.state().active_count;
+    meshed_moving.clear();
+    meshed_resting.clear();
+    meshed_resting_ids.clear();
+    for (std::size_t i = 0; i < fluid.size(); ++i) {
+      if ((meshed_phase && fluid.phase[i] != *meshed_phase) ||
+          (meshing_settings.region && !meshing_settings.region->contains(fluid.position[i])))
+        continue;
+      if (i < active) {
+        meshed_moving.push_back(fluid.position[i]);
+      } else {
+        meshed_resting.push_back(fluid.position[i]);
+        meshed_resting_ids.push_back(fluid.id[i]);
+      }
+    }
+    return meshing->submit(solver.time(), meshed_moving, meshed_resting, meshed_resting_ids);
   };
   auto mesh_if_due = [&]() {
     if (!meshing || solver.time() + 1e-12 < next_mesh_time) return;
     if (options.wait_for_meshes) meshing->wait_idle();
-    if (meshing->submit(solver.time(), select_meshed())) last_meshed_time = solver.time();
+    if (submit_mesh()) last_meshed_time = solver.time();
     if (options.wait_for_meshes) meshing->wait_idle();
     while (next_mesh_time <= solver.time() + 1e-12) next_mesh_time += meshing_settings.period;
   };
@@ -252,7 +264,7 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     // The final state is always meshed (after the mesh in progress): nothing printed goes unmeshed.
     meshing->wait_idle();
     if (last_meshed_time < solver.time() && solver.fluid().size() > 0) {
-      meshing->submit(solver.time(), select_meshed());
+      submit_mesh();
       meshing->wait_idle();
     }
     summary.meshes_written = meshing->meshes().size();
