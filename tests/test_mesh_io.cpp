@@ -10,12 +10,15 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/io/mesh_io.hpp"
+#include "m3dp/io/particle_reader.hpp"
+#include "m3dp/io/vtk_writer.hpp"
 
 namespace {
 
 namespace fs = std::filesystem;
 using m3dp::InputError;
 using m3dp::io::read_triangle_mesh;
+using m3dp::Vec3;
 
 /// A fresh folder per test, removed afterwards.
 class MeshIo : public ::testing::Test {
@@ -184,6 +187,46 @@ TEST_F(MeshIo, UnknownExtensionAndMissingFile) {
   const std::string missing_message = read_error(folder_ / "nowhere.stl");
   EXPECT_NE(missing_message.find("nowhere.stl"), std::string::npos) << missing_message;
   EXPECT_NE(missing_message.find("no such file"), std::string::npos) << missing_message;
+}
+
+TEST_F(MeshIo, ParticleFramesKeepTheirIds) {
+  // m3dp run's frames (raw appended, UInt64 ids beyond a float's 2^24) and a hand-written ASCII file.
+  const std::vector<Vec3> points{Vec3(0.1f, 0.2f, 0.3f), Vec3(-1, 2, 4), Vec3(5e-4f, 0, 1)};
+  const std::vector<std::uint64_t> ids{7, (std::uint64_t{1} << 40) + 3, 16777217};
+  const fs::path written = folder_ / "frame.vtu";
+  m3dp::io::write_vtu(written, points, {m3dp::io::PointArray::of("id", ids)}, {{"particle_radius", 0.001}});
+  const auto frame = m3dp::io::read_particle_frame(written);
+  ASSERT_EQ(frame.positions.size(), 3u);
+  EXPECT_EQ(frame.positions[1], points[1]);
+  EXPECT_EQ(frame.ids, ids);
+  EXPECT_NEAR(*frame.particle_radius, 0.001, 1e-9);
+
+  const fs::path ascii = write("ascii.vtu", R"(<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="1.0">
+  <UnstructuredGrid><Piece NumberOfPoints="2" NumberOfCells="0">
+    <PointData><DataArray type="Int32" Name="id" format="ascii">12 5</DataArray></PointData>
+    <Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">0 0 0 1 1 1</DataArray></Points>
+  </Piece></UnstructuredGrid>
+</VTKFile>
+)");
+  const auto ascii_frame = m3dp::io::read_particle_frame(ascii);
+  EXPECT_EQ(ascii_frame.ids, (std::vector<std::uint64_t>{12, 5}));
+  EXPECT_EQ(ascii_frame.positions[1], Vec3(1, 1, 1));
+
+  const fs::path short_ids = write("short.vtu", R"(<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="1.0">
+  <UnstructuredGrid><Piece NumberOfPoints="2" NumberOfCells="0">
+    <PointData><DataArray type="Int32" Name="id" format="ascii">12</DataArray></PointData>
+    <Points><DataArray type="Float64" NumberOfComponents="3" format="ascii">0 0 0 1 1 1</DataArray></Points>
+  </Piece></UnstructuredGrid>
+</VTKFile>
+)");
+  try {
+    (void)m3dp::io::read_particle_frame(short_ids);
+    ADD_FAILURE() << "a short id array was read";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("the id array ends after 1 of 2 values"), std::string::npos) << error.what();
+  }
 }
 
 }  // namespace

@@ -249,3 +249,24 @@ TEST(IncrementalSurface, RebuildsWhenARestingParticleWakesOrMoves) {
   const std::vector<std::uint64_t> too_few_ids(still_ids.begin(), still_ids.end() - 1);
   EXPECT_THROW((void)incremental.reconstruct(moving, still_resting, too_few_ids), Error);
 }
+
+TEST(IncrementalSurface, SavedFramesTreatUnmovedParticlesAsResting) {
+  // Frames as m3dp run saves them: a block that stays put and a layer that moves on top of it.
+  const std::vector<Vec3> still = block(10, 4, 3);
+  IncrementalSurface incremental(settings_for(Method::spherical));
+  for (int frame = 0; frame < 3; ++frame) {
+    std::vector<Vec3> positions = still;
+    std::vector<std::uint64_t> ids(still.size());
+    for (std::size_t i = 0; i < ids.size(); ++i) ids[i] = 1000 + i;
+    for (const Vec3& p : block(10, 4, 1, Vec3(frame * kRadius, 0, 3 * kSpacing))) {
+      ids.push_back(positions.size() + 1000);
+      positions.push_back(p);
+    }
+    SurfaceStats stats;
+    const TriangleMesh mesh = incremental.reconstruct_frame(positions, ids, &stats);
+    EXPECT_EQ(stats.reused_particles, frame >= 2 ? still.size() : 0u) << "frame " << frame;
+    EXPECT_EQ(stats.added_particles, frame >= 1 ? still.size() * (frame == 1) : 0u) << "frame " << frame;
+    const TriangleMesh whole = reconstruct_surface(positions, settings_for(Method::spherical));
+    EXPECT_EQ(mesh.triangles.size(), whole.triangles.size()) << "frame " << frame;
+  }
+}

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <chrono>
+#include <memory>
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
@@ -81,23 +82,29 @@ struct MeshedFrame {
   std::size_t particles = 0;
 };
 
-/// Meshes one frame and writes it.
-MeshedFrame mesh_one(const MeshOptions& options, const fs::path& input, const fs::path& output, const std::string& format) {
+/// Meshes one frame and writes it. `incremental`, for a sequence, keeps the field of particles that
+/// have not moved since the previous frame (frames with particle ids only, as m3dp run writes them).
+MeshedFrame mesh_one(const MeshOptions& options, const fs::path& input, const fs::path& output, const std::string& format,
+                     std::unique_ptr<surface::IncrementalSurface>* incremental = nullptr) {
   const io::ParticleFrame frame = io::read_particle_frame(input);
   const surface::SurfaceSettings settings = settings_of(options, frame, input);
   surface::SurfaceStats stats;
-  const TriangleMesh mesh = surface::reconstruct_surface(frame.positions, settings, &stats);
+  const bool reuse = incremental && frame.ids.size() == frame.positions.size();
+  if (reuse && !*incremental) *incremental = std::make_unique<surface::IncrementalSurface>(settings);
+  const TriangleMesh mesh = reuse ? (*incremental)->reconstruct_frame(frame.positions, frame.ids, &stats)
+                                  : surface::reconstruct_surface(frame.positions, settings, &stats);
   if (format == "sdf") {
     io::write_sdf_model(output, output.filename().string(), mesh);
   } else {
     if (output.has_parent_path()) fs::create_directories(output.parent_path());
     io::write_triangle_mesh(output, mesh);
   }
-  return {fmt::format("{} → {}: {} particles, {} triangles, {} pieces, volume {:.6g} m³ ({} method, {:.3f} s field + {:.3f} s mesh, "
-                     "{:.1f} MB grid)",
-                     input.string(), output.string(), frame.positions.size(), mesh.triangles.size(),
-                     surface::connected_components(mesh), surface::signed_volume(mesh), surface::method_name(settings.method),
-                     stats.field_seconds, stats.mesh_seconds, stats.grid_bytes / 1e6),
+  return {fmt::format("{} → {}: {} particles{}, {} triangles, {} pieces, volume {:.6g} m³ ({} method, {:.3f} s field + {:.3f} s mesh, "
+                      "{:.1f} MB grid)",
+                      input.string(), output.string(), frame.positions.size(),
+                      reuse ? fmt::format(" ({} meshed from a kept field: unmoved since earlier frames)", stats.reused_particles) : std::string(),
+                      mesh.triangles.size(), surface::connected_components(mesh), surface::signed_volume(mesh),
+                      surface::method_name(settings.method), stats.field_seconds, stats.mesh_seconds, stats.grid_bytes / 1e6),
           frame.positions.size()};
 }
 
@@ -118,10 +125,11 @@ int mesh_command(const MeshOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   ProgressSample sample;
   sample.end_time_s = entries.back().time;
+  std::unique_ptr<surface::IncrementalSurface> incremental;  // the frames' resting material is meshed once
   for (std::size_t n = 0; n < entries.size(); ++n) {
     const std::string name = fmt::format("mesh_{:06}", n);
     const fs::path output = format == "sdf" ? options.output / name : options.output / (name + "." + format);
-    const MeshedFrame meshed = mesh_one(options, entries[n].file, output, format);
+    const MeshedFrame meshed = mesh_one(options, entries[n].file, output, format, &incremental);
     if (options.quiet) fmt::print("{}\n", meshed.line);
     sample.particles = static_cast<long long>(meshed.particles);
     sample.simulated_time_s = entries[n].time;

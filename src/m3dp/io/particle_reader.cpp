@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <type_traits>
 
 #include "m3dp/core/error.hpp"
 
@@ -36,16 +37,61 @@ std::size_t vtk_type_bytes(const std::string& type) {
   return 0;
 }
 
-Real read_scalar(const char* bytes, const std::string& type) {
+/// One value of a VTK/PLY binary type (little-endian) as T.
+template <class T>
+T read_element(const char* bytes, const std::string& type) {
   static_assert(std::endian::native == std::endian::little, "the readers assume a little-endian machine");
-  if (type == "Float32") {
-    float value;
-    std::memcpy(&value, bytes, 4);
-    return static_cast<Real>(value);
+  auto as = [&]<class Stored>(Stored) {
+    Stored value;
+    std::memcpy(&value, bytes, sizeof(Stored));
+    return static_cast<T>(value);
+  };
+  if (type == "Float32") return as(float{});
+  if (type == "Float64") return as(double{});
+  if (type == "Int8") return as(std::int8_t{});
+  if (type == "UInt8") return as(std::uint8_t{});
+  if (type == "Int16") return as(std::int16_t{});
+  if (type == "UInt16") return as(std::uint16_t{});
+  if (type == "Int32") return as(std::int32_t{});
+  if (type == "UInt32") return as(std::uint32_t{});
+  if (type == "Int64") return as(std::int64_t{});
+  return as(std::uint64_t{});
+}
+
+Real read_scalar(const char* bytes, const std::string& type) { return read_element<Real>(bytes, type); }
+
+/// The `components` × `count` values of a DataArray, ascii or raw appended (`appended` is where
+/// <AppendedData> starts in `bytes`, npos if none).
+template <class T>
+std::vector<T> read_data_array(const fs::path& file, const pugi::xml_node& array, std::size_t count, int components,
+                               const std::string& bytes, std::size_t appended, const std::string& header_type) {
+  const std::string name = array.attribute("Name").as_string("points");
+  const std::string type = array.attribute("type").as_string();
+  if (vtk_type_bytes(type) == 0) fail(file, 0, fmt::format("array '{}' of unknown type '{}'", name, type));
+  const std::size_t total = count * static_cast<std::size_t>(components);
+  std::vector<T> values(total);
+  const std::string format = array.attribute("format").as_string();
+  if (format == "ascii") {
+    std::istringstream text(array.text().as_string());
+    for (std::size_t n = 0; n < total; ++n) {
+      std::conditional_t<std::is_floating_point_v<T>, double, long long> value;
+      if (!(text >> value)) fail(file, 0, fmt::format("the {} array ends after {} of {} values", name, n, total));
+      values[n] = static_cast<T>(value);
+    }
+  } else if (format == "appended") {
+    if (appended == std::string::npos) fail(file, 0, fmt::format("appended {} but no <AppendedData>", name));
+    const std::size_t marker = bytes.find('_', appended);
+    if (marker == std::string::npos) fail(file, 0, "<AppendedData> without its '_' marker");
+    const std::size_t size_bytes = header_type == "UInt64" ? 8 : 4;
+    const std::size_t start = marker + 1 + array.attribute("offset").as_ullong() + size_bytes;
+    const std::size_t element = vtk_type_bytes(type);
+    if (start + total * element > bytes.size()) fail(file, 0, fmt::format("the file ends inside the {} data (truncated?)", name));
+    for (std::size_t n = 0; n < total; ++n) values[n] = read_element<T>(bytes.data() + start + n * element, type);
+  } else {
+    fail(file, 0, fmt::format("{} in '{}' format; expected ascii or raw appended (ParaView: Data Mode Ascii or Appended, "
+                              "Encode Appended Data off)", name, format));
   }
-  double value;
-  std::memcpy(&value, bytes, 8);
-  return static_cast<Real>(value);
+  return values;
 }
 
 ParticleFrame read_vtk_xml(const fs::path& file) {
@@ -73,30 +119,13 @@ ParticleFrame read_vtk_xml(const fs::path& file) {
   if (points.attribute("NumberOfComponents").as_int(3) != 3) fail(file, 0, "points must have 3 components");
 
   ParticleFrame frame;
+  const std::vector<Real> coordinates = read_data_array<Real>(file, points, count, 3, bytes, appended, header_type);
   frame.positions.resize(count);
-  const std::string format = points.attribute("format").as_string();
-  if (format == "ascii") {
-    std::istringstream values(points.text().as_string());
-    for (std::size_t i = 0; i < count; ++i)
-      for (int k = 0; k < 3; ++k) {
-        double value;
-        if (!(values >> value)) fail(file, 0, fmt::format("the points array ends after {} of {} values", 3 * i + k, 3 * count));
-        frame.positions[i][k] = static_cast<Real>(value);
-      }
-  } else if (format == "appended") {
-    if (appended == std::string::npos) fail(file, 0, "appended points but no <AppendedData>");
-    const std::size_t marker = bytes.find('_', appended);
-    if (marker == std::string::npos) fail(file, 0, "<AppendedData> without its '_' marker");
-    const std::size_t size_bytes = header_type == "UInt64" ? 8 : 4;
-    const std::size_t start = marker + 1 + points.attribute("offset").as_ullong() + size_bytes;
-    const std::size_t element = vtk_type_bytes(type);
-    if (start + 3 * count * element > bytes.size()) fail(file, 0, "the file ends inside the points data (truncated?)");
-    for (std::size_t i = 0; i < count; ++i)
-      for (int k = 0; k < 3; ++k) frame.positions[i][k] = read_scalar(bytes.data() + start + (3 * i + k) * element, type);
-  } else {
-    fail(file, 0, fmt::format("points in '{}' format; expected ascii or raw appended (ParaView: Data Mode Ascii or Appended, "
-                              "Encode Appended Data off)", format));
-  }
+  for (std::size_t i = 0; i < count; ++i) frame.positions[i] = Vec3(coordinates[3 * i], coordinates[3 * i + 1], coordinates[3 * i + 2]);
+  // Stable particle ids (m3dp run writes them): let a sequence be meshed incrementally.
+  for (const pugi::xml_node array : piece.child("PointData").children("DataArray"))
+    if (std::string(array.attribute("Name").as_string()) == "id" && array.attribute("NumberOfComponents").as_int(1) == 1)
+      frame.ids = read_data_array<std::uint64_t>(file, array, count, 1, bytes, appended, header_type);
   for (const pugi::xml_node array : dataset.child("FieldData").children("DataArray"))
     if (std::string(array.attribute("Name").as_string()) == "particle_radius")
       frame.particle_radius = static_cast<Real>(array.text().as_double());

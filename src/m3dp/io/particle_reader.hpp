@@ -2,6 +2,7 @@
 // Reading particle frames back for offline work (m3dp mesh): VTK XML UnstructuredGrid / PolyData
 // (.vtu/.vtp, ASCII or raw appended, uncompressed), PLY point sets (ASCII or binary little-endian)
 // and ParaView collections (.pvd) of such files.
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <vector>
@@ -13,6 +14,7 @@ namespace m3dp::io {
 struct ParticleFrame {
   std::vector<Vec3> positions;          // m
   std::optional<Real> particle_radius;  // m, from the file's FieldData "particle_radius" when present
+  std::vector<std::uint64_t> ids;       // stable particle ids, from a point array "id" (.vtu/.vtp); empty if none
 };
 
 /// Reads positions from a .vtu, .vtp or .ply file. Throws InputError naming the file (and line

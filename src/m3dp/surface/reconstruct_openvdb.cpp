@@ -511,6 +511,7 @@ struct IncrementalSurface::Cache {
   openvdb::FloatGrid::Ptr resting_field;    // field of the particles in `kept`; null when none
   std::unordered_map<std::uint64_t, Vec3> kept;  // id → position of every particle in resting_field
   std::unordered_map<std::uint64_t, KernelRecord> kernels;  // anisotropic: id → kernel in resting_field
+  std::unordered_map<std::uint64_t, Vec3> previous_frame;   // reconstruct_frame: id → position last time
 
   void clear() {
     kept.clear();
@@ -677,6 +678,26 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
   if (field.grid) mesh = mesh_of_field(field, settings, local_stats);
   if (stats) *stats = local_stats;
   return mesh;
+}
+
+TriangleMesh IncrementalSurface::reconstruct_frame(std::span<const Vec3> positions, std::span<const std::uint64_t> ids,
+                                                   SurfaceStats* stats) {
+  if (positions.size() != ids.size()) throw Error("incremental surface: one id per particle is needed");
+  std::vector<Vec3> moving, resting;
+  std::vector<std::uint64_t> resting_ids;
+  auto& previous = cache_->previous_frame;
+  for (std::size_t i = 0; i < positions.size(); ++i) {
+    const auto found = previous.find(ids[i]);
+    if (found != previous.end() && found->second == positions[i]) {
+      resting.push_back(positions[i]);
+      resting_ids.push_back(ids[i]);
+    } else {
+      moving.push_back(positions[i]);
+    }
+  }
+  previous.clear();
+  for (std::size_t i = 0; i < positions.size(); ++i) previous.emplace(ids[i], positions[i]);
+  return reconstruct(moving, resting, resting_ids, stats);
 }
 
 }  // namespace m3dp::surface

@@ -100,6 +100,10 @@ class IncrementalSurface {
   /// The surface of `moving` ∪ `resting` (m); `resting_ids` are the resting particles' stable ids.
   [[nodiscard]] TriangleMesh reconstruct(std::span<const Vec3> moving, std::span<const Vec3> resting,
                                          std::span<const std::uint64_t> resting_ids, SurfaceStats* stats = nullptr);
+  /// For saved frames, where rest is not recorded: a particle whose id and position are those it had
+  /// in the previous call's frame counts as resting (a resting particle is frozen, bit for bit).
+  [[nodiscard]] TriangleMesh reconstruct_frame(std::span<const Vec3> positions, std::span<const std::uint64_t> ids,
+                                               SurfaceStats* stats = nullptr);
 
  private:
   struct Cache;
