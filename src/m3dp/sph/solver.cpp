@@ -840,11 +840,13 @@ void Solver::reorder() {
 void Solver::search_neighbors() {
   const Real support = support_radius();
   // Every particle is in the grid (resting ones are neighbours too); only the active ones query it.
+  // Lists stay in grid order, which is as deterministic: sorting them by index cost 12 of 43 ms per
+  // step in the 47k dam break and made the solver's sweeps no faster.
   state_.fluid_grid.build(state_.fluid.position, support);
   const std::span<const Vec3> active(state_.fluid.position.data(), state_.active_count);
-  find_neighbors(state_.fluid_grid, active, support, true, state_.fluid_neighbors);
+  find_neighbors(state_.fluid_grid, active, support, true, state_.fluid_neighbors, false);
   const SpatialHashGrid* boundary_grids[] = {&state_.static_boundary_grid, &state_.moving_boundary_grid};
-  find_neighbors(boundary_grids, active, support, false, state_.boundary_neighbors);
+  find_neighbors(boundary_grids, active, support, false, state_.boundary_neighbors, false);
 }
 
 void Solver::keep_out_of_boundaries() {
