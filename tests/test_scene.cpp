@@ -694,7 +694,9 @@ TEST(SceneMaterials, ViscositySolverAndRestSettings) {
         <rest_detection>false</rest_detection>
         <rest_speed unit="mm/s">1</rest_speed>
         <rest_duration unit="ms">80</rest_duration>
-        <wake_speed unit="mm/s">4</wake_speed>)");
+        <wake_speed unit="mm/s">4</wake_speed>
+        <wake_on_load>true</wake_on_load>
+        <load_wake_duration unit="ms">500</load_wake_duration>)");
   const auto scene = load_scene_from_string(settings, "settings.sdf");
   EXPECT_EQ(scene.solver.viscosity_solver, m3dp::sph::ViscositySolver::explicit_morris1997);
   EXPECT_FLOAT_EQ(scene.solver.viscosity_tolerance, 0.005f);
@@ -704,6 +706,8 @@ TEST(SceneMaterials, ViscositySolverAndRestSettings) {
   EXPECT_FLOAT_EQ(scene.solver.rest_speed, 0.001f);
   EXPECT_FLOAT_EQ(scene.solver.rest_duration, 0.08f);
   EXPECT_FLOAT_EQ(scene.solver.wake_speed, 0.004f);
+  EXPECT_TRUE(scene.solver.wake_on_load);
+  EXPECT_FLOAT_EQ(scene.solver.load_wake_duration, 0.5f);
 
   const std::string bad = replaced(valid_scene(), "<end_time>2</end_time>",
                                    "<end_time>2</end_time><viscosity_solver>implicit_weiler</viscosity_solver>");

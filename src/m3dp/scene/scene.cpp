@@ -1128,7 +1128,7 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
                           "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
                           "warm_start", "end_time", "bounds", "viscosity_solver", "max_viscosity_error",
                           "max_viscosity_iterations", "xsph", "rest_detection", "rest_speed", "rest_duration",
-                          "wake_speed"});
+                          "wake_speed", "wake_on_load", "load_wake_duration"});
   sph::SolverSettings& settings = scene_.solver;
 
   if (const auto radius =
@@ -1163,12 +1163,15 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
   }
   if (const auto iterations = read_int(solver, "max_viscosity_iterations", 1)) settings.max_viscosity_iterations = *iterations;
   if (const auto enabled = read_bool(solver, "rest_detection")) settings.rest_detection = *enabled;
+  if (const auto enabled = read_bool(solver, "wake_on_load")) settings.wake_on_load = *enabled;
   if (const auto speed = read_scalar(solver, "rest_speed", Quantity::speed, Limits::positive(), Presence::optional))
     settings.rest_speed = Real(*speed);
   if (const auto duration = read_scalar(solver, "rest_duration", Quantity::time, Limits::positive(), Presence::optional))
     settings.rest_duration = Real(*duration);
   if (const auto speed = read_scalar(solver, "wake_speed", Quantity::speed, Limits::positive(), Presence::optional))
     settings.wake_speed = Real(*speed);
+  if (const auto duration = read_scalar(solver, "load_wake_duration", Quantity::time, Limits::non_negative(), Presence::optional))
+    settings.load_wake_duration = Real(*duration);
   if (const auto factor = read_scalar(solver, "xsph", Quantity::plain_number, Limits{std::nullopt, 0.0, 1.0},
                                       Presence::optional)) {
     settings.xsph_factor = Real(*factor);

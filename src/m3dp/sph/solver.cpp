@@ -294,6 +294,7 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.shear_rate[i] = 0;
     fluid.viscous_change[i] = Vec3::Zero();
     fluid.rest_time[i] = 0;
+    fluid.rest_load[i] = -1;
     fluid.angular_velocity[i] = Vec3::Zero();
     fluid.reference_position[i] = point;
     ++added;
@@ -324,6 +325,7 @@ void Solver::update_rest_partition() {
     fluid.angular_velocity[last] = Vec3::Zero();
     fluid.kappa_density[last] = 0;
     fluid.kappa_divergence[last] = 0;
+    fluid.rest_load[last] = -1;  // measured at the next load check
   }
   // Waking: a resting particle whose clock was reset by motion nearby (update_rest_clocks).
   if (!state_.resting_woken) return;
@@ -357,7 +359,8 @@ void Solver::update_rest_clocks(Real time_step) {
       const Real age = time - fluid.birth_time[i];
       resting = fluid.viscosity[i] * fluid.shear_rate[i] < phase.ageing.yield_stress(phase.rheology.yield_stress, age);
     }
-    fluid.rest_time[i] = resting ? fluid.rest_time[i] + time_step : Real(0);
+    // A negative clock (woken by load) keeps counting from where it is; motion cannot shorten the hold.
+    fluid.rest_time[i] = resting ? fluid.rest_time[i] + time_step : std::min(fluid.rest_time[i], Real(0));
     if (speed_squared > wake_speed_squared)
       for (const Index j : state_.fluid_neighbors.of(i))
         if (j >= active) wake(j);
@@ -376,6 +379,76 @@ void Solver::update_rest_clocks(Real time_step) {
         if (j >= active && (p - position).squaredNorm() < support_squared) wake(j);
       });
   }, 64);
+}
+
+void Solver::wake_loaded_rest() {
+  const auto& settings = parameters_.settings;
+  auto& fluid = state_.fluid;
+  const std::size_t count = fluid.size();
+  const Real g = settings.gravity.norm();
+  if (state_.active_count == count || !(g > 0)) return;
+  // Columns two particle diameters across, along gravity: the weight per area above each particle,
+  // σ_v = g Σ m / w², from the top of its column down. One diameter is too noisy: the particles are
+  // not on a lattice, and a d-wide column over a print's seam held twice its share.
+  const Vec3 down = settings.gravity / g;
+  const Vec3 across_u = down.unitOrthogonal();
+  const Vec3 across_v = down.cross(across_u);
+  const Real column_width = 2 * particle_diameter();
+  const Real inverse_width = 1 / column_width;
+  state_.sort_keys.resize(count);
+  state_.permutation.resize(count);
+  state_.height.resize(count);
+  state_.overburden.resize(count);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const Vec3& p = fluid.position[i];
+    const auto column_u = static_cast<std::int64_t>(std::floor(p.dot(across_u) * inverse_width)) + (std::int64_t(1) << 31);
+    const auto column_v = static_cast<std::int64_t>(std::floor(p.dot(across_v) * inverse_width)) + (std::int64_t(1) << 31);
+    state_.sort_keys[i] = (static_cast<std::uint64_t>(column_u) << 32) | (static_cast<std::uint64_t>(column_v) & 0xffffffffu);
+    state_.height[i] = -p.dot(down);
+    state_.permutation[i] = static_cast<Index>(i);
+  }, 2048);
+  const auto& key = state_.sort_keys;
+  const auto& height = state_.height;
+  tbb::parallel_sort(state_.permutation.begin(), state_.permutation.end(), [&](Index a, Index b) {
+    return key[a] != key[b] ? key[a] < key[b] : (height[a] != height[b] ? height[a] > height[b] : a < b);
+  });
+  const Real load_per_mass = g * inverse_width * inverse_width;
+  const Real time = static_cast<Real>(state_.time);
+  const std::size_t active = state_.active_count;
+  // Roussel 2018: a layer under a height H of material yields once ρ g H > √3 τ0 (unconfined).
+  const Real unconfined = std::sqrt(Real(3));
+  bool woken = false;
+  std::size_t run_begin = 0;
+  while (run_begin < count) {
+    std::size_t run_end = run_begin + 1;
+    while (run_end < count && key[state_.permutation[run_end]] == key[state_.permutation[run_begin]]) ++run_end;
+    Real mass_above = 0;
+    std::size_t deepest_loaded = run_begin;  // one past the deepest particle to wake in this column
+    for (std::size_t n = run_begin; n < run_end; ++n) {
+      const Index i = state_.permutation[n];
+      const Real load = load_per_mass * mass_above;
+      mass_above += fluid.mass[i];
+      if (i < active) continue;
+      if (fluid.rest_load[i] < 0) {
+        fluid.rest_load[i] = load;  // came to rest since the last check
+        continue;
+      }
+      const FluidPhase& phase = parameters_.phases[fluid.phase[i]];
+      const Real yield_stress = phase.ageing.yield_stress(phase.rheology.yield_stress, time - fluid.birth_time[i]);
+      if (load - fluid.rest_load[i] > Real(0.1) * yield_stress && load > unconfined * yield_stress) deepest_loaded = n + 1;
+    }
+    // The material above a loaded particle is what loads it: it must move too, or it hangs as a fixed block.
+    for (std::size_t n = run_begin; n < deepest_loaded; ++n) {
+      const Index i = state_.permutation[n];
+      if (i < active) continue;
+      // A collapse starts slowly: the clock starts well below zero so that the particle is simulated
+      // long enough for the flow to develop before slowness can put it to rest again.
+      fluid.rest_time[i] = -settings.load_wake_duration;
+      woken = true;
+    }
+    run_begin = run_end;
+  }
+  if (woken) state_.resting_woken = 1;
 }
 
 void Solver::reserve(std::size_t capacity) {
@@ -537,7 +610,13 @@ const StepStats& Solver::step() {
   push_out_of_nozzles();
   parallel_for_each_index(count, [&](std::size_t i) { state_.fluid.position[i] += time_step * state_.fluid.velocity[i]; }, 1024);
   if (any_elastic_) stages::relax_reference_shape(parameters_, state_, time_step);
-  if (settings.rest_detection) update_rest_clocks(time_step);
+  if (settings.rest_detection) {
+    update_rest_clocks(time_step);
+    if (settings.wake_on_load && state_.time >= state_.next_load_check_time) {
+      wake_loaded_rest();
+      state_.next_load_check_time = state_.time + 0.5 * settings.rest_duration;
+    }
+  }
   stats.particles_at_rest = state_.fluid.size() - state_.active_count;
   finish_step(stats, time_step, start);
   return state_.last_step;
@@ -765,6 +844,7 @@ void Solver::emit(StepStats& stats) {
         fluid.shear_rate[i] = 0;
         fluid.viscous_change[i] = Vec3::Zero();
         fluid.rest_time[i] = 0;
+        fluid.rest_load[i] = -1;
         fluid.angular_velocity[i] = Vec3::Zero();
         fluid.reference_position[i] = fluid.position[i];
         state_.mass_emitted_total += mass;
