@@ -101,13 +101,14 @@ ViscosityCalibration calibrated_viscosity(KernelType type, Real support_radius, 
       return double(kernel.gradient_factor(Real(std::sqrt(distance_squared)))) / (distance_squared + regularisation);
     };
     // Laplacian of (z², 0, 0) at the origin: x-component of 2(d+2) Σ V (u_i − u_j)(x_i − x_j)² f / (r² + ε) = 2.
-    double laplacian = 0, fluid_shear = 0, gradient = 0, fluid_gradient_near_wall = 0;
+    double laplacian = 0, fluid_shear = 0, gradient = 0, fluid_gradient_near_wall = 0, coupling = 0;
     for (int i = -reach; i <= reach; ++i)
       for (int j = -reach; j <= reach; ++j)
         for (int k = -reach; k <= reach; ++k) {
           const double x = i * d, y = j * d, z = k * d, r2 = x * x + y * y + z * z;
           if (r2 == 0 || r2 >= double(support_radius) * support_radius) continue;
           laplacian += volume * (-z * z) * x * x * pair_term(r2);
+          coupling += volume * std::abs(pair_term(r2)) * r2;
           // Linear shear over the wall: the fluid neighbours of a first-layer particle (k ≥ 0), u = z.
           if (k >= 0) fluid_shear += volume * (-z) * x * x * pair_term(r2);
           // Velocity gradient of u = (z, 0, 0): Σ V (u_j − u_i)(z_i − z_j) f = ∂u/∂z = 1; near the wall only k ≥ 0.
@@ -135,6 +136,7 @@ ViscosityCalibration calibrated_viscosity(KernelType type, Real support_radius, 
     calibration.boundary = static_cast<Real>(-fluid_scale * fluid_shear / wall_shear);
     calibration.fluid_gradient = static_cast<Real>(1 / gradient);
     calibration.boundary_gradient = static_cast<Real>((1 - fluid_gradient_near_wall / gradient) / (wall_gradient / gradient));
+    calibration.coupling = static_cast<Real>(2 * (3 + 2) * fluid_scale * coupling);
     return calibration;
   });
 }

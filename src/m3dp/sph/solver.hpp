@@ -202,6 +202,9 @@ struct ViscosityCalibration {
   Real boundary = 1;  // on fluid–boundary pairs: no slip at the geometric surface
   Real fluid_gradient = 1;     // on the velocity gradient's fluid sum
   Real boundary_gradient = 1;  // on its wall sum
+  // 1/m²: on the rest lattice, Σ_j |c_ij| r_ij² = Δt μ/ρ0 × coupling (c_ij the implicit solve's pair
+  // coefficients): how strongly the viscous term couples a particle to its neighbours in a step.
+  Real coupling = 0;
 };
 
 /// Surface tension (Akinci et al. 2013) coefficients per unit of the material's physical values:
