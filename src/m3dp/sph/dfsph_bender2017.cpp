@@ -255,7 +255,8 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
 
     Real mean_error = update_divergence() / Real(count) * time_step;
     int iterations = 0;
-    while ((iterations < 1 || mean_error > settings.divergence_tolerance) && iterations < settings.max_divergence_iterations) {
+    while ((iterations < settings.min_divergence_iterations || mean_error > settings.divergence_tolerance) &&
+           iterations < settings.max_divergence_iterations) {
       parallel_for_each_index(count, [&](std::size_t i) {
         const Real kappa = view.density_advected[i] * view.factor[i] * inverse_time_step;
         kappa_total[i] += kappa;
