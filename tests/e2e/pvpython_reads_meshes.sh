@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # End to end: `m3dp run` prints a ring, `m3dp mesh` turns its last frame into OBJ, binary PLY,
 # binary STL and a Gazebo model folder, and ParaView's own readers (pvpython) open each mesh file
-# and count the same triangles and a closed surface (no boundary edges).
+# and count the same triangles and a closed surface (no boundary edges). The whole .pvd sequence is
+# meshed too, with the resting material's field kept from frame to frame.
 set -euo pipefail
 m3dp=$1 scene=$2 out=$3
 rm -rf "$out"
@@ -29,4 +30,17 @@ done
 test -f "$out/printed_ring/model.sdf" && test -f "$out/printed_ring/model.config" && test -f "$out/printed_ring/meshes/printed_ring.stl"
 grep -q '<uri>model://printed_ring/meshes/printed_ring.stl</uri>' "$out/printed_ring/model.sdf"
 if grep -q "$out" "$out/printed_ring/model.sdf" "$out/surface.obj"; then echo "FAIL: absolute path inside a mesh file"; exit 1; fi
+# A .pvd sequence: material that has come to rest is meshed from a kept field, and the last mesh
+# is the one its frame gives alone.
+"$m3dp" mesh "$out/run/particles.pvd" -o "$out/sequence" --method sph_blobby -q > "$out/sequence.log"
+frames=$(grep -c '<DataSet' "$out/run/particles.pvd")
+meshes=$(ls "$out"/sequence/mesh_*.obj | wc -l)
+[ "$meshes" = "$frames" ] || { echo "FAIL: $meshes meshes for $frames frames"; exit 1; }
+last=$(grep ' kept field' "$out/sequence.log" | tail -n 1)
+echo "$last"
+kept=$(echo "$last" | sed -E 's/.*\(([0-9]+) meshed from a kept field.*/\1/')
+[ "$kept" -gt 0 ] || { echo "FAIL: nothing at rest was kept"; exit 1; }
+alone=$("$m3dp" mesh "$frame" -o "$out/alone.obj" --method sph_blobby)
+[ "$(echo "$last" | sed -E 's/.* ([0-9]+) triangles.*/\1/')" = "$(echo "$alone" | sed -E 's/.* ([0-9]+) triangles.*/\1/')" ] ||
+  { echo "FAIL: the sequence's last mesh differs from its frame's own: $alone"; exit 1; }
 echo "PASS"
