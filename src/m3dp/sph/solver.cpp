@@ -400,7 +400,6 @@ void Solver::wake_loaded_rest() {
   state_.sort_keys.resize(count);
   state_.permutation.resize(count);
   state_.height.resize(count);
-  state_.overburden.resize(count);
   parallel_for_each_index(count, [&](std::size_t i) {
     const Vec3& p = fluid.position[i];
     const auto column_u = static_cast<std::int64_t>(std::floor(p.dot(across_u) * inverse_width)) + (std::int64_t(1) << 31);

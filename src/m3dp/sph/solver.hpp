@@ -186,7 +186,6 @@ struct State {
   std::vector<Real> scratch_real;
   std::vector<std::uint16_t> scratch_u16;
   std::vector<std::uint64_t> scratch_u64;
-  std::vector<Real> overburden;      // (n) Pa, weight per area of the particles above each (load check)
   std::vector<Real> height;          // (n) m, against gravity (load check)
   // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.
   struct ViscositySystem {
