@@ -203,7 +203,9 @@ TEST(IncrementalSurface, KeepsTheRestingFieldAndMeshesWhatTheWholeFrameGives) {
       EXPECT_EQ(stats.added_particles, frame > 0 ? 80u : 0u) << method_name(method) << " frame " << frame;
       EXPECT_FALSE(stats.rebuilt);
       // Kernels under the new layer are remade (they were the flat kernels of a top face).
-      if (method == Method::anisotropic && frame > 1) EXPECT_GT(stats.refreshed_kernels, 0u);
+      if (method == Method::anisotropic && frame > 1) {
+        EXPECT_GT(stats.refreshed_kernels, 0u) << "frame " << frame;
+      }
       EXPECT_TRUE(check_edges(mesh).watertight()) << method_name(method) << " frame " << frame;
       EXPECT_EQ(connected_components(mesh), connected_components(whole)) << method_name(method) << " frame " << frame;
       worst_volume = std::max(worst_volume, std::abs(signed_volume(mesh) / signed_volume(whole) - 1));
