@@ -670,8 +670,8 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
       merge_field(settings.method, *copy, *field.grid);
       field.grid = copy;
     }
-  } else if (cache_->resting_field) {
-    field.grid = cache_->resting_field->deepCopy();
+  } else {
+    field.grid = cache_->resting_field;  // the mesher only reads it: no copy (null when nothing rests)
   }
   local_stats.field_seconds = seconds_since(start);
   TriangleMesh mesh;
