@@ -96,6 +96,32 @@ TEST_P(EveryMethod, BallIsClosedOutwardAndOfTheRightSize) {
   EXPECT_LT(std::abs(area_error), 0.05);
 }
 
+TEST(Surface, SphericalFieldIsTheOneOpenVdbRasterises) {
+  // M3DP gathers the union of spheres per leaf node instead of calling ParticlesToLevelSet (four
+  // times slower). The two grids must agree voxel for voxel: a lattice ball straddling the origin
+  // (negative leaf coordinates), a random cloud with close pairs, and a sphere as large as the band.
+  std::vector<Vec3> cloud = ball(Vec3(Real(0.01), Real(-0.02), Real(0.003)), 9 * kRadius);
+  std::uint32_t state = 12345;
+  auto uniform = [&] {
+    state = state * 1664525u + 1013904223u;
+    return static_cast<Real>(state >> 8) / static_cast<Real>(1 << 24);
+  };
+  for (int n = 0; n < 400; ++n)
+    cloud.push_back(Vec3(Real(0.2) + 30 * kRadius * uniform(), -30 * kRadius * uniform(), 30 * kRadius * uniform()));
+  for (const Real sphere_in_voxels : {Real(1.5), Real(2.0), Real(3.3)}) {
+    const Real voxel = kRadius * Real(0.8);
+    const auto comparison = detail::compare_spherical_field_with_openvdb(cloud, sphere_in_voxels * voxel, voxel);
+    std::printf("sphere %.1f voxels: %zu active voxels (ParticlesToLevelSet %zu), %zu differ in activity, "
+                "largest value difference %.3g m\n",
+                sphere_in_voxels, comparison.active_voxels, comparison.reference_active_voxels,
+                comparison.activity_mismatches, comparison.max_difference);
+    EXPECT_GT(comparison.active_voxels, 10000u);
+    EXPECT_EQ(comparison.active_voxels, comparison.reference_active_voxels);
+    EXPECT_EQ(comparison.activity_mismatches, 0u);
+    EXPECT_LE(comparison.max_difference, 1e-7);
+  }
+}
+
 TEST(Surface, FlatSlabTopIsFlatAndInPlace) {
   // 30 × 30 × 8 particles: the top face is at z = 8 · 2r. Vertices of the top face away from the
   // edges should lie on it: rms deviation below 0.25 r (issue 4, anisotropic).

@@ -3,6 +3,7 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
+#include <openvdb/tools/Prune.h>
 #include <openvdb/tools/VolumeToMesh.h>
 #include <openvdb/tree/LeafManager.h>
 #include <tbb/blocked_range.h>
@@ -14,6 +15,7 @@
 #include <climits>
 #include <cmath>
 #include <mutex>
+#include <atomic>
 #include <numeric>
 #include <unordered_map>
 #include <unordered_set>
@@ -37,24 +39,37 @@ void initialize_openvdb() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
-/// Particle indices in Z-order of a coarse grid, so each thread's splats stay in a compact region
-/// (fewer, denser leaf nodes to merge).
-std::vector<Index> spatial_order(std::span<const Vec3> positions, Real cell_size) {
-  std::vector<std::uint64_t> keys(positions.size());
+/// Particle indices in Z-order of a coarse grid (so each thread's splats stay in a compact region),
+/// and each one's cell's Morton key: particles of one cell come out consecutive.
+struct SpatialOrder {
+  std::vector<Index> order;
+  std::vector<std::uint64_t> key;  // key[n]: the cell key of particle order[n]
+};
+
+std::array<std::int32_t, 3> coarse_cell_of(const Vec3& p, Real inverse_cell_size) {
+  return {static_cast<std::int32_t>(std::floor(p.x() * inverse_cell_size)),
+          static_cast<std::int32_t>(std::floor(p.y() * inverse_cell_size)),
+          static_cast<std::int32_t>(std::floor(p.z() * inverse_cell_size))};
+}
+
+SpatialOrder spatial_order(std::span<const Vec3> positions, Real cell_size) {
+  std::vector<std::pair<std::uint64_t, Index>> keyed(positions.size());
   const Real inverse = Real(1) / cell_size;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 4096), [&](const auto& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const Vec3& p = positions[i];
-      keys[i] = sph::morton_code(static_cast<std::int32_t>(std::floor(p.x() * inverse)),
-                                 static_cast<std::int32_t>(std::floor(p.y() * inverse)),
-                                 static_cast<std::int32_t>(std::floor(p.z() * inverse)));
+      const auto cell = coarse_cell_of(positions[i], inverse);
+      keyed[i] = {sph::morton_code(cell[0], cell[1], cell[2]), static_cast<Index>(i)};
     }
   });
-  std::vector<Index> order(positions.size());
-  std::iota(order.begin(), order.end(), Index(0));
-  tbb::parallel_sort(order.begin(), order.end(),
-                     [&](Index a, Index b) { return keys[a] < keys[b] || (keys[a] == keys[b] && a < b); });
-  return order;
+  tbb::parallel_sort(keyed.begin(), keyed.end());
+  SpatialOrder result;
+  result.order.resize(keyed.size());
+  result.key.resize(keyed.size());
+  for (std::size_t n = 0; n < keyed.size(); ++n) {
+    result.key[n] = keyed[n].first;
+    result.order[n] = keyed[n].second;
+  }
+  return result;
 }
 
 /// Where the material is deep, the field is "inside" whatever the exact sums: only particles near
@@ -74,47 +89,49 @@ DeepRegion find_deep_region(std::span<const Vec3> positions, Real cell_size, Rea
   DeepRegion region;
   region.cell_size = cell_size;
   const Real inverse = Real(1) / cell_size;
-  auto cell_of = [&](const Vec3& p) {
-    return std::array<std::int32_t, 3>{static_cast<std::int32_t>(std::floor(p.x() * inverse)),
-                                       static_cast<std::int32_t>(std::floor(p.y() * inverse)),
-                                       static_cast<std::int32_t>(std::floor(p.z() * inverse))};
+  const SpatialOrder sorted = spatial_order(positions, cell_size);
+  // The occupied cells: runs of one key in the sorted order.
+  struct Cell {
+    std::array<std::int32_t, 3> coord;
+    std::size_t first, end;  // its particles: sorted.order[first, end)
+    bool full = false, interior = false, deep = false;
   };
-  auto key_of = [](const std::array<std::int32_t, 3>& c) { return sph::morton_code(c[0], c[1], c[2]); };
-  const std::vector<Index> order = spatial_order(positions, cell_size);
-  std::unordered_map<std::uint64_t, std::uint32_t> count;
-  count.reserve(positions.size() / 4 + 16);
-  for (const Index i : order) ++count[key_of(cell_of(positions[i]))];
+  std::vector<Cell> cells;
+  for (std::size_t n = 0; n < sorted.order.size();) {
+    std::size_t end = n;
+    while (end < sorted.order.size() && sorted.key[end] == sorted.key[n]) ++end;
+    cells.push_back(Cell{coarse_cell_of(positions[sorted.order[n]], inverse), n, end});
+    n = end;
+  }
+  std::unordered_map<std::uint64_t, std::size_t> cell_index;
+  cell_index.reserve(2 * cells.size());
+  for (std::size_t c = 0; c < cells.size(); ++c) cell_index.emplace(sorted.key[cells[c].first], c);
   const double lattice_capacity = std::pow(static_cast<double>(cell_size / (2 * particle_radius)), 3);
-  const auto full_count = static_cast<std::uint32_t>(std::max(1.0, 0.6 * lattice_capacity));
-  auto is_full = [&](const std::array<std::int32_t, 3>& c) {
-    const auto found = count.find(key_of(c));
-    return found != count.end() && found->second >= full_count;
-  };
-  auto all_around = [](const std::array<std::int32_t, 3>& c, auto&& predicate) {
+  const auto full_count = static_cast<std::size_t>(std::max(1.0, 0.6 * lattice_capacity));
+  for (Cell& cell : cells) cell.full = cell.end - cell.first >= full_count;
+  // Whether `flag` holds for the cell and its 26 neighbours (an empty cell has no flag).
+  auto all_around = [&](const Cell& cell, bool Cell::*flag) {
     for (int dz = -1; dz <= 1; ++dz)
       for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx)
-          if (!predicate(std::array<std::int32_t, 3>{c[0] + dx, c[1] + dy, c[2] + dz})) return false;
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto found =
+              cell_index.find(sph::morton_code(cell.coord[0] + dx, cell.coord[1] + dy, cell.coord[2] + dz));
+          if (found == cell_index.end() || !(cells[found->second].*flag)) return false;
+        }
     return true;
   };
-  std::unordered_map<std::uint64_t, bool> interior;
-  interior.reserve(count.size());
-  auto is_interior = [&](const std::array<std::int32_t, 3>& c) {
-    const std::uint64_t key = key_of(c);
-    if (const auto known = interior.find(key); known != interior.end()) return known->second;
-    const bool value = is_full(c) && all_around(c, is_full);
-    interior.emplace(key, value);
-    if (value) region.interior_cells.push_back(c);
-    return value;
-  };
-  std::unordered_map<std::uint64_t, bool> deep;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 256), [&](const auto& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) cells[c].interior = all_around(cells[c], &Cell::full);
+  });
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 256), [&](const auto& range) {
+    for (std::size_t c = range.begin(); c != range.end(); ++c) cells[c].deep = all_around(cells[c], &Cell::interior);
+  });
   region.contributing.reserve(positions.size());
-  for (const Index i : order) {
-    const auto cell = cell_of(positions[i]);
-    const std::uint64_t key = key_of(cell);
-    auto known = deep.find(key);
-    if (known == deep.end()) known = deep.emplace(key, all_around(cell, is_interior)).first;
-    if (!known->second) region.contributing.push_back(i);
+  for (const Cell& cell : cells) {
+    if (cell.interior) region.interior_cells.push_back(cell.coord);
+    if (!cell.deep)
+      region.contributing.insert(region.contributing.end(), sorted.order.begin() + static_cast<std::ptrdiff_t>(cell.first),
+                                 sorted.order.begin() + static_cast<std::ptrdiff_t>(cell.end));
   }
   return region;
 }
@@ -175,7 +192,7 @@ openvdb::CoordBBox voxel_box(const Vec3& centre, const Vec3& half_extent, Real v
                                            static_cast<int>(std::floor((centre.z() + half_extent.z()) * inverse))));
 }
 
-/// Particle list in the form ParticlesToLevelSet reads.
+/// Particle list in the form ParticlesToLevelSet reads (the reference the tests compare against).
 struct ParticleList {
   using PosType = openvdb::Vec3R;
   std::span<const Vec3> positions;
@@ -188,20 +205,155 @@ struct ParticleList {
   }
 };
 
+/// Half-width of the spherical level set's narrow band, in voxels.
+constexpr float kSphereBandVoxels = 2;
+
+/// The union of spheres of radius `sphere_radius` (m) around `centres` as a narrow-band level set:
+/// the values OpenVDB's ParticlesToLevelSet writes (each voxel within R + band of a centre holds
+/// min_j |x − x_j| − R, active; a voxel at a centre's core is inactive inside), computed by gathering
+/// rather than scattering. The (leaf node, sphere) pairs are sorted by leaf, and each leaf is filled
+/// by one thread from the spheres that reach it. There are no per-thread grids to merge, no tree
+/// look-ups per voxel, and per (x, y) row only the voxels inside the sphere are visited. This is about
+/// four times faster than ParticlesToLevelSet, whose per-thread grids and their union were most of
+/// the spherical method's time (issue 4).
+
+openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sphere_radius, Real voxel_size) {
+  using LeafT = openvdb::FloatTree::LeafNodeType;
+  constexpr int kLeafDim = static_cast<int>(LeafT::DIM);
+  constexpr int kLeafLog2 = static_cast<int>(LeafT::LOG2DIM);
+  auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxel_size, kSphereBandVoxels);
+  const float background = grid->background();
+  // In voxel units and double precision, as ParticlesToLevelSet computes them.
+  const double dx = voxel_size, radius = sphere_radius / dx, band = background / dx;
+  const double reach = radius + band, reach_squared = reach * reach;
+  const double core_squared = std::pow(std::max(0.0, radius - band), 2);
+  auto box_of = [&](const Vec3& centre) {
+    const openvdb::Vec3d p(centre.x() / dx, centre.y() / dx, centre.z() / dx);
+    return openvdb::CoordBBox(openvdb::Coord(static_cast<int>(std::floor(p[0] - reach)), static_cast<int>(std::floor(p[1] - reach)),
+                                             static_cast<int>(std::floor(p[2] - reach))),
+                              openvdb::Coord(static_cast<int>(std::ceil(p[0] + reach)), static_cast<int>(std::ceil(p[1] + reach)),
+                                             static_cast<int>(std::ceil(p[2] + reach))));
+  };
+  // Leaf coordinates (voxel >> 3) of 21 bits each, offset to be positive, packed into one key.
+  constexpr std::int64_t kKeyOffset = 1 << 20, kKeyMask = (1 << 21) - 1;
+  auto leaf_key = [](const openvdb::Coord& leaf) {
+    return static_cast<std::uint64_t>(leaf.x() + kKeyOffset) << 42 | static_cast<std::uint64_t>(leaf.y() + kKeyOffset) << 21 |
+           static_cast<std::uint64_t>(leaf.z() + kKeyOffset);
+  };
+  auto leaf_of_key = [](std::uint64_t key) {
+    return openvdb::Coord(static_cast<int>((static_cast<std::int64_t>(key >> 42) & kKeyMask) - kKeyOffset),
+                          static_cast<int>((static_cast<std::int64_t>(key >> 21) & kKeyMask) - kKeyOffset),
+                          static_cast<int>((static_cast<std::int64_t>(key) & kKeyMask) - kKeyOffset));
+  };
+  // A sphere's box is at most ⌈2 reach⌉ + 2 voxels wide, so it spans its lowest corner's leaf (its
+  // "home") and at most leaf_span − 1 more on each axis (2 for the default spheres).
+  const int box_width = static_cast<int>(std::ceil(2 * reach)) + 2;
+  const int leaf_span = 1 + (box_width - 1 + kLeafDim - 1) / kLeafDim;
+  auto home_of = [&](const Vec3& centre) {
+    const openvdb::Coord low = box_of(centre).min();
+    return openvdb::Coord(low.x() >> kLeafLog2, low.y() >> kLeafLog2, low.z() >> kLeafLog2);
+  };
+  // Spheres sorted by home leaf; each home's spheres in one run.
+  std::vector<std::pair<std::uint64_t, Index>> by_home(centres.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) by_home[i] = {leaf_key(home_of(centres[i])), static_cast<Index>(i)};
+  });
+  tbb::parallel_sort(by_home.begin(), by_home.end());
+  // Centres (in voxels) and boxes in that order, for the gather's sequential reads.
+  struct SphereInVoxels {
+    openvdb::Vec3d centre;
+    openvdb::CoordBBox box;
+  };
+  std::vector<SphereInVoxels> spheres(centres.size());
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
+    for (std::size_t n = range.begin(); n != range.end(); ++n) {
+      const Vec3& centre = centres[by_home[n].second];
+      spheres[n] = {openvdb::Vec3d(centre.x() / dx, centre.y() / dx, centre.z() / dx), box_of(centre)};
+    }
+  });
+  std::unordered_map<std::uint64_t, std::pair<std::size_t, std::size_t>> home_run;  // key → [begin, end) in by_home
+  std::vector<std::uint64_t> target_keys;  // every leaf a sphere may reach: each home and its + neighbours
+  for (std::size_t n = 0; n < by_home.size();) {
+    std::size_t end = n;
+    while (end < by_home.size() && by_home[end].first == by_home[n].first) ++end;
+    home_run.emplace(by_home[n].first, std::pair{n, end});
+    const openvdb::Coord home = leaf_of_key(by_home[n].first);
+    for (int dx_leaf = 0; dx_leaf < leaf_span; ++dx_leaf)
+      for (int dy_leaf = 0; dy_leaf < leaf_span; ++dy_leaf)
+        for (int dz_leaf = 0; dz_leaf < leaf_span; ++dz_leaf) target_keys.push_back(leaf_key(home.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
+    n = end;
+  }
+  tbb::parallel_sort(target_keys.begin(), target_keys.end());
+  target_keys.erase(std::unique(target_keys.begin(), target_keys.end()), target_keys.end());
+
+  std::vector<LeafT*> leaves(target_keys.size(), nullptr);  // null where no band reaches
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 16), [&](const auto& range) {
+    // Per voxel the smallest squared distance (voxels²) to a centre: |x − x_j| − R grows with it, so
+    // the level set value needs one square root per voxel, not one per sphere and voxel.
+    std::array<double, LeafT::SIZE> nearest_squared;
+    for (std::size_t target = range.begin(); target != range.end(); ++target) {
+      const openvdb::Coord leaf_coord = leaf_of_key(target_keys[target]);
+      const openvdb::Coord origin(leaf_coord.x() * kLeafDim, leaf_coord.y() * kLeafDim, leaf_coord.z() * kLeafDim);
+      const openvdb::CoordBBox leaf_box(origin, origin.offsetBy(kLeafDim - 1));
+      nearest_squared.fill(reach_squared);
+      for (int dx_leaf = 1 - leaf_span; dx_leaf <= 0; ++dx_leaf)
+        for (int dy_leaf = 1 - leaf_span; dy_leaf <= 0; ++dy_leaf)
+          for (int dz_leaf = 1 - leaf_span; dz_leaf <= 0; ++dz_leaf) {
+            const auto home = home_run.find(leaf_key(leaf_coord.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
+            if (home == home_run.end()) continue;
+            for (std::size_t n = home->second.first; n < home->second.second; ++n) {
+              const SphereInVoxels& sphere = spheres[n];
+              openvdb::CoordBBox box = sphere.box;
+              box.intersect(leaf_box);
+              if (box.empty()) continue;  // a sphere of a neighbouring home may not reach this leaf
+              // Whole rows of the box, not only the voxels within reach: the minimum of squared
+              // distances ignores the others, and a fixed-length loop needs no root per row.
+              const openvdb::Vec3d& p = sphere.centre;
+              const int row_length = box.max().z() - box.min().z() + 1;
+              std::array<double, kLeafDim> z_squared;
+              for (int k = 0; k < row_length; ++k) z_squared[k] = (box.min().z() + k - p[2]) * (box.min().z() + k - p[2]);
+              for (int x = box.min().x(); x <= box.max().x(); ++x) {
+                const double x2 = (x - p[0]) * (x - p[0]);
+                if (x2 >= reach_squared) continue;
+                for (int y = box.min().y(); y <= box.max().y(); ++y) {
+                  const double x2y2 = x2 + (y - p[1]) * (y - p[1]);
+                  if (x2y2 >= reach_squared) continue;
+                  double* row = nearest_squared.data() + ((x - origin.x()) << (2 * kLeafLog2)) +
+                                ((y - origin.y()) << kLeafLog2) + (box.min().z() - origin.z());
+                  for (int k = 0; k < row_length; ++k) row[k] = std::min(row[k], x2y2 + z_squared[k]);
+                }
+              }
+            }
+          }
+      auto leaf = std::make_unique<LeafT>(origin, background, false);
+      bool any = false;
+      for (openvdb::Index voxel = 0; voxel < LeafT::SIZE; ++voxel) {
+        const double d2 = nearest_squared[voxel];
+        if (d2 >= reach_squared) continue;  // no sphere's band reaches it
+        any = true;
+        if (d2 <= core_squared)
+          leaf->setValueOff(voxel, -background);  // deep inside a sphere, as ParticlesToLevelSet leaves it
+        else
+          leaf->setValueOn(voxel, static_cast<float>(dx * (std::sqrt(d2) - radius)));
+      }
+      if (any) leaves[target] = leaf.release();
+    }
+  });
+  for (LeafT* leaf : leaves)
+    if (leaf) grid->tree().addLeaf(leaf);  // the tree takes ownership
+  openvdb::tools::pruneLevelSet(grid->tree());
+  return grid;
+}
+
 openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats) {
-  constexpr float kHalfWidthVoxels = 2;
   // Cells of the deep region a voxel wider than a splat reaches: at 3.5 r the lattice fills cells too
   // unevenly (1 or 2 particles a side) for the 60 % rule, and no cell counts as interior.
-  const Real reach = settings.sphere_radius + (kHalfWidthVoxels + 1) * settings.voxel_size;
+  const Real reach = settings.sphere_radius + (kSphereBandVoxels + 1) * settings.voxel_size;
   const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
   stats.surface_particles += region.contributing.size();
   std::vector<Vec3> near_surface(region.contributing.size());
   for (std::size_t n = 0; n < near_surface.size(); ++n) near_surface[n] = positions[region.contributing[n]];
-  auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(settings.voxel_size, kHalfWidthVoxels);
-  openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*grid);
-  raster.setRmin(0.5);  // spheres smaller than 1.5 voxels are kept, not dropped as the default does
-  raster.rasterizeSpheres(ParticleList{near_surface, settings.sphere_radius}, settings.sphere_radius);
-  raster.finalize(true);
+  auto grid = union_of_spheres(near_surface, settings.sphere_radius, settings.voxel_size);
   fill_interior(*grid, region, settings.voxel_size, -static_cast<float>(grid->background()));
   return grid;
 }
@@ -421,10 +573,47 @@ void merge_field(Method method, openvdb::FloatGrid& into, openvdb::FloatGrid& fr
     openvdb::tools::compSum(into, from);
 }
 
+/// Marks inside every active voxel that is outside (≥ 0) while all 26 around it are inside: the
+/// voxel-sized pockets a union of spheres leaves between a lattice's spheres (a cell's centre is
+/// √3 r from its corners, farther than the spheres' 1.5 r). Meshed, each is a closed inside-out
+/// shell of 12 triangles inside its 8 cubes, which remove_small_cavities drops again whenever
+/// 8 voxels³ ≤ the particle volume; half the triangles of a near-lattice frame were such shells.
+/// The value of the voxel does not matter once no cube around it has an outside corner.
+std::size_t fill_voxel_pockets(openvdb::FloatGrid& grid) {
+  std::vector<openvdb::Coord> pockets;
+  std::mutex pockets_mutex;
+  openvdb::tree::LeafManager<const openvdb::FloatTree> leaves(grid.constTree());
+  leaves.foreach([&](const openvdb::FloatTree::LeafNodeType& leaf, std::size_t) {
+    auto accessor = grid.getConstAccessor();
+    std::vector<openvdb::Coord> found;
+    for (auto voxel = leaf.cbeginValueOn(); voxel; ++voxel) {
+      if (*voxel < 0) continue;
+      const openvdb::Coord ijk = voxel.getCoord();
+      bool enclosed = true;
+      for (int dx = -1; dx <= 1 && enclosed; ++dx)
+        for (int dy = -1; dy <= 1 && enclosed; ++dy)
+          for (int dz = -1; dz <= 1 && enclosed; ++dz)
+            if ((dx | dy | dz) != 0 && !(accessor.getValue(ijk.offsetBy(dx, dy, dz)) < 0)) enclosed = false;
+      if (enclosed) found.push_back(ijk);
+    }
+    if (found.empty()) return;
+    const std::lock_guard lock(pockets_mutex);
+    pockets.insert(pockets.end(), found.begin(), found.end());
+  });
+  const float inside = -grid.background();
+  auto accessor = grid.getAccessor();
+  for (const openvdb::Coord& ijk : pockets) accessor.setValueOnly(ijk, inside);
+  return pockets.size();
+}
+
 TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, SurfaceStats& stats) {
   stats.active_voxels = field.grid->activeVoxelCount();
   stats.grid_bytes = std::max<std::size_t>(stats.grid_bytes, field.grid->memUsage());
   const auto start = Clock::now();
+  // Pockets are filled in the field only where their shells are certain to be dropped below.
+  const Real spacing = 2 * settings.particle_radius;
+  if (settings.method == Method::spherical && 8 * std::pow(settings.voxel_size, 3) <= std::pow(spacing, 3))
+    fill_voxel_pockets(*field.grid);
   TriangleMesh mesh = extract_mesh(*field.grid, field.isovalue);
   remove_unused_vertices(mesh);
   // The mesher winds triangles one way for every field here; make them face outwards.
@@ -432,7 +621,6 @@ TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, 
   // Spheres leave closed pockets between them (a lattice cell's centre is √3 r from its corners):
   // each is a small inside-out shell. Pockets smaller than a particle are gaps, not holes in the material.
   if (settings.method == Method::spherical) {
-    const Real spacing = 2 * settings.particle_radius;
     remove_small_cavities(mesh, spacing * spacing * spacing);
   }
   taubin_smooth(mesh, settings.smoothing_iterations, settings.smoothing_lambda, settings.smoothing_mu);
@@ -479,6 +667,35 @@ class OccupiedCells {
 };
 
 }  // namespace
+
+namespace detail {
+SphericalFieldComparison compare_spherical_field_with_openvdb(std::span<const Vec3> centres, Real sphere_radius,
+                                                              Real voxel_size) {
+  initialize_openvdb();
+  auto reference = openvdb::createLevelSet<openvdb::FloatGrid>(voxel_size, kSphereBandVoxels);
+  openvdb::tools::ParticlesToLevelSet<openvdb::FloatGrid> raster(*reference);
+  raster.setRmin(0.5);  // spheres smaller than 1.5 voxels are kept, not dropped as the default does
+  raster.rasterizeSpheres(ParticleList{centres, sphere_radius}, sphere_radius);
+  raster.finalize(true);
+  const auto ours = union_of_spheres(centres, sphere_radius, voxel_size);
+  SphericalFieldComparison result;
+  result.reference_active_voxels = reference->activeVoxelCount();
+  result.active_voxels = ours->activeVoxelCount();
+  // Every voxel either grid stores in a leaf, looked up in the other one.
+  auto compare = [&](const openvdb::FloatGrid& a, const openvdb::FloatGrid& b) {
+    auto other = b.getConstAccessor();
+    for (auto leaf = a.tree().cbeginLeaf(); leaf; ++leaf)
+      for (auto voxel = leaf->cbeginValueAll(); voxel; ++voxel) {
+        const openvdb::Coord ijk = voxel.getCoord();
+        if (voxel.isValueOn() != other.isValueOn(ijk)) ++result.activity_mismatches;
+        result.max_difference = std::max(result.max_difference, std::abs(static_cast<double>(*voxel) - other.getValue(ijk)));
+      }
+  };
+  compare(*reference, *ours);
+  compare(*ours, *reference);
+  return result;
+}
+}  // namespace detail
 
 TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceSettings& input_settings, SurfaceStats* stats) {
   const SurfaceSettings settings = input_settings.resolved();

@@ -3,7 +3,8 @@
 // OpenVDB stays inside reconstruct_openvdb.cpp (slow to compile); this header is plain C++.
 //
 // Methods (every length defaults to a multiple of the particle radius r, see SurfaceSettings):
-//  spherical    union of spheres (OpenVDB ParticlesToLevelSet), surface at the spheres' skin.
+//  spherical    union of spheres (the narrow-band level set OpenVDB's ParticlesToLevelSet makes,
+//               gathered per leaf node), surface at the spheres' skin.
 //  sph_blobby   volume fraction Σ_j V_j W(x − x_j) with the SPH cubic spline; surface at iso_level.
 //  zhu_bridson  Zhu & Bridson 2005, "Animating sand as a fluid": φ = |x − x̄(x)| − r̄, x̄ the
 //               kernel-weighted mean of nearby centres, r̄ the mean radius; surface at φ = 0.
@@ -78,6 +79,18 @@ struct SurfaceStats {
 /// mesh (empty for no particles). Runs in parallel (TBB).
 [[nodiscard]] TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceSettings& settings,
                                                SurfaceStats* stats = nullptr);
+
+namespace detail {
+/// For tests: the spherical method's union of spheres as M3DP rasterises it, compared voxel by voxel
+/// with OpenVDB's ParticlesToLevelSet (the reference it replaced for speed).
+struct SphericalFieldComparison {
+  std::size_t active_voxels = 0, reference_active_voxels = 0;
+  std::size_t activity_mismatches = 0;  // voxels active in one grid and not in the other
+  double max_difference = 0;            // m, largest difference of a voxel's value
+};
+[[nodiscard]] SphericalFieldComparison compare_spherical_field_with_openvdb(std::span<const Vec3> centres, Real sphere_radius,
+                                                                            Real voxel_size);
+}  // namespace detail
 
 /// Meshes a sequence of frames in which printed material comes to rest (issue 4, incremental
 /// meshing). The field of the resting particles is kept between frames: each frame adds the
