@@ -238,9 +238,14 @@ TEST(Outputs, MaterialAtRestIsMeshedIncrementallyAndGivesTheWholeFramesMesh) {
   ASSERT_GE(meshes.size(), 5u);
   std::printf("particles reused from the kept field, mesh by mesh:");
   for (const auto& mesh : meshes) std::printf(" %zu/%zu", mesh["reused_particles"].get<std::size_t>(), mesh["particles"].get<std::size_t>());
+  std::printf("\ntiles meshed again, mesh by mesh:");
+  for (const auto& mesh : meshes) std::printf(" %zu/%zu", mesh["remeshed_tiles"].get<std::size_t>(), mesh["tiles"].get<std::size_t>());
   std::printf("\n");
   const auto& last = meshes.back();
   EXPECT_GT(last["reused_particles"].get<std::size_t>(), summary.particles * 9 / 10);
+  // Nothing moves at the end: the last mesh reuses every tile's triangles.
+  EXPECT_GT(last["tiles"].get<std::size_t>(), 0u);
+  EXPECT_EQ(last["remeshed_tiles"].get<std::size_t>(), 0u);
   const TriangleMesh written = io::read_triangle_mesh(directory / last["file"].get<std::string>());
   surface::SurfaceSettings settings = scene.meshing.surface;
   settings.particle_radius = scene.solver.particle_radius;

@@ -95,6 +95,8 @@ void MeshingWorker::run() {
       surface::SurfaceStats stats;
       surface = std::make_shared<TriangleMesh>(surface_.reconstruct(moving, resting, resting_ids, &stats));
       mesh.reused_particles = stats.reused_particles;
+      mesh.tiles = stats.mesh_tiles;
+      mesh.remeshed_tiles = stats.remeshed_tiles;
       io::write_triangle_mesh(mesh.file, *surface);
       mesh.triangles = surface->triangles.size();
     } catch (const std::exception& error) {

@@ -26,6 +26,7 @@ class MeshingWorker {
     std::filesystem::path file;
     std::size_t particles = 0, triangles = 0;
     std::size_t reused_particles = 0;  // resting particles whose field was kept from earlier meshes
+    std::size_t tiles = 0, remeshed_tiles = 0;  // mesh tiles (32 voxels), and those meshed again
     double seconds = 0;              // wall time to reconstruct and write
   };
 

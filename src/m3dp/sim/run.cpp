@@ -65,6 +65,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                         {"particles", mesh.particles},
                         {"triangles", mesh.triangles},
                         {"reused_particles", mesh.reused_particles},
+                        {"tiles", mesh.tiles},
+                        {"remeshed_tiles", mesh.remeshed_tiles},
                         {"seconds", mesh.seconds}});
   nlohmann::json nozzles = nlohmann::json::array();
   const auto& solver = simulation.solver();

@@ -58,8 +58,6 @@ EdgeReport check_edges(const TriangleMesh& mesh) {
   return report;
 }
 
-namespace {
-/// Union–find over vertices joined by triangles; returns each vertex's root.
 std::vector<Index> component_roots(const TriangleMesh& mesh) {
   std::vector<Index> parent(mesh.vertices.size());
   std::iota(parent.begin(), parent.end(), Index(0));
@@ -74,7 +72,6 @@ std::vector<Index> component_roots(const TriangleMesh& mesh) {
   for (Index v = 0; v < parent.size(); ++v) parent[v] = find(v);
   return parent;
 }
-}  // namespace
 
 std::size_t connected_components(const TriangleMesh& mesh) {
   const std::vector<Index> root = component_roots(mesh);

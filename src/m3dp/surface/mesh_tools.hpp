@@ -2,6 +2,7 @@
 // Measures and clean-up of triangle meshes: volume, area, watertightness, connected parts,
 // orientation and Taubin smoothing. Used by surface reconstruction and its tests.
 #include <cstddef>
+#include <vector>
 
 #include "m3dp/core/geometry.hpp"
 
@@ -31,6 +32,9 @@ void flip_orientation(TriangleMesh& mesh);
 /// Taubin 1995 λ|μ smoothing: alternating shrink (λ > 0) and inflate (μ < −λ) steps with the
 /// umbrella operator. Keeps the volume far better than plain Laplacian smoothing.
 void taubin_smooth(TriangleMesh& mesh, int iterations, Real lambda, Real mu);
+
+/// Union–find over vertices joined by triangles: each vertex's piece, named by one of its vertices.
+std::vector<Index> component_roots(const TriangleMesh& mesh);
 
 /// Removes every closed piece that bounds a cavity (negative signed volume) smaller than
 /// `max_volume` (m³). Returns how many were removed.

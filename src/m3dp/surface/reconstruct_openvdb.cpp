@@ -14,7 +14,10 @@
 #include <chrono>
 #include <climits>
 #include <cmath>
+#include <map>
 #include <mutex>
+#include <set>
+#include <bit>
 #include <atomic>
 #include <numeric>
 #include <unordered_map>
@@ -606,22 +609,316 @@ std::size_t fill_voxel_pockets(openvdb::FloatGrid& grid) {
   return pockets.size();
 }
 
-TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, SurfaceStats& stats) {
+/// Meshes a field tile by tile (cubes of 32 voxels) and keeps each tile's triangles until the field
+/// around the tile changes, so that incremental meshing's mesher cost follows what changed (issue 4).
+/// A tile is meshed from a copy of the field over the tile and one leaf (8 voxels) around it by
+/// OpenVDB's mesher, and keeps the polygons whose centroid rounds to one of its own voxels. In dual
+/// contouring a polygon joins the points of the 4 cubes around a sign-changing edge, each point
+/// inside its cube, so a kept polygon's cubes lie within 2 voxels of the tile: it is made from the
+/// field's true values, the same as in the whole field's mesh, and the copy's cut (which the mesher
+/// closes) stays ≥ 6 voxels away. The tiles' meshes are joined by welding bit-equal points near
+/// the tiles' faces. A tile is meshed again when a hash of the field over its copy changes.
+class TiledMesher {
+ public:
+  struct Result {
+    TriangleMesh mesh;
+    std::size_t tiles = 0, meshed_tiles = 0;
+  };
+
+  /// Outward, closed where the material is. `fill_pockets`: fill_voxel_pockets in each tile's copy
+  /// (as in the whole field). `max_cavity_volume` > 0: drop inside-out pieces smaller (m³).
+  Result mesh(const openvdb::FloatGrid& grid, double isovalue, bool fill_pockets, double max_cavity_volume) {
+    using LeafT = openvdb::FloatTree::LeafNodeType;
+    const openvdb::FloatTree& tree = grid.tree();
+    // Tiles near a leaf: its own, and the neighbour whose copy reaches it (a leaf at a tile's face).
+    std::set<std::uint64_t> keys;
+    for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
+      const openvdb::Coord block(leaf->origin().x() >> LeafT::LOG2DIM, leaf->origin().y() >> LeafT::LOG2DIM,
+                                 leaf->origin().z() >> LeafT::LOG2DIM);
+      std::array<std::array<int, 2>, 3> range;
+      for (int axis = 0; axis < 3; ++axis)
+        range[axis] = {floor_divide(block[axis] - 1, kTileBlocks), floor_divide(block[axis] + 1, kTileBlocks)};
+      for (int x = range[0][0]; x <= range[0][1]; ++x)
+        for (int y = range[1][0]; y <= range[1][1]; ++y)
+          for (int z = range[2][0]; z <= range[2][1]; ++z) keys.insert(tile_key(openvdb::Coord(x, y, z)));
+    }
+    const std::vector<std::uint64_t> tile_keys(keys.begin(), keys.end());
+    std::map<std::uint64_t, Tile> previous;
+    previous.swap(tiles_);
+    std::vector<Tile> made(tile_keys.size());
+    std::vector<char> was_meshed(tile_keys.size(), 0);
+    const double voxel = grid.voxelSize()[0];
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tile_keys.size(), 1), [&](const auto& range) {
+      for (std::size_t n = range.begin(); n != range.end(); ++n) {
+        const openvdb::Coord tile = tile_of_key(tile_keys[n]);
+        const std::uint64_t hash = hash_of_copy(tree, tile);
+        const auto found = previous.find(tile_keys[n]);
+        if (found != previous.end() && found->second.hash == hash) {
+          made[n] = std::move(found->second);  // each key is visited by one task only
+          continue;
+        }
+        made[n] = mesh_tile(grid, tile, isovalue, fill_pockets, voxel);
+        made[n].hash = hash;
+        was_meshed[n] = 1;
+      }
+    });
+    Result result;
+    result.tiles = tile_keys.size();
+    result.meshed_tiles = static_cast<std::size_t>(std::count(was_meshed.begin(), was_meshed.end(), 1));
+    // Join in key order (the same mesh for the same field), welding equal seam points and joining
+    // the pieces they connect.
+    std::size_t vertex_total = 0, triangle_total = 0, seam_total = 0, piece_total = 0;
+    std::vector<std::size_t> first_piece(made.size());
+    for (std::size_t n = 0; n < made.size(); ++n) {
+      vertex_total += made[n].vertices.size();
+      triangle_total += made[n].triangles.size();
+      seam_total += made[n].seam_vertices.size();
+      first_piece[n] = piece_total;
+      piece_total += made[n].piece_six_volume.size();
+    }
+    std::vector<Index> piece_parent(piece_total);
+    std::iota(piece_parent.begin(), piece_parent.end(), Index(0));
+    auto find = [&](Index piece) {
+      while (piece_parent[piece] != piece) piece = piece_parent[piece] = piece_parent[piece_parent[piece]];
+      return piece;
+    };
+    TriangleMesh& mesh = result.mesh;
+    mesh.vertices.reserve(vertex_total);
+    mesh.triangles.reserve(triangle_total);
+    // Seam points by their bits, in an open-addressing table (a node per entry was half the time).
+    struct Welded {
+      std::array<std::uint32_t, 3> bits;
+      Index vertex = ~Index(0), piece = 0;
+    };
+    const std::size_t slot_mask = std::bit_ceil(2 * seam_total + 16) - 1;
+    std::vector<Welded> seam_table(slot_mask + 1);
+    std::vector<Index> global;
+    for (std::size_t n = 0; n < made.size(); ++n) {
+      const Tile& t = made[n];
+      global.resize(t.vertices.size());
+      std::size_t next_seam = 0;
+      for (std::size_t v = 0; v < t.vertices.size(); ++v) {
+        const auto piece = static_cast<Index>(first_piece[n] + t.vertex_piece[v]);
+        if (next_seam < t.seam_vertices.size() && t.seam_vertices[next_seam] == v) {
+          ++next_seam;
+          const auto bits = bits_of(t.vertices[v]);
+          std::size_t slot = PointBitsHash()(bits) & slot_mask;
+          while (seam_table[slot].vertex != ~Index(0) && seam_table[slot].bits != bits) slot = (slot + 1) & slot_mask;
+          Welded& entry = seam_table[slot];
+          if (entry.vertex != ~Index(0)) {
+            global[v] = entry.vertex;
+            piece_parent[find(piece)] = find(entry.piece);
+            continue;
+          }
+          entry = Welded{bits, static_cast<Index>(mesh.vertices.size()), piece};
+        }
+        global[v] = static_cast<Index>(mesh.vertices.size());
+        mesh.vertices.push_back(t.vertices[v]);
+      }
+      for (const auto& tri : t.triangles) mesh.triangles.push_back({global[tri[0]], global[tri[1]], global[tri[2]]});
+    }
+    // The mesher winds every field's triangles one way: turn them outwards by the total volume.
+    std::vector<double> six_volume(piece_total, 0.0);
+    double total = 0;
+    for (std::size_t n = 0; n < made.size(); ++n)
+      for (std::size_t k = 0; k < made[n].piece_six_volume.size(); ++k) {
+        six_volume[find(static_cast<Index>(first_piece[n] + k))] += made[n].piece_six_volume[k];
+        total += made[n].piece_six_volume[k];
+      }
+    const double sign = total < 0 ? -1.0 : 1.0;
+    if (total < 0) flip_orientation(mesh);
+    if (max_cavity_volume > 0) {
+      // Closed inside-out pieces smaller than the limit are gaps between particles, not cavities.
+      std::vector<char> drop(piece_total, 0);
+      bool any = false;
+      for (std::size_t piece = 0; piece < piece_total; ++piece) {
+        const double volume = sign * six_volume[find(static_cast<Index>(piece))] / 6;
+        drop[piece] = volume < 0 && -volume < max_cavity_volume;
+        any = any || drop[piece];
+      }
+      if (any) {
+        std::size_t kept = 0, triangle = 0;
+        for (std::size_t n = 0; n < made.size(); ++n)
+          for (const auto& tri : made[n].triangles) {
+            if (!drop[first_piece[n] + made[n].vertex_piece[tri[0]]]) mesh.triangles[kept++] = mesh.triangles[triangle];
+            ++triangle;
+          }
+        mesh.triangles.resize(kept);
+        remove_unused_vertices(mesh);
+      }
+    }
+    for (std::size_t n = 0; n < tile_keys.size(); ++n) tiles_.emplace(tile_keys[n], std::move(made[n]));
+    return result;
+  }
+
+ private:
+  static constexpr int kTileBlocks = 4;  // leaf-sized blocks per tile edge: 32 voxels
+  static constexpr int kBlock = 8;       // voxels per leaf edge
+  static constexpr int kTileVoxels = kTileBlocks * kBlock;
+  // A point lies in its cube c, and the polygons around it have centroids rounding to voxels c to
+  // c + 2 on each axis: only points within 1.5 voxels of a tile's face can be shared across it.
+  static constexpr double kSeamVoxels = 2;
+
+  struct Tile {
+    std::uint64_t hash = 0;
+    std::vector<Vec3> vertices;
+    std::vector<std::array<Index, 3>> triangles;
+    std::vector<Index> seam_vertices;  // ascending local indices of points near the tile's faces
+    // Pieces of the tile's mesh (connected within the tile) and six times their signed volumes: the
+    // whole mesh's pieces are these joined at welded points, so cavities are found per piece.
+    std::vector<Index> vertex_piece;
+    std::vector<double> piece_six_volume;
+  };
+  std::map<std::uint64_t, Tile> tiles_;  // by tile key, from the last call
+  struct PointBitsHash {
+    std::size_t operator()(const std::array<std::uint32_t, 3>& bits) const {
+      std::uint64_t h = (static_cast<std::uint64_t>(bits[0]) << 32 | bits[1]) * 0x9E3779B97F4A7C15ull;
+      h ^= (h >> 29) ^ (static_cast<std::uint64_t>(bits[2]) * 0xBF58476D1CE4E5B9ull);
+      return static_cast<std::size_t>(h ^ (h >> 32));
+    }
+  };
+  static std::array<std::uint32_t, 3> bits_of(const Vec3& p) {
+    return {std::bit_cast<std::uint32_t>(p.x()), std::bit_cast<std::uint32_t>(p.y()), std::bit_cast<std::uint32_t>(p.z())};
+  }
+  static int floor_divide(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+  static std::uint64_t tile_key(const openvdb::Coord& tile) {
+    constexpr std::int64_t offset = 1 << 20;
+    return static_cast<std::uint64_t>(tile.x() + offset) << 42 | static_cast<std::uint64_t>(tile.y() + offset) << 21 |
+           static_cast<std::uint64_t>(tile.z() + offset);
+  }
+  static openvdb::Coord tile_of_key(std::uint64_t key) {
+    constexpr std::int64_t offset = 1 << 20, mask = (1 << 21) - 1;
+    return openvdb::Coord(static_cast<int>((static_cast<std::int64_t>(key >> 42) & mask) - offset),
+                          static_cast<int>((static_cast<std::int64_t>(key >> 21) & mask) - offset),
+                          static_cast<int>((static_cast<std::int64_t>(key) & mask) - offset));
+  }
+  /// Calls visit(block_origin) for the leaf-sized blocks of a tile's copy: the tile and one block around.
+  template <class Visit>
+  static void for_each_block_of_copy(const openvdb::Coord& tile, Visit&& visit) {
+    for (int bx = -1; bx <= kTileBlocks; ++bx)
+      for (int by = -1; by <= kTileBlocks; ++by)
+        for (int bz = -1; bz <= kTileBlocks; ++bz)
+          visit(openvdb::Coord((tile.x() * kTileBlocks + bx) * kBlock, (tile.y() * kTileBlocks + by) * kBlock,
+                               (tile.z() * kTileBlocks + bz) * kBlock));
+  }
+  static std::uint64_t hash_of_copy(const openvdb::FloatTree& tree, const openvdb::Coord& tile) {
+    std::uint64_t hash = 0xcbf29ce484222325ull;
+    auto mix = [&hash](std::uint64_t word) { hash = (hash ^ word) * 0x100000001b3ull; };
+    for_each_block_of_copy(tile, [&](const openvdb::Coord& origin) {
+      if (const auto* leaf = tree.probeConstLeaf(origin)) {
+        mix(0x1eaf);
+        for (openvdb::Index word = 0; word < leaf->getValueMask().WORD_COUNT; ++word) mix(leaf->getValueMask().getWord<openvdb::Index64>(word));
+        const float* values = leaf->buffer().data();
+        for (openvdb::Index v = 0; v < leaf->SIZE; ++v) mix(std::bit_cast<std::uint32_t>(values[v]));
+      } else {
+        mix(std::bit_cast<std::uint32_t>(tree.getValue(origin)));
+        mix(tree.isValueOn(origin) ? 1 : 2);
+      }
+    });
+    return hash;
+  }
+  static Tile mesh_tile(const openvdb::FloatGrid& grid, const openvdb::Coord& tile, double isovalue, bool fill_pockets,
+                        double voxel) {
+    const openvdb::FloatTree& tree = grid.tree();
+    auto copy = openvdb::FloatGrid::create(grid.background());
+    copy->setTransform(grid.transform().copy());
+    copy->setGridClass(grid.getGridClass());
+    for_each_block_of_copy(tile, [&](const openvdb::Coord& origin) {
+      if (const auto* leaf = tree.probeConstLeaf(origin)) {
+        copy->tree().addLeaf(new openvdb::FloatTree::LeafNodeType(*leaf));
+      } else {
+        const float value = tree.getValue(origin);
+        const bool active = tree.isValueOn(origin);
+        if (active || value != grid.background())
+          copy->tree().fill(openvdb::CoordBBox(origin, origin.offsetBy(kBlock - 1)), value, active);
+      }
+    });
+    if (fill_pockets) fill_voxel_pockets(*copy);
+    std::vector<openvdb::Vec3s> points;
+    std::vector<openvdb::Vec3I> triangles;
+    std::vector<openvdb::Vec4I> quads;
+    openvdb::tools::volumeToMesh(*copy, points, triangles, quads, isovalue, /*adaptivity=*/0.0);
+    // Keep the polygons whose centroid rounds to a voxel of this tile.
+    const openvdb::Coord low(tile.x() * kTileVoxels, tile.y() * kTileVoxels, tile.z() * kTileVoxels);
+    auto owned = [&](std::initializer_list<unsigned> corners) {
+      openvdb::Vec3d sum(0, 0, 0);
+      for (const unsigned corner : corners) sum += openvdb::Vec3d(points[corner]);
+      for (int axis = 0; axis < 3; ++axis) {
+        const int voxel_index = static_cast<int>(std::floor(sum[axis] / static_cast<double>(corners.size()) / voxel + 0.5));
+        if (voxel_index < low[axis] || voxel_index >= low[axis] + kTileVoxels) return false;
+      }
+      return true;
+    };
+    Tile result;
+    TriangleMesh mesh;
+    mesh.vertices.reserve(points.size());
+    for (const auto& p : points) mesh.vertices.emplace_back(p.x(), p.y(), p.z());
+    for (const auto& t : triangles)
+      if (owned({t[0], t[1], t[2]})) mesh.triangles.push_back({t[0], t[1], t[2]});
+    for (const auto& q : quads)
+      if (owned({q[0], q[1], q[2], q[3]})) {  // split as extract_mesh splits
+        mesh.triangles.push_back({q[0], q[1], q[2]});
+        mesh.triangles.push_back({q[0], q[2], q[3]});
+      }
+    remove_unused_vertices(mesh);
+    // Points near the tile's faces may belong to the next tile's polygons too.
+    auto near_face = [&](const Vec3& p) {
+      for (int axis = 0; axis < 3; ++axis) {
+        const double index = p[axis] / voxel;
+        if (index - (low[axis] - 0.5) < kSeamVoxels || (low[axis] + kTileVoxels - 0.5) - index < kSeamVoxels) return true;
+      }
+      return false;
+    };
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v)
+      if (near_face(mesh.vertices[v])) result.seam_vertices.push_back(static_cast<Index>(v));
+    const std::vector<Index> root = component_roots(mesh);
+    std::vector<Index> piece_of_root(mesh.vertices.size(), ~Index(0));
+    result.vertex_piece.resize(mesh.vertices.size());
+    for (std::size_t v = 0; v < mesh.vertices.size(); ++v) {
+      Index& piece = piece_of_root[root[v]];
+      if (piece == ~Index(0)) {
+        piece = static_cast<Index>(result.piece_six_volume.size());
+        result.piece_six_volume.push_back(0);
+      }
+      result.vertex_piece[v] = piece;
+    }
+    for (const auto& t : mesh.triangles)
+      result.piece_six_volume[result.vertex_piece[t[0]]] +=
+          mesh.vertices[t[0]].cast<double>().dot(mesh.vertices[t[1]].cast<double>().cross(mesh.vertices[t[2]].cast<double>()));
+    result.vertices = std::move(mesh.vertices);
+    result.triangles = std::move(mesh.triangles);
+    return result;
+  }
+};
+
+/// The mesh of a field. With `tiles`, by tiles whose meshes are kept between calls (incremental
+/// meshing); without, by one mesher call over the whole field. Both give the same triangles.
+TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, SurfaceStats& stats,
+                           TiledMesher* tiles = nullptr) {
   stats.active_voxels = field.grid->activeVoxelCount();
   stats.grid_bytes = std::max<std::size_t>(stats.grid_bytes, field.grid->memUsage());
   const auto start = Clock::now();
-  // Pockets are filled in the field only where their shells are certain to be dropped below.
-  const Real spacing = 2 * settings.particle_radius;
-  if (settings.method == Method::spherical && 8 * std::pow(settings.voxel_size, 3) <= std::pow(spacing, 3))
-    fill_voxel_pockets(*field.grid);
-  TriangleMesh mesh = extract_mesh(*field.grid, field.isovalue);
-  remove_unused_vertices(mesh);
-  // The mesher winds triangles one way for every field here; make them face outwards.
-  if (signed_volume(mesh) < 0) flip_orientation(mesh);
   // Spheres leave closed pockets between them (a lattice cell's centre is √3 r from its corners):
-  // each is a small inside-out shell. Pockets smaller than a particle are gaps, not holes in the material.
-  if (settings.method == Method::spherical) {
-    remove_small_cavities(mesh, spacing * spacing * spacing);
+  // each is a small inside-out shell. Pockets smaller than a particle are gaps, not holes in the
+  // material. Voxel-sized ones are filled in the field, only where their shells are certain to be
+  // dropped anyway (8 voxels³ ≤ the particle volume).
+  const Real spacing = 2 * settings.particle_radius;
+  const bool spherical = settings.method == Method::spherical;
+  const bool fill_pockets = spherical && 8 * std::pow(settings.voxel_size, 3) <= std::pow(spacing, 3);
+  const double max_cavity_volume = spherical ? std::pow(spacing, 3) : 0.0;
+  TriangleMesh mesh;
+  if (tiles) {
+    TiledMesher::Result tiled = tiles->mesh(*field.grid, field.isovalue, fill_pockets, max_cavity_volume);
+    mesh = std::move(tiled.mesh);
+    stats.mesh_tiles = tiled.tiles;
+    stats.remeshed_tiles = tiled.meshed_tiles;
+  } else {
+    if (fill_pockets) fill_voxel_pockets(*field.grid);
+    mesh = extract_mesh(*field.grid, field.isovalue);
+    remove_unused_vertices(mesh);
+    // The mesher winds triangles one way for every field here; make them face outwards.
+    if (signed_volume(mesh) < 0) flip_orientation(mesh);
+    if (spherical) remove_small_cavities(mesh, max_cavity_volume);
   }
   taubin_smooth(mesh, settings.smoothing_iterations, settings.smoothing_lambda, settings.smoothing_mu);
   stats.mesh_seconds = seconds_since(start);
@@ -729,6 +1026,7 @@ struct IncrementalSurface::Cache {
   std::unordered_map<std::uint64_t, Vec3> kept;  // id → position of every particle in resting_field
   std::unordered_map<std::uint64_t, KernelRecord> kernels;  // anisotropic: id → kernel in resting_field
   std::unordered_map<std::uint64_t, Vec3> previous_frame;   // reconstruct_frame: id → position last time
+  TiledMesher tiles;                                         // the mesh, tile by tile, kept too
 
   void clear() {
     kept.clear();
@@ -820,12 +1118,23 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
                                              std::span<const std::uint64_t> resting_ids, SurfaceStats* stats) {
   if (resting.size() != resting_ids.size()) throw Error("incremental surface: one id per resting particle is needed");
   const SurfaceSettings& settings = cache_->settings;
+  initialize_openvdb();
   if (settings.method == Method::zhu_bridson) {
+    // Not a sum over particles: the field is made whole; the mesh of unchanged tiles is kept.
     std::vector<Vec3> all(moving.begin(), moving.end());
     all.insert(all.end(), resting.begin(), resting.end());
-    return reconstruct_surface(all, settings, stats);
+    SurfaceStats local_stats;
+    local_stats.particles = all.size();
+    TriangleMesh mesh;
+    if (!all.empty()) {
+      const auto start = Clock::now();
+      const Field field = field_of(all, settings, local_stats);
+      local_stats.field_seconds = seconds_since(start);
+      mesh = mesh_of_field(field, settings, local_stats, &cache_->tiles);
+    }
+    if (stats) *stats = local_stats;
+    return mesh;
   }
-  initialize_openvdb();
   SurfaceStats local_stats;
   local_stats.particles = moving.size() + resting.size();
   const auto start = Clock::now();
@@ -888,11 +1197,13 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
       field.grid = copy;
     }
   } else {
-    field.grid = cache_->resting_field;  // the mesher only reads it: no copy (null when nothing rests)
+    // No copy (null when nothing rests). Meshing may fill voxel pockets in it, which adding
+    // particles later keeps right: a union only lowers values, so a pocket stays enclosed.
+    field.grid = cache_->resting_field;
   }
   local_stats.field_seconds = seconds_since(start);
   TriangleMesh mesh;
-  if (field.grid) mesh = mesh_of_field(field, settings, local_stats);
+  if (field.grid) mesh = mesh_of_field(field, settings, local_stats, &cache_->tiles);
   if (stats) *stats = local_stats;
   return mesh;
 }
