@@ -271,13 +271,15 @@ TEST(IncrementalSurface, MeshesOnlyTheTilesWhereTheFieldChanged) {
   // A long resting wall (8 tiles of 32 voxels long) and a blob moving along its top at one end:
   // each frame meshes again only the tiles around the blob, now and one frame before, and the mesh
   // has the whole frame's triangles.
-  std::vector<Vec3> resting = block(120, 3, 4);
+  // The wall straddles the origin on every axis: tiles on both sides of zero (negative keys).
+  const Vec3 corner(-60 * kSpacing, Real(-1.5) * kSpacing, -2 * kSpacing);
+  std::vector<Vec3> resting = block(120, 3, 4, corner);
   std::vector<std::uint64_t> ids(resting.size());
   std::iota(ids.begin(), ids.end(), std::uint64_t(0));
   for (const Method method : {Method::spherical, Method::sph_blobby, Method::zhu_bridson, Method::anisotropic}) {
     IncrementalSurface incremental(settings_for(method));
     for (int frame = 0; frame < 3; ++frame) {
-      const auto moving = block(3, 3, 2, Vec3((4 + Real(0.3) * frame) * kSpacing, 0, 4 * kSpacing));
+      const auto moving = block(3, 3, 2, corner + Vec3((4 + Real(0.3) * frame) * kSpacing, 0, 4 * kSpacing));
       SurfaceStats stats;
       const TriangleMesh mesh = incremental.reconstruct(moving, resting, ids, &stats);
       std::vector<Vec3> all = moving;

@@ -102,7 +102,9 @@ MeshedFrame mesh_one(const MeshOptions& options, const fs::path& input, const fs
   return {fmt::format("{} → {}: {} particles{}, {} triangles, {} pieces, volume {:.6g} m³ ({} method, {:.3f} s field + {:.3f} s mesh, "
                       "{:.1f} MB grid)",
                       input.string(), output.string(), frame.positions.size(),
-                      reuse ? fmt::format(" ({} meshed from a kept field: unmoved since earlier frames)", stats.reused_particles) : std::string(),
+                      reuse ? fmt::format(" ({} meshed from a kept field: unmoved since earlier frames; {} of {} mesh tiles made again)",
+                                          stats.reused_particles, stats.remeshed_tiles, stats.mesh_tiles)
+                            : std::string(),
                       mesh.triangles.size(), surface::connected_components(mesh), surface::signed_volume(mesh),
                       surface::method_name(settings.method), stats.field_seconds, stats.mesh_seconds, stats.grid_bytes / 1e6),
           frame.positions.size()};
