@@ -11,6 +11,8 @@
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
 
+#include <fmt/format.h>
+
 #include <chrono>
 #include <climits>
 #include <cmath>
@@ -229,9 +231,13 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
   // In voxel units and double precision, as ParticlesToLevelSet computes them.
   const double dx = voxel_size, radius = sphere_radius / dx, band = background / dx;
   const double reach = radius + band, reach_squared = reach * reach;
-  const double core_squared = std::pow(std::max(0.0, radius - band), 2);
+  const double core = std::max(0.0, radius - band), core_squared = core * core;
+  // Index-space centres as OpenVDB's UniformScaleMap maps them: times the inverse, not divided.
+  const double inverse_dx = 1.0 / dx;
+  // Leaf keys hold 21 bits a coordinate: ±2^20 leaves of 8 voxels.
+  const double max_index = double(1 << 20) * 8 - 64;
   auto box_of = [&](const Vec3& centre) {
-    const openvdb::Vec3d p(centre.x() / dx, centre.y() / dx, centre.z() / dx);
+    const openvdb::Vec3d p(centre.x() * inverse_dx, centre.y() * inverse_dx, centre.z() * inverse_dx);
     return openvdb::CoordBBox(openvdb::Coord(static_cast<int>(std::floor(p[0] - reach)), static_cast<int>(std::floor(p[1] - reach)),
                                              static_cast<int>(std::floor(p[2] - reach))),
                               openvdb::Coord(static_cast<int>(std::ceil(p[0] + reach)), static_cast<int>(std::ceil(p[1] + reach)),
@@ -257,6 +263,12 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
     return openvdb::Coord(low.x() >> kLeafLog2, low.y() >> kLeafLog2, low.z() >> kLeafLog2);
   };
   // Spheres sorted by home leaf; each home's spheres in one run.
+  for (const Vec3& centre : centres)
+    if (!(std::abs(centre.x() * inverse_dx) < max_index && std::abs(centre.y() * inverse_dx) < max_index &&
+          std::abs(centre.z() * inverse_dx) < max_index))
+      throw Error(fmt::format("surface reconstruction: a particle at ({}, {}, {}) m is not finite or lies beyond the "
+                              "grid's reach of {:.3g} m at voxel size {:.3g} m",
+                              centre.x(), centre.y(), centre.z(), max_index * dx, dx));
   std::vector<std::pair<std::uint64_t, Index>> by_home(centres.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) by_home[i] = {leaf_key(home_of(centres[i])), static_cast<Index>(i)};
@@ -271,7 +283,7 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
     for (std::size_t n = range.begin(); n != range.end(); ++n) {
       const Vec3& centre = centres[by_home[n].second];
-      spheres[n] = {openvdb::Vec3d(centre.x() / dx, centre.y() / dx, centre.z() / dx), box_of(centre)};
+      spheres[n] = {openvdb::Vec3d(centre.x() * inverse_dx, centre.y() * inverse_dx, centre.z() * inverse_dx), box_of(centre)};
     }
   });
   std::unordered_map<std::uint64_t, std::pair<std::size_t, std::size_t>> home_run;  // key → [begin, end) in by_home
@@ -333,11 +345,16 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
       for (openvdb::Index voxel = 0; voxel < LeafT::SIZE; ++voxel) {
         const double d2 = nearest_squared[voxel];
         if (d2 >= reach_squared) continue;  // no sphere's band reaches it
-        any = true;
-        if (d2 <= core_squared)
+        if (d2 <= core_squared) {
           leaf->setValueOff(voxel, -background);  // deep inside a sphere, as ParticlesToLevelSet leaves it
-        else
-          leaf->setValueOn(voxel, static_cast<float>(dx * (std::sqrt(d2) - radius)));
+          any = true;
+          continue;
+        }
+        // ParticlesToLevelSet writes only values below the current one (the background at first).
+        const auto distance = static_cast<float>(dx * (std::sqrt(d2) - radius));
+        if (!(distance < background)) continue;
+        leaf->setValueOn(voxel, distance);
+        any = true;
       }
       if (any) leaves[target] = leaf.release();
     }
@@ -616,8 +633,10 @@ std::size_t fill_voxel_pockets(openvdb::FloatGrid& grid) {
 /// contouring a polygon joins the points of the 4 cubes around a sign-changing edge, each point
 /// inside its cube, so a kept polygon's cubes lie within 2 voxels of the tile: it is made from the
 /// field's true values, the same as in the whole field's mesh, and the copy's cut (which the mesher
-/// closes) stays ≥ 6 voxels away. The tiles' meshes are joined by welding bit-equal points near
-/// the tiles' faces. A tile is meshed again when a hash of the field over its copy changes.
+/// closes) stays 4 voxels away. The tiles' meshes are joined by welding bit-equal points near
+/// the tiles' faces (two distinct mesher points that coincide exactly, which needs a voxel value
+/// equal to the iso-value, would be joined there and not elsewhere). A tile is meshed again when
+/// a hash of the field over its copy changes.
 class TiledMesher {
  public:
   struct Result {
@@ -638,6 +657,22 @@ class TiledMesher {
       std::array<std::array<int, 2>, 3> range;
       for (int axis = 0; axis < 3; ++axis)
         range[axis] = {floor_divide(block[axis] - 1, kTileBlocks), floor_divide(block[axis] + 1, kTileBlocks)};
+      for (int x = range[0][0]; x <= range[0][1]; ++x)
+        for (int y = range[1][0]; y <= range[1][1]; ++y)
+          for (int z = range[2][0]; z <= range[2][1]; ++z) keys.insert(tile_key(openvdb::Coord(x, y, z)));
+    }
+    // Active tiles above the leaf level (a fill of whole leaf-sized blocks or more): the mesher also
+    // makes surfaces at their borders, leaves or not.
+    auto tile_value = tree.cbeginValueOn();
+    tile_value.setMaxDepth(openvdb::FloatTree::ValueOnCIter::LEAF_DEPTH - 1);
+    for (; tile_value; ++tile_value) {
+      openvdb::CoordBBox box;
+      tile_value.getBoundingBox(box);
+      box.expand(1);
+      std::array<std::array<int, 2>, 3> range;
+      for (int axis = 0; axis < 3; ++axis)
+        range[axis] = {floor_divide((box.min()[axis] >> LeafT::LOG2DIM) - 1, kTileBlocks),
+                       floor_divide((box.max()[axis] >> LeafT::LOG2DIM) + 1, kTileBlocks)};
       for (int x = range[0][0]; x <= range[0][1]; ++x)
         for (int y = range[1][0]; y <= range[1][1]; ++y)
           for (int z = range[2][0]; z <= range[2][1]; ++z) keys.insert(tile_key(openvdb::Coord(x, y, z)));
@@ -778,7 +813,8 @@ class TiledMesher {
     }
   };
   static std::array<std::uint32_t, 3> bits_of(const Vec3& p) {
-    return {std::bit_cast<std::uint32_t>(p.x()), std::bit_cast<std::uint32_t>(p.y()), std::bit_cast<std::uint32_t>(p.z())};
+    return {std::bit_cast<std::uint32_t>(static_cast<float>(p.x())), std::bit_cast<std::uint32_t>(static_cast<float>(p.y())),
+            std::bit_cast<std::uint32_t>(static_cast<float>(p.z()))};
   }
   static int floor_divide(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
   static std::uint64_t tile_key(const openvdb::Coord& tile) {
@@ -803,7 +839,14 @@ class TiledMesher {
   }
   static std::uint64_t hash_of_copy(const openvdb::FloatTree& tree, const openvdb::Coord& tile) {
     std::uint64_t hash = 0xcbf29ce484222325ull;
-    auto mix = [&hash](std::uint64_t word) { hash = (hash ^ word) * 0x100000001b3ull; };
+    // splitmix64's finaliser on every word: each input bit reaches every hash bit (a bare FNV step
+    // only carries bits upwards, so two flips of a word's top bit would cancel).
+    auto mix = [&hash](std::uint64_t word) {
+      std::uint64_t z = (hash ^ word) + 0x9E3779B97F4A7C15ull;
+      z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+      z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+      hash = z ^ (z >> 31);
+    };
     for_each_block_of_copy(tile, [&](const openvdb::Coord& origin) {
       if (const auto* leaf = tree.probeConstLeaf(origin)) {
         mix(0x1eaf);
@@ -892,7 +935,8 @@ class TiledMesher {
 };
 
 /// The mesh of a field. With `tiles`, by tiles whose meshes are kept between calls (incremental
-/// meshing); without, by one mesher call over the whole field. Both give the same triangles.
+/// meshing); without, by one mesher call over the whole field. Both give the same triangles (with
+/// smoothing, up to rounding: the vertices are numbered differently).
 TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, SurfaceStats& stats,
                            TiledMesher* tiles = nullptr) {
   stats.active_voxels = field.grid->activeVoxelCount();
@@ -988,8 +1032,20 @@ SphericalFieldComparison compare_spherical_field_with_openvdb(std::span<const Ve
         result.max_difference = std::max(result.max_difference, std::abs(static_cast<double>(*voxel) - other.getValue(ijk)));
       }
   };
+  // And the values above the leaf level (tiles), at each tile's first voxel.
+  auto compare_tiles = [&](const openvdb::FloatGrid& a, const openvdb::FloatGrid& b) {
+    auto value = a.tree().cbeginValueAll();
+    value.setMaxDepth(openvdb::FloatTree::ValueAllCIter::LEAF_DEPTH - 1);
+    for (; value; ++value) {
+      const openvdb::Coord ijk = value.getCoord();
+      if (value.isValueOn() != b.tree().isValueOn(ijk)) ++result.activity_mismatches;
+      result.max_difference = std::max(result.max_difference, std::abs(static_cast<double>(*value) - b.tree().getValue(ijk)));
+    }
+  };
   compare(*reference, *ours);
   compare(*ours, *reference);
+  compare_tiles(*reference, *ours);
+  compare_tiles(*ours, *reference);
   return result;
 }
 }  // namespace detail
@@ -1197,8 +1253,8 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
       field.grid = copy;
     }
   } else {
-    // No copy (null when nothing rests). Meshing may fill voxel pockets in it, which adding
-    // particles later keeps right: a union only lowers values, so a pocket stays enclosed.
+    // No copy (null when nothing rests): the tiled mesher only reads it (pockets are filled in the
+    // tiles' copies).
     field.grid = cache_->resting_field;
   }
   local_stats.field_seconds = seconds_since(start);
