@@ -182,6 +182,25 @@ TEST(Surface, NoParticlesGiveAnEmptyMeshAndBadSettingsAnError) {
   bad.particle_radius = kRadius;
   bad.iso_level = Real(1.5);
   EXPECT_THROW((void)reconstruct_surface(one, bad), Error);
+  // A blown-up frame: the error names the particle; so does a position beyond the grid's reach.
+  for (const Method method : {Method::spherical, Method::sph_blobby, Method::zhu_bridson, Method::anisotropic}) {
+    std::vector<Vec3> frame = ball(Vec3::Zero(), 4 * kRadius);
+    frame.push_back(Vec3(0, std::nan(""), 0));
+    try {
+      (void)reconstruct_surface(frame, settings_for(method));
+      ADD_FAILURE() << method_name(method) << ": no error for a NaN particle";
+    } catch (const Error& error) {
+      EXPECT_NE(std::string(error.what()).find("particle " + std::to_string(frame.size() - 1) + " of"), std::string::npos)
+          << error.what();
+    }
+  }
+  const std::vector<Vec3> far{Vec3(Real(1e6), 0, 0)};
+  try {
+    (void)reconstruct_surface(far, settings_for(Method::spherical));
+    ADD_FAILURE() << "no error for a particle 1000 km away";
+  } catch (const Error& error) {
+    EXPECT_NE(std::string(error.what()).find("beyond the grid's reach"), std::string::npos) << error.what();
+  }
 }
 
 TEST(Surface, MethodNamesRoundTrip) {

@@ -44,6 +44,14 @@ void initialize_openvdb() {
   std::call_once(once, [] { openvdb::initialize(); });
 }
 
+/// Throws for a particle that is not finite (a blown-up frame): every grid key below would be garbage.
+void check_finite(std::span<const Vec3> positions) {
+  for (std::size_t i = 0; i < positions.size(); ++i)
+    if (!positions[i].allFinite())
+      throw Error(fmt::format("surface reconstruction: particle {} of {} is not finite ({}, {}, {})", i, positions.size(),
+                              positions[i].x(), positions[i].y(), positions[i].z()));
+}
+
 /// Particle indices in Z-order of a coarse grid (so each thread's splats stay in a compact region),
 /// and each one's cell's Morton key: particles of one cell come out consecutive.
 struct SpatialOrder {
@@ -1059,6 +1067,7 @@ TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceS
     if (stats) *stats = local_stats;
     return mesh;
   }
+  check_finite(positions);
   initialize_openvdb();
   const auto start = Clock::now();
   Field field = field_of(positions, settings, local_stats);
@@ -1173,6 +1182,8 @@ IncrementalSurface::~IncrementalSurface() = default;
 TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::span<const Vec3> resting,
                                              std::span<const std::uint64_t> resting_ids, SurfaceStats* stats) {
   if (resting.size() != resting_ids.size()) throw Error("incremental surface: one id per resting particle is needed");
+  check_finite(moving);
+  check_finite(resting);
   const SurfaceSettings& settings = cache_->settings;
   initialize_openvdb();
   if (settings.method == Method::zhu_bridson) {
