@@ -218,6 +218,19 @@ struct ParticleList {
   }
 };
 
+/// A coordinate triple (leaf or tile indices) packed into one key, 21 bits each offset to be
+/// positive: ±2^20 on each axis. Keys order like their z-major triples.
+constexpr std::int64_t kKeyOffset = 1 << 20, kKeyMask = (1 << 21) - 1;
+std::uint64_t coord_key(const openvdb::Coord& c) {
+  return static_cast<std::uint64_t>(c.x() + kKeyOffset) << 42 | static_cast<std::uint64_t>(c.y() + kKeyOffset) << 21 |
+         static_cast<std::uint64_t>(c.z() + kKeyOffset);
+}
+openvdb::Coord coord_of_key(std::uint64_t key) {
+  return openvdb::Coord(static_cast<int>((static_cast<std::int64_t>(key >> 42) & kKeyMask) - kKeyOffset),
+                        static_cast<int>((static_cast<std::int64_t>(key >> 21) & kKeyMask) - kKeyOffset),
+                        static_cast<int>((static_cast<std::int64_t>(key) & kKeyMask) - kKeyOffset));
+}
+
 /// Half-width of the spherical level set's narrow band, in voxels.
 constexpr float kSphereBandVoxels = 2;
 
@@ -251,17 +264,7 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
                               openvdb::Coord(static_cast<int>(std::ceil(p[0] + reach)), static_cast<int>(std::ceil(p[1] + reach)),
                                              static_cast<int>(std::ceil(p[2] + reach))));
   };
-  // Leaf coordinates (voxel >> 3) of 21 bits each, offset to be positive, packed into one key.
-  constexpr std::int64_t kKeyOffset = 1 << 20, kKeyMask = (1 << 21) - 1;
-  auto leaf_key = [](const openvdb::Coord& leaf) {
-    return static_cast<std::uint64_t>(leaf.x() + kKeyOffset) << 42 | static_cast<std::uint64_t>(leaf.y() + kKeyOffset) << 21 |
-           static_cast<std::uint64_t>(leaf.z() + kKeyOffset);
-  };
-  auto leaf_of_key = [](std::uint64_t key) {
-    return openvdb::Coord(static_cast<int>((static_cast<std::int64_t>(key >> 42) & kKeyMask) - kKeyOffset),
-                          static_cast<int>((static_cast<std::int64_t>(key >> 21) & kKeyMask) - kKeyOffset),
-                          static_cast<int>((static_cast<std::int64_t>(key) & kKeyMask) - kKeyOffset));
-  };
+
   // A sphere's box is at most ⌈2 reach⌉ + 2 voxels wide, so it spans its lowest corner's leaf (its
   // "home") and at most leaf_span − 1 more on each axis (2 for the default spheres).
   const int box_width = static_cast<int>(std::ceil(2 * reach)) + 2;
@@ -279,7 +282,7 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
                               centre.x(), centre.y(), centre.z(), max_index * dx, dx));
   std::vector<std::pair<std::uint64_t, Index>> by_home(centres.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) by_home[i] = {leaf_key(home_of(centres[i])), static_cast<Index>(i)};
+    for (std::size_t i = range.begin(); i != range.end(); ++i) by_home[i] = {coord_key(home_of(centres[i])), static_cast<Index>(i)};
   });
   tbb::parallel_sort(by_home.begin(), by_home.end());
   // Centres (in voxels) and boxes in that order, for the gather's sequential reads.
@@ -300,10 +303,10 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
     std::size_t end = n;
     while (end < by_home.size() && by_home[end].first == by_home[n].first) ++end;
     home_run.emplace(by_home[n].first, std::pair{n, end});
-    const openvdb::Coord home = leaf_of_key(by_home[n].first);
+    const openvdb::Coord home = coord_of_key(by_home[n].first);
     for (int dx_leaf = 0; dx_leaf < leaf_span; ++dx_leaf)
       for (int dy_leaf = 0; dy_leaf < leaf_span; ++dy_leaf)
-        for (int dz_leaf = 0; dz_leaf < leaf_span; ++dz_leaf) target_keys.push_back(leaf_key(home.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
+        for (int dz_leaf = 0; dz_leaf < leaf_span; ++dz_leaf) target_keys.push_back(coord_key(home.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
     n = end;
   }
   tbb::parallel_sort(target_keys.begin(), target_keys.end());
@@ -315,14 +318,14 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
     // the level set value needs one square root per voxel, not one per sphere and voxel.
     std::array<double, LeafT::SIZE> nearest_squared;
     for (std::size_t target = range.begin(); target != range.end(); ++target) {
-      const openvdb::Coord leaf_coord = leaf_of_key(target_keys[target]);
+      const openvdb::Coord leaf_coord = coord_of_key(target_keys[target]);
       const openvdb::Coord origin(leaf_coord.x() * kLeafDim, leaf_coord.y() * kLeafDim, leaf_coord.z() * kLeafDim);
       const openvdb::CoordBBox leaf_box(origin, origin.offsetBy(kLeafDim - 1));
       nearest_squared.fill(reach_squared);
       for (int dx_leaf = 1 - leaf_span; dx_leaf <= 0; ++dx_leaf)
         for (int dy_leaf = 1 - leaf_span; dy_leaf <= 0; ++dy_leaf)
           for (int dz_leaf = 1 - leaf_span; dz_leaf <= 0; ++dz_leaf) {
-            const auto home = home_run.find(leaf_key(leaf_coord.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
+            const auto home = home_run.find(coord_key(leaf_coord.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
             if (home == home_run.end()) continue;
             for (std::size_t n = home->second.first; n < home->second.second; ++n) {
               const SphereInVoxels& sphere = spheres[n];
@@ -659,16 +662,20 @@ class TiledMesher {
     const openvdb::FloatTree& tree = grid.tree();
     // Tiles near a leaf: its own, and the neighbour whose copy reaches it (a leaf at a tile's face).
     std::set<std::uint64_t> keys;
-    for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) {
-      const openvdb::Coord block(leaf->origin().x() >> LeafT::LOG2DIM, leaf->origin().y() >> LeafT::LOG2DIM,
-                                 leaf->origin().z() >> LeafT::LOG2DIM);
+    // Every tile whose copy (the tile and one leaf-sized block around) holds a block from
+    // `low` to `high` (block indices: voxel >> 3).
+    auto add_tiles_holding = [&](const openvdb::Coord& low, const openvdb::Coord& high) {
       std::array<std::array<int, 2>, 3> range;
       for (int axis = 0; axis < 3; ++axis)
-        range[axis] = {floor_divide(block[axis] - 1, kTileBlocks), floor_divide(block[axis] + 1, kTileBlocks)};
+        range[axis] = {floor_divide(low[axis] - 1, kTileBlocks), floor_divide(high[axis] + 1, kTileBlocks)};
       for (int x = range[0][0]; x <= range[0][1]; ++x)
         for (int y = range[1][0]; y <= range[1][1]; ++y)
-          for (int z = range[2][0]; z <= range[2][1]; ++z) keys.insert(tile_key(openvdb::Coord(x, y, z)));
-    }
+          for (int z = range[2][0]; z <= range[2][1]; ++z) keys.insert(coord_key(openvdb::Coord(x, y, z)));
+    };
+    auto block_of = [](const openvdb::Coord& voxel) {
+      return openvdb::Coord(voxel.x() >> LeafT::LOG2DIM, voxel.y() >> LeafT::LOG2DIM, voxel.z() >> LeafT::LOG2DIM);
+    };
+    for (auto leaf = tree.cbeginLeaf(); leaf; ++leaf) add_tiles_holding(block_of(leaf->origin()), block_of(leaf->origin()));
     // Active tiles above the leaf level (a fill of whole leaf-sized blocks or more): the mesher also
     // makes surfaces at their borders, leaves or not.
     auto tile_value = tree.cbeginValueOn();
@@ -677,13 +684,7 @@ class TiledMesher {
       openvdb::CoordBBox box;
       tile_value.getBoundingBox(box);
       box.expand(1);
-      std::array<std::array<int, 2>, 3> range;
-      for (int axis = 0; axis < 3; ++axis)
-        range[axis] = {floor_divide((box.min()[axis] >> LeafT::LOG2DIM) - 1, kTileBlocks),
-                       floor_divide((box.max()[axis] >> LeafT::LOG2DIM) + 1, kTileBlocks)};
-      for (int x = range[0][0]; x <= range[0][1]; ++x)
-        for (int y = range[1][0]; y <= range[1][1]; ++y)
-          for (int z = range[2][0]; z <= range[2][1]; ++z) keys.insert(tile_key(openvdb::Coord(x, y, z)));
+      add_tiles_holding(block_of(box.min()), block_of(box.max()));
     }
     const std::vector<std::uint64_t> tile_keys(keys.begin(), keys.end());
     std::map<std::uint64_t, Tile> previous;
@@ -693,7 +694,7 @@ class TiledMesher {
     const double voxel = grid.voxelSize()[0];
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, tile_keys.size(), 1), [&](const auto& range) {
       for (std::size_t n = range.begin(); n != range.end(); ++n) {
-        const openvdb::Coord tile = tile_of_key(tile_keys[n]);
+        const openvdb::Coord tile = coord_of_key(tile_keys[n]);
         const std::uint64_t hash = hash_of_copy(tree, tile);
         const auto found = previous.find(tile_keys[n]);
         if (found != previous.end() && found->second.hash == hash) {
@@ -825,17 +826,6 @@ class TiledMesher {
             std::bit_cast<std::uint32_t>(static_cast<float>(p.z()))};
   }
   static int floor_divide(int a, int b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
-  static std::uint64_t tile_key(const openvdb::Coord& tile) {
-    constexpr std::int64_t offset = 1 << 20;
-    return static_cast<std::uint64_t>(tile.x() + offset) << 42 | static_cast<std::uint64_t>(tile.y() + offset) << 21 |
-           static_cast<std::uint64_t>(tile.z() + offset);
-  }
-  static openvdb::Coord tile_of_key(std::uint64_t key) {
-    constexpr std::int64_t offset = 1 << 20, mask = (1 << 21) - 1;
-    return openvdb::Coord(static_cast<int>((static_cast<std::int64_t>(key >> 42) & mask) - offset),
-                          static_cast<int>((static_cast<std::int64_t>(key >> 21) & mask) - offset),
-                          static_cast<int>((static_cast<std::int64_t>(key) & mask) - offset));
-  }
   /// Calls visit(block_origin) for the leaf-sized blocks of a tile's copy: the tile and one block around.
   template <class Visit>
   static void for_each_block_of_copy(const openvdb::Coord& tile, Visit&& visit) {
