@@ -20,7 +20,6 @@
 #include <mutex>
 #include <set>
 #include <bit>
-#include <atomic>
 #include <numeric>
 #include <unordered_map>
 #include <unordered_set>
@@ -219,7 +218,7 @@ struct ParticleList {
 };
 
 /// A coordinate triple (leaf or tile indices) packed into one key, 21 bits each offset to be
-/// positive: ±2^20 on each axis. Keys order like their z-major triples.
+/// positive: ±2^20 on each axis. Keys order like the triples compared x first.
 constexpr std::int64_t kKeyOffset = 1 << 20, kKeyMask = (1 << 21) - 1;
 std::uint64_t coord_key(const openvdb::Coord& c) {
   return static_cast<std::uint64_t>(c.x() + kKeyOffset) << 42 | static_cast<std::uint64_t>(c.y() + kKeyOffset) << 21 |
@@ -237,12 +236,12 @@ constexpr float kSphereBandVoxels = 2;
 /// The union of spheres of radius `sphere_radius` (m) around `centres` as a narrow-band level set:
 /// the values OpenVDB's ParticlesToLevelSet writes (each voxel within R + band of a centre holds
 /// min_j |x − x_j| − R, active; a voxel at a centre's core is inactive inside), computed by gathering
-/// rather than scattering. The (leaf node, sphere) pairs are sorted by leaf, and each leaf is filled
-/// by one thread from the spheres that reach it. There are no per-thread grids to merge, no tree
-/// look-ups per voxel, and per (x, y) row only the voxels inside the sphere are visited. This is about
-/// four times faster than ParticlesToLevelSet, whose per-thread grids and their union were most of
-/// the spherical method's time (issue 4).
-
+/// rather than scattering. Spheres are sorted by the leaf node of their box's lowest corner (their
+/// home), and each leaf is filled by one thread from the spheres of the homes below it, keeping the
+/// smallest squared distance per voxel and taking one square root per voxel at the end. There are
+/// no per-thread grids to merge and no tree look-ups per voxel: about four times faster than
+/// ParticlesToLevelSet, whose per-thread grids and their union were most of the spherical
+/// method's time (issue 4). Throws for a centre beyond the leaf keys' range.
 openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sphere_radius, Real voxel_size) {
   using LeafT = openvdb::FloatTree::LeafNodeType;
   constexpr int kLeafDim = static_cast<int>(LeafT::DIM);
@@ -273,13 +272,13 @@ openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sph
     const openvdb::Coord low = box_of(centre).min();
     return openvdb::Coord(low.x() >> kLeafLog2, low.y() >> kLeafLog2, low.z() >> kLeafLog2);
   };
-  // Spheres sorted by home leaf; each home's spheres in one run.
   for (const Vec3& centre : centres)
     if (!(std::abs(centre.x() * inverse_dx) < max_index && std::abs(centre.y() * inverse_dx) < max_index &&
           std::abs(centre.z() * inverse_dx) < max_index))
       throw Error(fmt::format("surface reconstruction: a particle at ({}, {}, {}) m is not finite or lies beyond the "
                               "grid's reach of {:.3g} m at voxel size {:.3g} m",
                               centre.x(), centre.y(), centre.z(), max_index * dx, dx));
+  // Spheres sorted by home leaf; each home's spheres in one run.
   std::vector<std::pair<std::uint64_t, Index>> by_home(centres.size());
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) by_home[i] = {coord_key(home_of(centres[i])), static_cast<Index>(i)};
@@ -660,8 +659,7 @@ class TiledMesher {
   Result mesh(const openvdb::FloatGrid& grid, double isovalue, bool fill_pockets, double max_cavity_volume) {
     using LeafT = openvdb::FloatTree::LeafNodeType;
     const openvdb::FloatTree& tree = grid.tree();
-    // Tiles near a leaf: its own, and the neighbour whose copy reaches it (a leaf at a tile's face).
-    std::set<std::uint64_t> keys;
+    std::set<std::uint64_t> keys;  // the tiles to mesh or reuse
     // Every tile whose copy (the tile and one leaf-sized block around) holds a block from
     // `low` to `high` (block indices: voxel >> 3).
     auto add_tiles_holding = [&](const openvdb::Coord& low, const openvdb::Coord& high) {
@@ -813,7 +811,7 @@ class TiledMesher {
     std::vector<Index> vertex_piece;
     std::vector<double> piece_six_volume;
   };
-  std::map<std::uint64_t, Tile> tiles_;  // by tile key, from the last call
+  std::map<std::uint64_t, Tile> tiles_;  // by tile key, from the last call (one iso-value and set of settings)
   struct PointBitsHash {
     std::size_t operator()(const std::array<std::uint32_t, 3>& bits) const {
       std::uint64_t h = (static_cast<std::uint64_t>(bits[0]) << 32 | bits[1]) * 0x9E3779B97F4A7C15ull;
