@@ -599,6 +599,38 @@ TEST(SceneMaterials, SurfaceTensionAndAdhesionInNewtonsPerMetre) {
   }
 }
 
+TEST(SceneMaterials, TheContinuumSurfaceForceIsChosenInTheSolverAndHasNoAdhesion) {
+  const std::string csf = replaced(valid_scene(), "<kernel>wendland_c2</kernel>",
+                                   "<kernel>wendland_c2</kernel><surface_tension_model>brackbill1992</surface_tension_model>");
+  const auto scene = load_scene_from_string(csf, "csf.sdf");
+  EXPECT_EQ(scene.solver.surface_tension_model, m3dp::sph::SurfaceTensionModel::csf_brackbill1992);
+  EXPECT_EQ(load_scene_from_string(valid_scene(), "default.sdf").solver.surface_tension_model,
+            m3dp::sph::SurfaceTensionModel::akinci2013);
+  const std::string wetting = replaced(csf, R"(<material name="water">
+        <density>1000</density>
+        <viscosity unit="mPa*s">1</viscosity>
+        <boundary_viscosity unit="cP">2</boundary_viscosity>
+      </material>)", R"(<material name="water" preset="water">
+        <adhesion unit="mN/m">145</adhesion>
+      </material>)");
+  try {
+    load_scene_from_string(wetting, "wetting.sdf");
+    FAIL() << "no error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), "wetting.sdf:");
+    EXPECT_CONTAINS(error.what(), "<adhesion> needs <surface_tension_model>akinci2013</surface_tension_model>");
+  }
+  try {
+    load_scene_from_string(replaced(valid_scene(), "<kernel>wendland_c2</kernel>",
+                                    "<kernel>wendland_c2</kernel><surface_tension_model>csf</surface_tension_model>"),
+                           "typo.sdf");
+    FAIL() << "no error";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), "typo.sdf:");
+    EXPECT_CONTAINS(error.what(), "brackbill1992");
+  }
+}
+
 TEST(SceneMaterials, PresetWithOverrides) {
   const auto scene = load_scene_from_string(with_material(R"(<material name="water" preset="printable_mortar">
         <rheology><yield_stress>800</yield_stress></rheology>

@@ -1128,7 +1128,7 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
                           "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
                           "warm_start", "end_time", "bounds", "viscosity_solver", "max_viscosity_error",
                           "max_viscosity_iterations", "xsph", "rest_detection", "rest_speed", "rest_duration",
-                          "wake_speed", "wake_on_load", "load_wake_duration"});
+                          "wake_speed", "wake_on_load", "load_wake_duration", "surface_tension_model"});
   sph::SolverSettings& settings = scene_.solver;
 
   if (const auto radius =
@@ -1157,6 +1157,13 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
           {{"implicit", sph::ViscositySolver::implicit_weiler2018}, {"explicit", sph::ViscositySolver::explicit_morris1997}},
           "implicit (Weiler et al. 2018, any viscosity), explicit (Morris et al. 1997, water-like fluids)"))
     settings.viscosity_solver = *method;
+  if (const auto model = read_keyword<sph::SurfaceTensionModel>(
+          solver, "surface_tension_model",
+          {{"akinci2013", sph::SurfaceTensionModel::akinci2013},
+           {"brackbill1992", sph::SurfaceTensionModel::csf_brackbill1992}},
+          "akinci2013 (cohesion and adhesion, robust, σ as a scale), brackbill1992 (continuum surface force, "
+          "the physical σ on resolved surfaces, walls wetted at 90°)"))
+    settings.surface_tension_model = *model;
   if (const auto error = read_scalar(solver, "max_viscosity_error", Quantity::fraction, Limits::positive_up_to(0.1),
                                      Presence::optional)) {
     settings.viscosity_tolerance = Real(*error);
@@ -1287,13 +1294,18 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
       material.sticks_to_walls = false;
     }
   }
-  // Akinci et al. 2013: σ against air, and the work of adhesion σ(1 + cos θ) to walls (both N/m).
+  // σ against air, and the work of adhesion σ(1 + cos θ) to walls (both N/m; adhesion with Akinci et al.
+  // 2013's model only).
   if (const auto tension = read_scalar(element, "surface_tension", Quantity::surface_tension, Limits::non_negative(),
                                        Presence::optional))
     material.surface_tension = Real(*tension);
   if (const auto adhesion = read_scalar(element, "adhesion", Quantity::surface_tension, Limits::non_negative(),
-                                        Presence::optional))
+                                        Presence::optional)) {
     material.adhesion = Real(*adhesion);
+    if (material.adhesion > 0 && scene_.solver.surface_tension_model == sph::SurfaceTensionModel::csf_brackbill1992)
+      report(element.child("adhesion"), "<adhesion> needs <surface_tension_model>akinci2013</surface_tension_model>: the "
+                                        "brackbill1992 model wets walls at 90° and has no adhesion");
+  }
   if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular);
   if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material.micropolar);
   if (const pugi::xml_node elasticity = element.child("elasticity")) {

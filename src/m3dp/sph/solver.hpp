@@ -29,6 +29,17 @@ using FluidPhase = material::Material;
 /// Rest volume of every fluid particle (m³): the particle diameter cubed.
 inline Real particle_rest_volume(Real particle_radius) { return 8 * particle_radius * particle_radius * particle_radius; }
 
+/// How surface tension is modelled.
+enum class SurfaceTensionModel {
+  // Akinci et al. 2013 cohesion, curvature and wall adhesion: robust down to single particles and
+  // with any wetting, but σ sets only its scale (a droplet oscillates 2.6–3× too fast).
+  akinci2013,
+  // Continuum surface force (Brackbill et al. 1992) with curvature fitted to the surface: the physical
+  // σ (Rayleigh's droplet within 3 %), for surfaces resolved by ~10 particles per radius of curvature;
+  // walls are wetted at 90° (no adhesion setting).
+  csf_brackbill1992,
+};
+
 /// How viscous forces are integrated.
 enum class ViscositySolver {
   implicit_weiler2018,  // Weiler et al. 2018: stable at any viscosity and time step (conjugate gradients)
@@ -62,6 +73,7 @@ struct SolverSettings {
   Real viscosity_tolerance = Real(1e-2);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
   int max_viscosity_iterations = 300;
   Real xsph_factor = 0;                       // XSPH velocity smoothing ε (Monaghan 1989), 0 = none
+  SurfaceTensionModel surface_tension_model = SurfaceTensionModel::akinci2013;
   // Material at rest costs nothing: a particle of a yield-stress material that has moved slower than
   // rest_speed, below its yield stress, for rest_duration leaves the solve and stays where it is as a
   // fixed neighbour of the material still moving. It wakes when a moving neighbour (fluid faster than
@@ -195,7 +207,19 @@ struct State {
     std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
   } viscosity_system;
   std::vector<Mat3> elastic_stress;  // (n) R σ L of elastic particles this step (Peer et al. 2018)
-  std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij of this step (surface tension only)
+  std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij, or the colour gradient ∇c of the CSF
+  std::vector<std::uint8_t> surface_flag;  // (n) CSF: 1 on the outermost layer of the material
+  std::vector<Real> surface_curvature;     // (n) CSF: κ (1/m) of the surface at or above the particle
+  struct SurfaceLayer {                    // CSF: the outermost layer and its neighbours within the fit radius
+    std::vector<Index> indices;            // fluid indices of the layer's particles
+    std::vector<Vec3> positions;           // their positions, in the same order
+    std::vector<Real> area;                // m², the surface each carries
+    std::vector<Vec3> outward;             // unit outward normal of the surface fitted around each
+    std::vector<Vec3> wall_normal;         // (n) towards the wall next to a layer particle, zero if none
+    std::vector<Vec3> wall_point;          // (n) a point of that wall's geometric surface
+    SpatialHashGrid grid;
+    NeighborLists neighbors;               // per layer particle, fluid indices of layer particles
+  } surface_layer;
 };
 
 /// Factors on the viscosity sums that make them exact on the rest lattice (see calibrated_viscosity()).
@@ -215,10 +239,14 @@ struct ViscosityCalibration {
 struct SurfaceTensionCalibration {
   Real cohesion_per_tension = 0;
   Real adhesion_per_work = 0;
+  Real layer_kernel_sum = 0;  // CSF: d² Σ_j W_fit over a flat layer of the rest lattice (m² · kernel units)
 };
 /// The mean-field surface energy of Akinci's cohesion and adhesion forces on the rest lattice.
 SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Real support_radius, Real fluid_spacing,
                                                      Real wall_spacing, Real boundary_volume_scale);
+/// The CSF's area scale: d² Σ_j W over a flat layer of the rest lattice with the curvature fit's kernel, so
+/// that a layer particle's area is this over its kernel sum. See surface_tension_brackbill1992.cpp.
+Real csf_layer_kernel_sum(KernelType kernel_type, Real support_radius, Real spacing);
 
 /// A granular phase's contact law as the solver uses it (derived once from the material).
 struct GranularContact {
@@ -360,9 +388,11 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
 /// Air drag (Gissler et al. 2017) on the exposed particles, added to state.fluid.acceleration.
 /// `full_neighbourhood`: the neighbour count of a particle inside the material.
 void add_air_drag(const Parameters& parameters, State& state, int full_neighbourhood);
-/// Surface tension and wall adhesion (Akinci et al. 2013), added to state.fluid.acceleration; the
-/// adhesion's reaction goes to the body wrenches.
+/// Surface tension (the settings' model) and wall adhesion (Akinci et al. 2013), added to
+/// state.fluid.acceleration; the adhesion's reaction goes to the body wrenches.
 void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration);
+/// The continuum surface force (Brackbill et al. 1992) of surface_tension_brackbill1992.cpp.
+void add_csf_surface_tension(const Parameters& parameters, State& state, Real layer_kernel_sum);
 /// XSPH (Monaghan 1989): v_i += ε Σ_j V_j (v_j − v_i) W_ij.
 void apply_xsph(const Parameters& parameters, State& state);
 /// Viscosity of a particle pair (Pa·s): the harmonic mean, as for fluxes across layers in series. Where a

@@ -17,8 +17,9 @@
 // surface, a radius in front of the wall layer) off a flat wall layer with the solver's Akinci
 // volumes. The curvature term has no tangential part on flat surfaces and is left out of the mapping.
 // The mapping is a mean field: it sets the scale, it is not validated. On Rayleigh's oscillating droplet
-// (R = 10 mm, 16–20 particles across) the model oscillates about 1.7× too fast and is damped within a
-// period or two, so σ here is an order of magnitude, not a measured surface tension.
+// (R = 10 mm, 16–20 particles across) the model oscillates 2.6–3× too fast and is damped within a
+// period or two, so σ here is an order of magnitude, not a measured surface tension; the continuum
+// surface force (surface_tension_brackbill1992.cpp) is the model that meets the droplet's period.
 // Resting particles (rest detection) attract as neighbours but have no normal; their pairs skip the
 // curvature term.
 #include <tbb/blocked_range.h>
@@ -96,10 +97,46 @@ SurfaceTensionCalibration calibrated_surface_tension(KernelType kernel_type, Rea
 
 namespace stages {
 
-void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
+namespace {
+
+/// Akinci 2013 eq. 7: each particle of an adhering phase is drawn to the wall particles near it.
+void add_wall_adhesion(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
   const bool any = std::any_of(parameters.phases.begin(), parameters.phases.end(),
-                               [](const FluidPhase& phase) { return phase.has_surface_forces(); });
+                               [](const FluidPhase& phase) { return phase.adhesion > 0; });
   if (!any) return;
+  auto& fluid = state.fluid;
+  const auto& boundary = state.boundary;
+  const Real h = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
+  const Real inverse_volume = 1 / particle_rest_volume(parameters.settings.particle_radius);
+  const auto& boundary_lists = state.boundary_neighbors;
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
+    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
+      if (phase_i.adhesion <= 0) continue;
+      const Real rest_density_i = fluid.mass[i] * inverse_volume;
+      const Real beta = calibration.adhesion_per_work * phase_i.adhesion / (rest_density_i * rest_density_i);
+      Vec3 acceleration = Vec3::Zero();
+      const std::size_t boundary_first = i * boundary_lists.stride;
+      for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
+        const Index b = boundary_lists.indices[boundary_first + k];
+        const Vec3 r = fluid.position[i] - boundary.position[b];
+        const Real distance = r.norm();
+        if (distance <= Real(1e-9) * h) continue;
+        const Vec3 a = (-beta * rest_density_i * boundary.volume[b] * adhesion_kernel(distance, h) / distance) * r;
+        acceleration += a;
+        const Vec3 force = -fluid.mass[i] * a;
+        Wrench& wrench = wrenches[boundary.body[b]];
+        wrench.force += force;
+        wrench.torque += (boundary.position[b] - state.bodies[boundary.body[b]].pose.position).cross(force);
+      }
+      fluid.acceleration[i] += acceleration;
+    }
+  });
+}
+
+/// Akinci 2013 eqs. 1, 4, 5: cohesion and curvature between particles of phases with surface tension.
+void add_akinci_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
   const auto& settings = parameters.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
@@ -130,48 +167,43 @@ void add_surface_tension(const Parameters& parameters, State& state, const Surfa
     normal[i] = h * sum;
   }, 512);
 
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
-      const Vec3 position_i = fluid.position[i];
-      const Real density_ratio_i = fluid.density[i] * volume / fluid.mass[i];  // ρ_i/ρ0_i
-      const Real rest_density_i = fluid.mass[i] * inverse_volume;
-      Vec3 acceleration = Vec3::Zero();
-      const std::size_t fluid_first = i * fluid_lists.stride;
-      for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
-        const Index j = fluid_lists.indices[fluid_first + k];
-        const Real tension = Real(0.5) * (phase_i.surface_tension + parameters.phases[fluid.phase[j]].surface_tension);
-        if (tension <= 0) continue;
-        const Real rest_density_j = fluid.mass[j] * inverse_volume;
-        const Real gamma = calibration.cohesion_per_tension * tension / (rest_density_i * rest_density_j);
-        const Vec3 r = position_i - fluid.position[j];
-        const Real distance = r.norm();
-        const Real correction = 2 / (density_ratio_i + fluid.density[j] * volume / fluid.mass[j]);
-        Vec3 pair = Vec3::Zero();
-        if (distance > Real(1e-9) * h) pair -= (fluid.mass[j] * cohesion_kernel(distance, h) / distance) * r;
-        if (j < count) pair -= normal[i] - normal[j];
-        acceleration += (correction * gamma) * pair;
-      }
-      if (phase_i.adhesion > 0) {
-        const Real beta = calibration.adhesion_per_work * phase_i.adhesion / (rest_density_i * rest_density_i);
-        const std::size_t boundary_first = i * boundary_lists.stride;
-        for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
-          const Index b = boundary_lists.indices[boundary_first + k];
-          const Vec3 r = position_i - boundary.position[b];
-          const Real distance = r.norm();
-          if (distance <= Real(1e-9) * h) continue;
-          const Vec3 a = (-beta * rest_density_i * boundary.volume[b] * adhesion_kernel(distance, h) / distance) * r;
-          acceleration += a;
-          const Vec3 force = -fluid.mass[i] * a;
-          Wrench& wrench = wrenches[boundary.body[b]];
-          wrench.force += force;
-          wrench.torque += (boundary.position[b] - state.bodies[boundary.body[b]].pose.position).cross(force);
-        }
-      }
-      fluid.acceleration[i] += acceleration;
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
+    const Vec3 position_i = fluid.position[i];
+    const Real density_ratio_i = fluid.density[i] * volume / fluid.mass[i];  // ρ_i/ρ0_i
+    const Real rest_density_i = fluid.mass[i] * inverse_volume;
+    Vec3 acceleration = Vec3::Zero();
+    const std::size_t fluid_first = i * fluid_lists.stride;
+    for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+      const Index j = fluid_lists.indices[fluid_first + k];
+      const Real tension = Real(0.5) * (phase_i.surface_tension + parameters.phases[fluid.phase[j]].surface_tension);
+      if (tension <= 0) continue;
+      const Real rest_density_j = fluid.mass[j] * inverse_volume;
+      const Real gamma = calibration.cohesion_per_tension * tension / (rest_density_i * rest_density_j);
+      const Vec3 r = position_i - fluid.position[j];
+      const Real distance = r.norm();
+      const Real correction = 2 / (density_ratio_i + fluid.density[j] * volume / fluid.mass[j]);
+      Vec3 pair = Vec3::Zero();
+      if (distance > Real(1e-9) * h) pair -= (fluid.mass[j] * cohesion_kernel(distance, h) / distance) * r;
+      if (j < count) pair -= normal[i] - normal[j];
+      acceleration += (correction * gamma) * pair;
     }
-  });
+    fluid.acceleration[i] += acceleration;
+  }, 128);
+}
+
+}  // namespace
+
+void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
+  const bool any_tension = std::any_of(parameters.phases.begin(), parameters.phases.end(),
+                                       [](const FluidPhase& phase) { return phase.surface_tension > 0; });
+  if (parameters.settings.surface_tension_model == SurfaceTensionModel::csf_brackbill1992) {
+    // No adhesion: the Solver refuses it with this model (walls are wetted at 90°).
+    if (any_tension) add_csf_surface_tension(parameters, state, calibration.layer_kernel_sum);
+    return;
+  }
+  if (any_tension) add_akinci_surface_tension(parameters, state, calibration);
+  add_wall_adhesion(parameters, state, calibration);
 }
 
 }  // namespace stages
