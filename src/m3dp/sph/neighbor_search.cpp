@@ -2,6 +2,7 @@
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <atomic>
@@ -155,6 +156,22 @@ std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z) {
   constexpr std::int64_t offset = 1 << 20;  // cells from −2^20 to 2^20 map to positive 21-bit ints
   return spread_bits_21(static_cast<std::uint64_t>(x + offset)) | spread_bits_21(static_cast<std::uint64_t>(y + offset)) << 1 |
          spread_bits_21(static_cast<std::uint64_t>(z + offset)) << 2;
+}
+
+void sort_by_cell(std::span<const Vec3> positions, std::size_t count, Real cell_size, std::vector<std::uint64_t>& keys,
+                  std::vector<Index>& order) {
+  const Real inverse_cell = Real(1) / cell_size;
+  keys.resize(count);
+  order.resize(count);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const Vec3& p = positions[i];
+    keys[i] = morton_code(static_cast<std::int32_t>(std::floor(p.x() * inverse_cell)),
+                          static_cast<std::int32_t>(std::floor(p.y() * inverse_cell)),
+                          static_cast<std::int32_t>(std::floor(p.z() * inverse_cell)));
+    order[i] = static_cast<Index>(i);
+  }, 2048);
+  tbb::parallel_sort(order.begin(), order.end(),
+                     [&](Index a, Index b) { return keys[a] < keys[b] || (keys[a] == keys[b] && a < b); });
 }
 
 }  // namespace m3dp::sph

@@ -96,6 +96,10 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
 
 /// 63-bit Morton (Z-order) code of a grid cell; used to reorder particles so neighbours sit near in memory.
 std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z);
+/// The first `count` positions in Z-order of cells of size `cell_size`: keys[i] is the Morton code of
+/// point i's cell, order the points sorted by it, ties by index (the same order on every run).
+void sort_by_cell(std::span<const Vec3> positions, std::size_t count, Real cell_size, std::vector<std::uint64_t>& keys,
+                  std::vector<Index>& order);
 
 // ---- template implementation ----
 template <class Visit>

@@ -897,21 +897,7 @@ void Solver::reorder() {
   auto& fluid = state_.fluid;
   const std::size_t count = state_.active_count;
   if (count < 2) return;
-  const Real inverse_cell = Real(1) / support_radius();
-  state_.sort_keys.resize(count);
-  state_.permutation.resize(count);
-  parallel_for_each_index(count, [&](std::size_t i) {
-    const Vec3& p = fluid.position[i];
-    state_.sort_keys[i] = morton_code(static_cast<std::int32_t>(std::floor(p.x() * inverse_cell)),
-                                      static_cast<std::int32_t>(std::floor(p.y() * inverse_cell)),
-                                      static_cast<std::int32_t>(std::floor(p.z() * inverse_cell)));
-    state_.permutation[i] = static_cast<Index>(i);
-  }, 2048);
-  tbb::parallel_sort(state_.permutation.begin(), state_.permutation.end(),
-                     [&](Index a, Index b) {
-                       // Ties broken by index: the order (and so every later sum) is the same on every run.
-                       return state_.sort_keys[a] < state_.sort_keys[b] || (state_.sort_keys[a] == state_.sort_keys[b] && a < b);
-                     });
+  sort_by_cell(fluid.position, count, support_radius(), state_.sort_keys, state_.permutation);
   auto gather = [&](auto& field, auto& scratch) {
     scratch.resize(count);
     parallel_for_each_index(count, [&](std::size_t i) { scratch[i] = field[state_.permutation[i]]; }, 2048);

@@ -205,6 +205,14 @@ struct State {
     std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
     std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
+    // The preconditioner's coarse level: aggregates of particles (cells of a coarse grid) that move
+    // as one (see viscosity_weiler2018.cpp).
+    std::vector<std::uint64_t> aggregate_key;     // (n) coarse cell of each active particle
+    std::vector<Index> aggregate_order;           // (n) active particles grouped by aggregate
+    std::vector<Index> aggregate_start;           // (aggregates + 1) into aggregate_order
+    std::vector<Index> aggregate_of;              // (n) aggregate of each active particle
+    std::vector<double> coarse_residual, coarse_correction;  // (6 × aggregates: translation, rotation)
+    int previous_iterations = 0;                  // CG iterations of the last solve (whether to build the coarse level)
   } viscosity_system;
   std::vector<Mat3> elastic_stress;  // (n) R σ L of elastic particles this step (Peer et al. 2018)
   std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij, or the colour gradient ∇c of the CSF
