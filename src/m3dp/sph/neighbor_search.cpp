@@ -56,8 +56,38 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
   }
   for (std::size_t b = bucket_count; b > 0; --b) bucket_start_[b] = bucket_start_[b - 1];
   bucket_start_[0] = 0;
-  parallel_for_each_index(point_count, [&](std::size_t slot) { sorted_position_[slot] = positions[sorted_index_[slot]]; },
-                          2048);
+  sorted_x_.resize(point_count);
+  sorted_y_.resize(point_count);
+  sorted_z_.resize(point_count);
+  parallel_for_each_index(point_count, [&](std::size_t slot) {
+    const Vec3& position = positions[sorted_index_[slot]];
+    sorted_position_[slot] = position;
+    sorted_x_[slot] = position.x();
+    sorted_y_[slot] = position.y();
+    sorted_z_[slot] = position.z();
+  }, 2048);
+}
+
+void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3>& cell, std::vector<Index>& index,
+                                                std::vector<Real>& x, std::vector<Real>& y, std::vector<Real>& z) const {
+  if (sorted_index_.empty()) return;
+  std::uint32_t buckets[27];
+  const int count = buckets_around_cell(cell, buckets);
+  std::size_t total = 0;
+  for (int k = 0; k < count; ++k) total += bucket_start_[buckets[k] + 1] - bucket_start_[buckets[k]];
+  std::size_t at = index.size();
+  index.resize(at + total);
+  x.resize(at + total);
+  y.resize(at + total);
+  z.resize(at + total);
+  for (int k = 0; k < count; ++k) {
+    const std::uint32_t begin = bucket_start_[buckets[k]], end = bucket_start_[buckets[k] + 1];
+    std::copy(sorted_index_.begin() + begin, sorted_index_.begin() + end, index.begin() + std::ptrdiff_t(at));
+    std::copy(sorted_x_.begin() + begin, sorted_x_.begin() + end, x.begin() + std::ptrdiff_t(at));
+    std::copy(sorted_y_.begin() + begin, sorted_y_.begin() + end, y.begin() + std::ptrdiff_t(at));
+    std::copy(sorted_z_.begin() + begin, sorted_z_.begin() + end, z.begin() + std::ptrdiff_t(at));
+    at += end - begin;
+  }
 }
 
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
@@ -88,14 +118,7 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
           buffer.x.clear();
           buffer.y.clear();
           buffer.z.clear();
-          for (const SpatialHashGrid* each : grids) {
-            each->for_each_point_around_cell(cell, [&](Index j, const Vec3& position_j) {
-              buffer.index.push_back(j);
-              buffer.x.push_back(position_j.x());
-              buffer.y.push_back(position_j.y());
-              buffer.z.push_back(position_j.z());
-            });
-          }
+          for (const SpatialHashGrid* each : grids) each->append_points_around_cell(cell, buffer.index, buffer.x, buffer.y, buffer.z);
           buffer.distance_squared.resize(buffer.index.size());
           buffer.found.resize(buffer.index.size());
           buffer.cell = cell;
@@ -110,12 +133,23 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
           const Real dx = query.x() - x[c], dy = query.y() - y[c], dz = query.z() - z[c];
           distance_squared[c] = dx * dx + dy * dy + dz * dz;
         }
-        // Branch-free compaction: about one candidate in seven is a neighbour, too irregular to predict.
+        // Branch-free compaction: about one candidate in seven is a neighbour, too irregular to predict;
+        // a group of eight without one (about a third) is skipped whole.
         const Index* candidate = buffer.index.data();
         Index* found = buffer.found.data();
         const Index self = exclude_same_index ? static_cast<Index>(i) : std::numeric_limits<Index>::max();
         Index count = 0;
-        for (std::size_t c = 0; c < candidate_count; ++c) {
+        std::size_t c = 0;
+        for (; c + 8 <= candidate_count; c += 8) {
+          bool any = false;
+          for (std::size_t k = 0; k < 8; ++k) any |= distance_squared[c + k] < radius_squared;
+          if (!any) continue;
+          for (std::size_t k = c; k < c + 8; ++k) {
+            found[count] = candidate[k];
+            count += static_cast<Index>((distance_squared[k] < radius_squared) & (candidate[k] != self));
+          }
+        }
+        for (; c < candidate_count; ++c) {
           found[count] = candidate[c];
           count += static_cast<Index>((distance_squared[c] < radius_squared) & (candidate[c] != self));
         }

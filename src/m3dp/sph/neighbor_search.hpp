@@ -56,6 +56,10 @@ class SpatialHashGrid {
   /// Calls visit(point_index, point_position) for every point in the 27 cells around `cell`.
   template <class Visit>
   void for_each_point_around_cell(const std::array<std::int32_t, 3>& cell, Visit&& visit) const;
+  /// Appends the points in the 27 cells around `cell` (indices and coordinates) to the arrays, each
+  /// point once: whole bucket ranges, copied, for the neighbour search's candidate buffers.
+  void append_points_around_cell(const std::array<std::int32_t, 3>& cell, std::vector<Index>& index, std::vector<Real>& x,
+                                 std::vector<Real>& y, std::vector<Real>& z) const;
 
   [[nodiscard]] Real cell_size() const { return cell_size_; }
   [[nodiscard]] std::size_t point_count() const { return sorted_index_.size(); }
@@ -81,6 +85,9 @@ class SpatialHashGrid {
   std::vector<std::uint32_t> point_bucket_;  // per input point
   std::vector<Index> sorted_index_;          // input indices ordered by bucket
   std::vector<Vec3> sorted_position_;        // positions in the same order, for cache-friendly queries
+  std::vector<Real> sorted_x_, sorted_y_, sorted_z_;  // the same, as separate arrays (candidate copies)
+  /// The distinct buckets of the 27 cells around `cell`; returns how many.
+  int buckets_around_cell(const std::array<std::int32_t, 3>& cell, std::uint32_t (&buckets)[27]) const;
 };
 
 /// Fills `out` with, for each query point, the grid points within `radius` (strictly closer).
@@ -102,22 +109,28 @@ void sort_by_cell(std::span<const Vec3> positions, std::size_t count, Real cell_
                   std::vector<Index>& order);
 
 // ---- template implementation ----
-template <class Visit>
-void SpatialHashGrid::for_each_point_around_cell(const std::array<std::int32_t, 3>& cell, Visit&& visit) const {
-  if (sorted_index_.empty()) return;
-  std::uint32_t visited[27];
-  int visited_count = 0;
+inline int SpatialHashGrid::buckets_around_cell(const std::array<std::int32_t, 3>& cell, std::uint32_t (&buckets)[27]) const {
+  int count = 0;
   for (int dz = -1; dz <= 1; ++dz)
     for (int dy = -1; dy <= 1; ++dy)
       for (int dx = -1; dx <= 1; ++dx) {
         const std::uint32_t bucket = bucket_of_cell(cell[0] + dx, cell[1] + dy, cell[2] + dz);
         bool seen = false;
-        for (int k = 0; k < visited_count; ++k) seen |= (visited[k] == bucket);
-        if (seen) continue;
-        visited[visited_count++] = bucket;
-        const std::uint32_t end = bucket_start_[bucket + 1];
-        for (std::uint32_t slot = bucket_start_[bucket]; slot < end; ++slot) visit(sorted_index_[slot], sorted_position_[slot]);
+        for (int k = 0; k < count; ++k) seen |= (buckets[k] == bucket);
+        if (!seen) buckets[count++] = bucket;
       }
+  return count;
+}
+
+template <class Visit>
+void SpatialHashGrid::for_each_point_around_cell(const std::array<std::int32_t, 3>& cell, Visit&& visit) const {
+  if (sorted_index_.empty()) return;
+  std::uint32_t buckets[27];
+  const int count = buckets_around_cell(cell, buckets);
+  for (int k = 0; k < count; ++k) {
+    const std::uint32_t end = bucket_start_[buckets[k] + 1];
+    for (std::uint32_t slot = bucket_start_[buckets[k]]; slot < end; ++slot) visit(sorted_index_[slot], sorted_position_[slot]);
+  }
 }
 
 }  // namespace m3dp::sph
