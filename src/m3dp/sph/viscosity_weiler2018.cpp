@@ -70,7 +70,7 @@ constexpr int kCoarseLevelFromIterations = 12;
 /// the material is particles across to move it as a whole (122 a step in the clay bench). The coarse
 /// level lets each aggregate of particles move as a rigid body: z = D⁻¹ r + P A_c⁻¹ Pᵀ r, with
 /// P_i = [I  −[x_i − c]×] (v_i = t + ω × (x_i − c), c the aggregate's centroid) and A_c = Pᵀ A P,
-/// factorised once per solve (six unknowns per aggregate, a few thousand in all; the sparse
+/// factorised once per solve (six unknowns per aggregate of up to 512 particles; the sparse
 /// factorisation allocates, once per step). Rigid motions are what the viscous term cannot see: a
 /// pair's c r rᵀ (v_i − v_j) vanishes for a common translation and for a common rotation.
 class CoarseLevel {
