@@ -399,6 +399,10 @@ void add_air_drag(const Parameters& parameters, State& state, int full_neighbour
 /// Surface tension (the settings' model) and wall adhesion (Akinci et al. 2013), added to
 /// state.fluid.acceleration; the adhesion's reaction goes to the body wrenches.
 void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration);
+/// The colour gradient ∇c_i = Σ_j V_j ∇W_ij + Σ_b V_b ∇W_ib of particle i (pointing into the material;
+/// walls count as material), from this step's pair gradients, which hold the rest volume. With
+/// `rest_volume` (m³) > 0 each neighbour counts with its current volume m_j/ρ_j instead.
+Vec3 colour_gradient(const State& state, std::size_t i, Real rest_volume = 0);
 /// The continuum surface force (Brackbill et al. 1992) of surface_tension_brackbill1992.cpp.
 void add_csf_surface_tension(const Parameters& parameters, State& state, Real layer_kernel_sum);
 /// XSPH (Monaghan 1989): v_i += ε Σ_j V_j (v_j − v_i) W_ij.

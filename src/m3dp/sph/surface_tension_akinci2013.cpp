@@ -139,33 +139,19 @@ void add_wall_adhesion(const Parameters& parameters, State& state, const Surface
 void add_akinci_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
   const auto& settings = parameters.settings;
   auto& fluid = state.fluid;
-  const auto& boundary = state.boundary;
   const std::size_t count = state.active_count;
   const Real h = settings.support_radius_factor * settings.particle_radius;
   const Real volume = particle_rest_volume(settings.particle_radius);  // every particle's m/ρ0
   const Real inverse_volume = 1 / volume;
   const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
 
-  // Normals n_i = h (Σ_j (m_j/ρ_j) ∇W_ij + Σ_b V_b ∇W_ib), with (m_j/ρ_j) ∇W_ij = (ρ0/ρ_j) × the pair gradient × x_ij.
+  // Normals n_i = h (Σ_j (m_j/ρ_j) ∇W_ij + Σ_b V_b ∇W_ib). Walls count as material here: a face resting
+  // on a wall is no free surface, and the curvature term would push it into the wall (a drop without
+  // adhesion would be kicked off a ceiling).
   auto& normal = state.surface_normal;
   normal.resize(fluid.size());
   std::fill(normal.begin() + static_cast<std::ptrdiff_t>(count), normal.end(), Vec3::Zero());
-  parallel_for_each_index(count, [&](std::size_t i) {
-    Vec3 sum = Vec3::Zero();
-    const std::size_t first = i * fluid_lists.stride;
-    for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
-      const Index j = fluid_lists.indices[first + k];
-      sum += ((fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[first + k]) *
-             (fluid.position[i] - fluid.position[j]);
-    }
-    // Walls count as material here: a face resting on a wall is no free surface, and the curvature
-    // term would push it into the wall (a drop without adhesion would be kicked off a ceiling).
-    const std::size_t boundary_first = i * boundary_lists.stride;
-    for (Index k = 0; k < boundary_lists.counts[i]; ++k)
-      sum += state.boundary_pair_gradient[boundary_first + k] * (fluid.position[i] - boundary.position[boundary_lists.indices[boundary_first + k]]);
-    normal[i] = h * sum;
-  }, 512);
+  parallel_for_each_index(count, [&](std::size_t i) { normal[i] = h * colour_gradient(state, i, volume); }, 512);
 
   parallel_for_each_index(count, [&](std::size_t i) {
     const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
@@ -193,6 +179,26 @@ void add_akinci_surface_tension(const Parameters& parameters, State& state, cons
 }
 
 }  // namespace
+
+Vec3 colour_gradient(const State& state, std::size_t i, Real rest_volume) {
+  const auto& fluid = state.fluid;
+  const auto& fluid_lists = state.fluid_neighbors;
+  const auto& boundary_lists = state.boundary_neighbors;
+  // The pair factor holds V (dW/dr)/r with V the rest volume; m_j/ρ_j = (m_j/(V ρ_j)) V.
+  const Real inverse_volume = rest_volume > 0 ? 1 / rest_volume : Real(0);
+  Vec3 sum = Vec3::Zero();
+  const std::size_t first = i * fluid_lists.stride;
+  for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+    const Index j = fluid_lists.indices[first + k];
+    const Real scale = rest_volume > 0 ? fluid.mass[j] * inverse_volume / fluid.density[j] : Real(1);
+    sum += (scale * state.fluid_pair_gradient[first + k]) * (fluid.position[i] - fluid.position[j]);
+  }
+  const std::size_t boundary_first = i * boundary_lists.stride;
+  for (Index k = 0; k < boundary_lists.counts[i]; ++k)
+    sum += state.boundary_pair_gradient[boundary_first + k] *
+           (fluid.position[i] - state.boundary.position[boundary_lists.indices[boundary_first + k]]);
+  return sum;
+}
 
 void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
   const bool any_tension = std::any_of(parameters.phases.begin(), parameters.phases.end(),

@@ -174,20 +174,7 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
   auto& colour_gradient = state.surface_normal;
   colour_gradient.resize(fluid.size());
   std::fill(colour_gradient.begin() + static_cast<std::ptrdiff_t>(count), colour_gradient.end(), Vec3::Zero());
-  parallel_for_each_index(count, [&](std::size_t i) {
-    Vec3 sum = Vec3::Zero();
-    const std::size_t first = i * fluid_lists.stride;
-    for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
-      const Index j = fluid_lists.indices[first + k];
-      // The stored pair factor is V_j·(dW/dr)/r with V_j = m_j/ρ0: the rest volume for every phase.
-      sum += state.fluid_pair_gradient[first + k] * (fluid.position[i] - fluid.position[j]);
-    }
-    const std::size_t boundary_first = i * boundary_lists.stride;
-    for (Index k = 0; k < boundary_lists.counts[i]; ++k)
-      sum += state.boundary_pair_gradient[boundary_first + k] *
-             (fluid.position[i] - boundary.position[boundary_lists.indices[boundary_first + k]]);
-    colour_gradient[i] = sum;
-  }, 512);
+  parallel_for_each_index(count, [&](std::size_t i) { colour_gradient[i] = stages::colour_gradient(state, i); }, 512);
 
   // The outermost layer.
   auto& outermost = state.surface_flag;
