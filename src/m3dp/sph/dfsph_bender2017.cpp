@@ -32,15 +32,15 @@ constexpr int kMinNeighborsForDivergence = 20;
 
 /// Raw pointers of everything the solver sweeps touch; built once per solve.
 struct SolverView {
-  const Vec3* position;
-  Vec3* velocity;
+  const Vec4* position;  // padded copies (w = 0), see State::solver_position
+  Vec4* velocity;
   const Real* density;
   const Real* mass;
   const Real* factor;
   Real* density_advected;
   Real* kappa;  // m_i κ_i of the current iteration (mass-weighted: see the update)
-  const Vec3* boundary_position;
-  const Vec3* boundary_velocity;
+  const Vec4* boundary_position;
+  const Vec4* boundary_velocity;
   const Index* boundary_body;
   const std::uint16_t* neighbor_count;
   const Index* fluid_neighbor;           // fluid lists, stride fluid_stride
@@ -53,18 +53,34 @@ struct SolverView {
   Index boundary_stride;
 };
 
-SolverView view_of(State& state) {
+Vec4 padded(const Vec3& vector) { return Vec4(vector.x(), vector.y(), vector.z(), Real(0)); }
+
+/// Copies positions and velocities into the padded arrays and returns the view of the solve.
+/// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
+SolverView pack_for_solve(State& state) {
   auto& fluid = state.fluid;
   auto& boundary = state.boundary;
-  return SolverView{fluid.position.data(),
-                    fluid.velocity.data(),
+  state.solver_position.resize(fluid.size());
+  state.solver_velocity.resize(fluid.size());
+  state.solver_boundary_position.resize(boundary.size());
+  state.solver_boundary_velocity.resize(boundary.size());
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) {
+    state.solver_position[i] = padded(fluid.position[i]);
+    state.solver_velocity[i] = padded(fluid.velocity[i]);
+  }, 4096);
+  parallel_for_each_index(boundary.size(), [&](std::size_t b) {
+    state.solver_boundary_position[b] = padded(boundary.position[b]);
+    state.solver_boundary_velocity[b] = padded(boundary.velocity[b]);
+  }, 4096);
+  return SolverView{state.solver_position.data(),
+                    state.solver_velocity.data(),
                     fluid.density.data(),
                     fluid.mass.data(),
                     fluid.dfsph_factor.data(),
                     fluid.density_advected.data(),
                     state.kappa.data(),
-                    boundary.position.data(),
-                    boundary.velocity.data(),
+                    state.solver_boundary_position.data(),
+                    state.solver_boundary_velocity.data(),
                     boundary.body.data(),
                     fluid.neighbor_count.data(),
                     state.fluid_neighbors.indices.data(),
@@ -77,6 +93,13 @@ SolverView view_of(State& state) {
                     state.boundary_neighbors.stride};
 }
 
+/// The solve's velocities back into the particles (only the active ones changed).
+void unpack_velocities(State& state) {
+  parallel_for_each_index(state.active_count, [&](std::size_t i) {
+    state.fluid.velocity[i] = state.solver_velocity[i].head<3>();
+  }, 4096);
+}
+
 Real rest_volume_of(const Parameters& parameters) { return particle_rest_volume(parameters.settings.particle_radius); }
 
 template <class Body>
@@ -84,25 +107,30 @@ void for_each_particle_range(std::size_t count, Body&& body) {
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), body);
 }
 
+/// Σ_k w_k (v_i − v_j) ⊙ (x_i − x_j), j = neighbor[k], lane by lane: the lanes' sum is Σ_k w_k (v_i − v_j)·(x_i − x_j).
+Vec4 velocity_position_products(const Vec4* velocity, const Vec4* position, const Index* neighbor, const Real* weight,
+                                Index count, const Vec4& velocity_i, const Vec4& position_i) {
+  Vec4 sum = Vec4::Zero();  // no horizontal add per neighbour
+  for (Index k = 0; k < count; ++k) {
+    const Index j = neighbor[k];
+    sum += weight[k] * (velocity_i - velocity[j]).cwiseProduct(position_i - position[j]);
+  }
+  return sum;
+}
+
 /// Σ_j V_j (v_i − v_j)·∇W_ij + Σ_b V_b (v_i − v_b)·∇W_ib: the rate of change of ρ_i/ρ0 (1/s), with minus sign.
 Real density_change_rate(const SolverView& view, std::size_t i) {
-  const Vec3 position_i = view.position[i];
-  const Vec3 velocity_i = view.velocity[i];
-  Real rate = 0;
+  const Vec4 position_i = view.position[i];
+  const Vec4 velocity_i = view.velocity[i];
   const std::size_t fluid_first = i * view.fluid_stride;
-  const Index fluid_count = view.fluid_neighbor_count[i];
-  for (Index k = 0; k < fluid_count; ++k) {
-    const Index j = view.fluid_neighbor[fluid_first + k];
-    rate += view.fluid_pair_gradient[fluid_first + k] * (velocity_i - view.velocity[j]).dot(position_i - view.position[j]);
-  }
   const std::size_t boundary_first = i * view.boundary_stride;
-  const Index boundary_count = view.boundary_neighbor_count[i];
-  for (Index k = 0; k < boundary_count; ++k) {
-    const Index b = view.boundary_neighbor[boundary_first + k];
-    rate += view.boundary_pair_gradient[boundary_first + k] *
-            (velocity_i - view.boundary_velocity[b]).dot(position_i - view.boundary_position[b]);
-  }
-  return rate;
+  const Vec4 rate = velocity_position_products(view.velocity, view.position, view.fluid_neighbor + fluid_first,
+                                               view.fluid_pair_gradient + fluid_first, view.fluid_neighbor_count[i], velocity_i,
+                                               position_i) +
+                    velocity_position_products(view.boundary_velocity, view.boundary_position, view.boundary_neighbor + boundary_first,
+                                               view.boundary_pair_gradient + boundary_first, view.boundary_neighbor_count[i],
+                                               velocity_i, position_i);
+  return rate.sum();
 }
 
 /// One pressure velocity update with the m κ in view.kappa; adds the reaction on the bodies.
@@ -111,8 +139,8 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
     std::vector<Wrench>& wrenches = thread_body_wrenches(state);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Real weighted_kappa_i = view.kappa[i];  // m_i κ_i
-      const Vec3 position_i = view.position[i];
-      Vec3 momentum_change = Vec3::Zero();  // per Δt: m_i Δv_i / Δt
+      const Vec4 position_i = view.position[i];
+      Vec4 momentum_change = Vec4::Zero();  // per Δt: m_i Δv_i / Δt (w stays 0)
       const std::size_t fluid_first = i * view.fluid_stride;
       const Index fluid_count = view.fluid_neighbor_count[i];
       for (Index k = 0; k < fluid_count; ++k) {
@@ -124,14 +152,14 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
         const Index boundary_count = view.boundary_neighbor_count[i];
         for (Index k = 0; k < boundary_count; ++k) {
           const Index b = view.boundary_neighbor[boundary_first + k];
-          const Vec3 boundary_position = view.boundary_position[b];
-          const Vec3 change = -(weighted_kappa_i * view.boundary_pair_gradient[boundary_first + k]) * (position_i - boundary_position);
+          const Vec4 change = -(weighted_kappa_i * view.boundary_pair_gradient[boundary_first + k]) * (position_i - view.boundary_position[b]);
           momentum_change += change;
           // Reaction on the body: −m_i Δv_i / Δt.
-          const Vec3 force = -change;
-          Wrench& wrench = wrenches[view.boundary_body[b]];
+          const Vec3 force = -change.head<3>();
+          const Index body = view.boundary_body[b];
+          Wrench& wrench = wrenches[body];
           wrench.force += force;
-          wrench.torque += (boundary_position - state.bodies[view.boundary_body[b]].pose.position).cross(force);
+          wrench.torque += (state.boundary.position[b] - state.bodies[body].pose.position).cross(force);
         }
       }
       view.velocity[i] += (time_step / view.mass[i]) * momentum_change;
@@ -220,7 +248,7 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
   const auto& settings = parameters.settings;
   const std::size_t count = state.active_count;
   if (count == 0) return 0;
-  const SolverView view = view_of(state);
+  const SolverView view = pack_for_solve(state);
   const Real inverse_time_step = Real(1) / time_step;
   // Σ κ over this step's updates: a pressure (κ = ρ0 p / ρ²), so it carries over when Δt changes.
   auto& kappa_total = state.fluid.kappa_divergence;
@@ -266,6 +294,7 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
       mean_error = update_divergence() / Real(count) * time_step;
       ++iterations;
     }
+    unpack_velocities(state);
     return iterations;
   }
 }
@@ -275,7 +304,7 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
   const std::size_t count = state.active_count;
   mean_density_error = 0;
   if (count == 0) return 0;
-  const SolverView view = view_of(state);
+  const SolverView view = pack_for_solve(state);
   const Real inverse_time_step_squared = Real(1) / (time_step * time_step);
   auto& kappa_total = state.fluid.kappa_density;  // Σ κ over this step's updates (a pressure, see above)
   const Real volume = rest_volume_of(parameters);
@@ -324,6 +353,7 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
       mean_density_error = update_predicted_density() / Real(count);
       ++iterations;
     }
+    unpack_velocities(state);
     return iterations;
   }
 }

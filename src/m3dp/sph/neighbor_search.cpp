@@ -91,13 +91,13 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
 }
 
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
-                    bool exclude_same_index, NeighborLists& out, bool sort_lists) {
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists, std::span<const Index> query_order) {
   const SpatialHashGrid* grids[] = {&grid};
-  find_neighbors(grids, query_positions, radius, exclude_same_index, out, sort_lists);
+  find_neighbors(grids, query_positions, radius, exclude_same_index, out, sort_lists, query_order);
 }
 
 void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<const Vec3> query_positions, Real radius,
-                    bool exclude_same_index, NeighborLists& out, bool sort_lists) {
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists, std::span<const Index> query_order) {
   const SpatialHashGrid& grid = *grids.front();
   const std::size_t query_count = query_positions.size();
   const Real radius_squared = radius * radius;
@@ -107,10 +107,13 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
     if (out.indices.size() < needed) out.indices.resize(needed);
     std::atomic<Index> most_needed{0};
     const Index stride = out.stride;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, query_count, 64), [&](const tbb::blocked_range<std::size_t>& range) {
+    const std::size_t order_count = query_order.empty() ? query_count : query_order.size();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_count, 64), [&](const tbb::blocked_range<std::size_t>& range) {
       NeighborLists::CandidateBuffer& buffer = out.candidate_buffers.local();
       buffer.valid = false;  // the grid may have changed since this thread's last search
-      for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      for (std::size_t at = range.begin(); at != range.end(); ++at) {
+        const std::size_t i = query_order.empty() ? at : query_order[at];
+        if (i >= query_count) continue;
         const Vec3 query = query_positions[i];
         const auto cell = grid.cell_of(query);
         if (!buffer.valid || cell != buffer.cell) {

@@ -63,6 +63,8 @@ class SpatialHashGrid {
 
   [[nodiscard]] Real cell_size() const { return cell_size_; }
   [[nodiscard]] std::size_t point_count() const { return sorted_index_.size(); }
+  /// The points' indices in grid order: the points of one cell come together.
+  [[nodiscard]] std::span<const Index> points_in_grid_order() const { return sorted_index_; }
   [[nodiscard]] std::array<std::int32_t, 3> cell_of(const Vec3& point) const {
     return {static_cast<std::int32_t>(std::floor(point.x() * inverse_cell_size_)),
             static_cast<std::int32_t>(std::floor(point.y() * inverse_cell_size_)),
@@ -94,12 +96,17 @@ class SpatialHashGrid {
 /// With `exclude_same_index` the point with the query's own index is skipped (fluid–fluid lists).
 /// With `sort_lists` each list is in index order (memory order for the solver's sweeps); without,
 /// in grid order, which is as deterministic and cheaper for users that only sum over the list.
+/// `query_order`, if given, is the order in which the queries are answered (every query index once;
+/// larger indices are skipped): queries of one cell that come together share one gather of the 27
+/// cells' points, e.g. the query points' own grid order. The lists are the same in any order.
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
-                    bool exclude_same_index, NeighborLists& out, bool sort_lists = true);
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists = true,
+                    std::span<const Index> query_order = {});
 /// Same over the points of several grids of one point set (same cell size), e.g. static and moving
 /// boundary particles: each list holds the neighbours from every grid.
 void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<const Vec3> query_positions, Real radius,
-                    bool exclude_same_index, NeighborLists& out, bool sort_lists = true);
+                    bool exclude_same_index, NeighborLists& out, bool sort_lists = true,
+                    std::span<const Index> query_order = {});
 
 /// 63-bit Morton (Z-order) code of a grid cell; used to reorder particles so neighbours sit near in memory.
 std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z);

@@ -462,6 +462,8 @@ void Solver::wake_loaded_rest() {
 void Solver::reserve(std::size_t capacity) {
   state_.fluid.reserve(capacity);
   state_.kappa.reserve(capacity);
+  state_.solver_position.reserve(capacity);
+  state_.solver_velocity.reserve(capacity);
   state_.sort_keys.reserve(capacity);
   state_.permutation.reserve(capacity);
   state_.scratch_vec3.reserve(capacity);
@@ -920,9 +922,12 @@ void Solver::search_neighbors() {
   // step in the 47k dam break and made the solver's sweeps no faster.
   state_.fluid_grid.build(state_.fluid.position, support);
   const std::span<const Vec3> active(state_.fluid.position.data(), state_.active_count);
-  find_neighbors(state_.fluid_grid, active, support, true, state_.fluid_neighbors, false);
+  // Queries in the fluid grid's order: a cell's particles come together and share one candidate gather
+  // (in index order they drift apart between reorderings).
+  const std::span<const Index> query_order = state_.fluid_grid.points_in_grid_order();
+  find_neighbors(state_.fluid_grid, active, support, true, state_.fluid_neighbors, false, query_order);
   const SpatialHashGrid* boundary_grids[] = {&state_.static_boundary_grid, &state_.moving_boundary_grid};
-  find_neighbors(boundary_grids, active, support, false, state_.boundary_neighbors, false);
+  find_neighbors(boundary_grids, active, support, false, state_.boundary_neighbors, false, query_order);
 }
 
 void Solver::keep_out_of_boundaries() {
