@@ -53,8 +53,6 @@ struct SolverView {
   Index boundary_stride;
 };
 
-Vec4 padded(const Vec3& vector) { return Vec4(vector.x(), vector.y(), vector.z(), Real(0)); }
-
 /// Copies positions and velocities into the padded arrays and returns the view of the solve.
 /// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
 SolverView pack_for_solve(State& state) {

@@ -209,6 +209,9 @@ struct State {
     std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
     std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
+    // The vector that A multiplies (the start velocity, then each CG direction), padded to Vec4 for the
+    // product's sweep as the pressure solves' copies (State::solver_position holds the positions).
+    std::vector<Vec4> padded_operand;
     // The preconditioner's coarse level: aggregates of particles (cells of a coarse grid) that move
     // as one (see viscosity_weiler2018.cpp).
     std::vector<std::uint64_t> aggregate_key;     // (n) coarse cell of each active particle

@@ -313,6 +313,10 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     vector->resize(fluid.size());
   // A.x reads x at every neighbour: resting particles are fixed (zero velocity), so zero in the direction.
   std::fill(system.direction.begin() + static_cast<std::ptrdiff_t>(count), system.direction.end(), Vec3::Zero());
+  system.padded_operand.resize(fluid.size());
+  std::fill(system.padded_operand.begin() + static_cast<std::ptrdiff_t>(count), system.padded_operand.end(), Vec4::Zero());
+  state.solver_position.resize(fluid.size());
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_position[i] = padded(fluid.position[i]); }, 4096);
   system.inverse_diagonal.resize(count);
 
   // Coefficients, preconditioner and right-hand side (positions do not move during the solve).
@@ -355,27 +359,33 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     // pressure-driven spreading every step, so this guess is close and CG needs far fewer iterations.
     system.start_velocity[i] = fluid.velocity[i];
     fluid.velocity[i] += fluid.viscous_change[i];
+    system.padded_operand[i] = padded(fluid.velocity[i]);
   }, 128);
 
-  // y = A x for particle i.
-  auto multiply_row = [&](const std::vector<Vec3>& x, std::size_t i) {
-    const Vec3 position_i = fluid.position[i];
-    const Vec3 x_i = x[i];
-    Vec3 result = fluid.mass[i] * x_i;
+  // y = A x for particle i, x in system.padded_operand (padded: one SIMD load and operation per neighbour).
+  const Vec4* padded_position = state.solver_position.data();
+  const Vec4* padded_operand = system.padded_operand.data();
+  auto multiply_row = [&](std::size_t i) {
+    const Vec4 position_i = padded_position[i];
+    const Vec4 x_i = padded_operand[i];
+    Vec4 result = fluid.mass[i] * x_i;
     const std::size_t fluid_first = i * fluid_lists.stride;
+    const Index* neighbor = fluid_lists.indices.data() + fluid_first;
+    const Real* coefficient = system.fluid_pair_coefficient.data() + fluid_first;
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
-      const Index j = fluid_lists.indices[fluid_first + k];
-      const Vec3 r = position_i - fluid.position[j];
-      result += (system.fluid_pair_coefficient[fluid_first + k] * r.dot(x_i - x[j])) * r;
+      const Index j = neighbor[k];
+      const Vec4 r = position_i - padded_position[j];
+      result += (coefficient[k] * r.dot(x_i - padded_operand[j])) * r;
     }
+    Vec3 product = result.head<3>();
     const std::size_t boundary_first = i * boundary_lists.stride;
     for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
-      const Real coefficient = system.boundary_pair_coefficient[boundary_first + k];
-      if (coefficient == 0) continue;
-      const Vec3 r = position_i - boundary.position[boundary_lists.indices[boundary_first + k]];
-      result += (coefficient * r.dot(x_i)) * r;
+      const Real boundary_coefficient = system.boundary_pair_coefficient[boundary_first + k];
+      if (boundary_coefficient == 0) continue;
+      const Vec3 r = fluid.position[i] - boundary.position[boundary_lists.indices[boundary_first + k]];
+      product += (boundary_coefficient * r.dot(x_i.head<3>())) * r;
     }
-    return result;
+    return product;
   };
 
   // The coarse level (see CoarseLevel): A's diagonal block of particle i and the block c r rᵀ of a pair.
@@ -398,13 +408,16 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   // four sweeps: A p with p·Ap, the update with r·r, the preconditioner with r·z, and the new direction.
   auto& velocity = fluid.velocity;
   const auto start = deterministic_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
-    const Vec3 residual = system.rhs[i] - multiply_row(velocity, i);
+    const Vec3 residual = system.rhs[i] - multiply_row(i);
     system.residual[i] = residual;
     sums[0] += double(system.rhs[i].squaredNorm());
     sums[1] += double(residual.squaredNorm());
   });
   double residual_dot = precondition();
-  parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i]; }, 1024);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    system.direction[i] = system.preconditioned[i];
+    system.padded_operand[i] = padded(system.direction[i]);
+  }, 1024);
   double residual_norm = std::sqrt(start[1]);
   // Relative to the momentum ‖b‖, not to the first residual: the first residual is mostly the rough,
   // particle-scale part of the change, which CG removes first; the smooth part (a stiff paste spreading
@@ -414,7 +427,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   int iterations = 0;
   while (residual_norm > tolerance && iterations < settings.max_viscosity_iterations) {
     const double curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-      system.product[i] = multiply_row(system.direction, i);
+      system.product[i] = multiply_row(i);
       sums[0] += double(system.direction[i].dot(system.product[i]));
     })[0];
     if (!(curvature > 0)) break;
@@ -428,7 +441,10 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const double next_residual_dot = precondition();
     const Real beta = static_cast<Real>(next_residual_dot / residual_dot);
     residual_dot = next_residual_dot;
-    parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i] + beta * system.direction[i]; }, 1024);
+    parallel_for_each_index(count, [&](std::size_t i) {
+      system.direction[i] = system.preconditioned[i] + beta * system.direction[i];
+      system.padded_operand[i] = padded(system.direction[i]);
+    }, 1024);
     ++iterations;
   }
 
