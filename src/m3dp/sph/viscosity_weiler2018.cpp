@@ -179,7 +179,10 @@ class CoarseLevel {
       Eigen::Matrix<double, 6, 1> sum = Eigen::Matrix<double, 6, 1>::Zero();
       for (Index k = system.aggregate_start[aggregate]; k < system.aggregate_start[aggregate + 1]; ++k) {
         const Index i = system.aggregate_order[k];
-        sum.noalias() += basis(fluid.position[i], aggregate).transpose() * residual[i].cast<double>();
+        // P_iᵀ r = (r, (x_i − c) × r).
+        const Eigen::Vector3d r = residual[i].cast<double>();
+        sum.head<3>() += r;
+        sum.tail<3>() += (fluid.position[i].cast<double>() - centroid_[aggregate]).cross(r);
       }
       for (int row = 0; row < 6; ++row) system.coarse_residual[6 * aggregate + row] = sum[row];
     }, 16);
@@ -192,8 +195,9 @@ class CoarseLevel {
   [[nodiscard]] Vec3 correction(const State& state, std::size_t i) const {
     const auto& system = state.viscosity_system;
     const std::size_t aggregate = system.aggregate_of[i];
-    const Eigen::Map<const Eigen::Matrix<double, 6, 1>> motion(system.coarse_correction.data() + 6 * aggregate);
-    return (basis(state.fluid.position[i], aggregate) * motion).cast<Real>();
+    const double* motion = system.coarse_correction.data() + 6 * aggregate;  // t, then ω
+    const Eigen::Vector3d translation(motion[0], motion[1], motion[2]), rotation(motion[3], motion[4], motion[5]);
+    return (translation + rotation.cross(state.fluid.position[i].cast<double>() - centroid_[aggregate])).cast<Real>();
   }
 
  private:
