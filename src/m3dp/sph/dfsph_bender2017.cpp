@@ -208,9 +208,9 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
                                  const Index j = fluid_lists.indices[fluid_first + k];
                                  const Vec3 r = position_i - fluid.position[j];
-                                 const Real distance = r.norm();
-                                 density_ratio += volume * kernel.W(distance);
-                                 const Real pair_gradient = volume * kernel.gradient_factor(distance);
+                                 const auto [value, gradient_factor] = kernel.value_and_gradient_factor(r.norm());
+                                 density_ratio += volume * value;
+                                 const Real pair_gradient = volume * gradient_factor;
                                  state.fluid_pair_gradient[fluid_first + k] = pair_gradient;
                                  const Vec3 gradient = pair_gradient * r;
                                  gradient_sum += gradient;
@@ -220,9 +220,9 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
                                  const Index b = boundary_lists.indices[boundary_first + k];
                                  const Vec3 r = position_i - boundary.position[b];
-                                 const Real distance = r.norm();
-                                 density_ratio += boundary.volume[b] * kernel.W(distance);
-                                 const Real pair_gradient = boundary.volume[b] * kernel.gradient_factor(distance);
+                                 const auto [value, gradient_factor] = kernel.value_and_gradient_factor(r.norm());
+                                 density_ratio += boundary.volume[b] * value;
+                                 const Real pair_gradient = boundary.volume[b] * gradient_factor;
                                  state.boundary_pair_gradient[boundary_first + k] = pair_gradient;
                                  gradient_sum += pair_gradient * r;
                                }

@@ -9,6 +9,12 @@ namespace m3dp::sph {
 
 enum class KernelType { cubic_spline, wendland_c2 };
 
+/// W(r) and (dW/dr)/r of one distance.
+struct KernelValueAndGradient {
+  Real value;
+  Real gradient_factor;
+};
+
 /// Cubic B-spline (Monaghan 1992) on compact support [0, h].
 struct CubicSplineKernel {
   Real support_radius;
@@ -41,6 +47,22 @@ struct CubicSplineKernel {
 
   /// ∇_i W(x_i − x_j) for r = x_i − x_j.
   [[nodiscard]] Vec3 gradW(const Vec3& r) const { return gradient_factor(r.norm()) * r; }
+
+  /// W and gradient_factor together, as the density pass needs both for every pair: one q, and both
+  /// pieces of the spline evaluated and selected rather than branched on (which side of q = 1/2 a
+  /// neighbour lies is too irregular to predict).
+  [[nodiscard]] KernelValueAndGradient value_and_gradient_factor(Real distance) const {
+    const Real inverse_support = Real(1) / support_radius;
+    const Real q = distance * inverse_support;
+    const Real one_minus_q = Real(1) - q;
+    const bool inner = q <= Real(0.5);
+    const Real value = inner ? value_coefficient * (Real(6) * q * q * q - Real(6) * q * q + Real(1))
+                             : value_coefficient * Real(2) * one_minus_q * one_minus_q * one_minus_q;
+    const Real gradient = inner ? gradient_coefficient * (Real(3) * q - Real(2)) * inverse_support * inverse_support
+                                : -gradient_coefficient * one_minus_q * one_minus_q * inverse_support / distance;
+    if (q > Real(1)) return {0, 0};
+    return {value, gradient};
+  }
 };
 
 /// Wendland C2 (Wendland 1995; Dehnen & Aly 2012): smoother, no pairing instability.
@@ -71,6 +93,7 @@ struct WendlandC2Kernel {
     return gradient_coefficient * one_minus_q * one_minus_q * one_minus_q;
   }
   [[nodiscard]] Vec3 gradW(const Vec3& r) const { return gradient_factor(r.norm()) * r; }
+  [[nodiscard]] KernelValueAndGradient value_and_gradient_factor(Real distance) const { return {W(distance), gradient_factor(distance)}; }
 };
 
 /// Calls `body(kernel)` with the concrete kernel type, so per-pair code is inlined (no per-pair dispatch).
