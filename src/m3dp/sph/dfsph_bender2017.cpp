@@ -19,6 +19,7 @@
 #include <cmath>
 
 #include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/neighbor_sums_avx2.hpp"
 #include "m3dp/sph/solver.hpp"
 
 namespace m3dp::sph::stages {
@@ -108,6 +109,9 @@ void for_each_particle_range(std::size_t count, Body&& body) {
 /// Σ_k w_k (v_i − v_j) ⊙ (x_i − x_j), j = neighbor[k], lane by lane: the lanes' sum is Σ_k w_k (v_i − v_j)·(x_i − x_j).
 Vec4 velocity_position_products(const Vec4* velocity, const Vec4* position, const Index* neighbor, const Real* weight,
                                 Index count, const Vec4& velocity_i, const Vec4& position_i) {
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  if (avx2::available()) return avx2::difference_products(velocity, position, neighbor, weight, count, velocity_i, position_i);
+#endif
   Vec4 sum = Vec4::Zero();  // no horizontal add per neighbour
   for (Index k = 0; k < count; ++k) {
     const Index j = neighbor[k];

@@ -12,9 +12,7 @@
 
 #include "m3dp/core/parallel.hpp"
 
-#if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__))
-#include <immintrin.h>
-#endif
+#include "m3dp/sph/neighbor_sums_avx2.hpp"  // avx2::available() and the intrinsics
 
 namespace m3dp::sph {
 
@@ -57,8 +55,7 @@ Index keep_candidates_within_generic(NeighborLists::CandidateBuffer& buffer, con
   return count;
 }
 
-#if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__)) && !defined(M3DP_USE_DOUBLE)
-#define M3DP_NEIGHBOR_SEARCH_AVX2 1
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
 // For each 8-bit mask, the positions of its set bits, packed to the front (one byte each): the
 // permutation that moves a group's neighbours together.
 constexpr std::array<std::uint64_t, 256> make_pack_table() {
@@ -114,9 +111,8 @@ __attribute__((target("avx2,popcnt"))) Index keep_candidates_within_avx2(Neighbo
 #endif
 
 Index keep_candidates_within(NeighborLists::CandidateBuffer& buffer, const Vec3& query, Real radius_squared, Index self) {
-#ifdef M3DP_NEIGHBOR_SEARCH_AVX2
-  static const bool avx2 = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
-  if (avx2) return keep_candidates_within_avx2(buffer, query, radius_squared, self);
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  if (avx2::available()) return keep_candidates_within_avx2(buffer, query, radius_squared, self);
 #endif
   return keep_candidates_within_generic(buffer, query, radius_squared, self);
 }

@@ -25,6 +25,7 @@
 #include <array>
 
 #include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/neighbor_sums_avx2.hpp"
 #include "m3dp/sph/solver.hpp"
 
 namespace m3dp::sph::stages {
@@ -376,6 +377,11 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const std::size_t fluid_first = i * fluid_lists.stride;
     const Index* neighbor = fluid_lists.indices.data() + fluid_first;
     const Real* coefficient = system.fluid_pair_coefficient.data() + fluid_first;
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+    if (avx2::available()) {
+      result += avx2::projections(padded_position, padded_operand, neighbor, coefficient, fluid_lists.counts[i], position_i, x_i);
+    } else
+#endif
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = neighbor[k];
       const Vec4 r = position_i - padded_position[j];
