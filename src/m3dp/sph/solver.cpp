@@ -478,6 +478,7 @@ void Solver::reserve(std::size_t capacity) {
   system.fluid_pair_coefficient.reserve(capacity * state_.fluid_neighbors.stride);
   system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);
   system.inverse_diagonal.reserve(capacity);
+  system.own_block.reserve(capacity);
   state_.surface_normal.reserve(capacity);
   state_.surface_flag.reserve(capacity);
   state_.surface_curvature.reserve(capacity);

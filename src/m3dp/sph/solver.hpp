@@ -208,6 +208,7 @@ struct State {
     std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)
     std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
+    std::vector<Mat3> own_block;                  // (n) m_i I + the walls' Σ_b c_ib r rᵀ: A's part that acts on x_i alone (kg)
     std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
     // The vector that A multiplies (the start velocity, then each CG direction), padded to Vec4 for the
     // product's sweep as the pressure solves' copies (State::solver_position holds the positions).

@@ -323,6 +323,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   state.solver_position.resize(fluid.size());
   parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_position[i] = padded(fluid.position[i]); }, 4096);
   system.inverse_diagonal.resize(count);
+  system.own_block.resize(count);
 
   // Coefficients, preconditioner and right-hand side (positions do not move during the solve).
   parallel_for_each_index(count, [&](std::size_t i) {
@@ -331,8 +332,9 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const Real mass_i = fluid.mass[i];
     const Real volume_i = mass_i / fluid.density[i];
     const Real mu_i = fluid.viscosity[i];
-    Mat3 diagonal = mass_i * Mat3::Identity();
+    Mat3 own_block = mass_i * Mat3::Identity();  // the mass and the walls' coupling
     Vec3 rhs = mass_i * fluid.velocity[i];
+    Mat3 fluid_coupling = Mat3::Zero();
     const std::size_t fluid_first = i * fluid_lists.stride;
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = fluid_lists.indices[fluid_first + k];
@@ -343,7 +345,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
                                (fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k] /
                                (r.squaredNorm() + regularisation);
       system.fluid_pair_coefficient[fluid_first + k] = coefficient;
-      diagonal += coefficient * r * r.transpose();
+      fluid_coupling += coefficient * r * r.transpose();
     }
     const std::size_t boundary_first = i * boundary_lists.stride;
     for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
@@ -353,12 +355,13 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
         const Vec3 r = position_i - boundary.position[b];
         coefficient = -time_step * kDimensionFactor * calibration.boundary * phase.wall_viscosity(mu_i) * volume_i *
                       state.boundary_pair_gradient[boundary_first + k] / (r.squaredNorm() + regularisation);
-        diagonal += coefficient * r * r.transpose();
+        own_block += coefficient * r * r.transpose();
         rhs += (coefficient * r.dot(boundary.velocity[b])) * r;
       }
       system.boundary_pair_coefficient[boundary_first + k] = coefficient;
     }
-    system.inverse_diagonal[i] = diagonal.inverse();
+    system.own_block[i] = own_block;
+    system.inverse_diagonal[i] = (own_block + fluid_coupling).inverse();
     system.rhs[i] = rhs;
     // Warm start: v* plus last step's viscous change. A stiff paste's viscosity undoes nearly the same
     // pressure-driven spreading every step, so this guess is close and CG needs far fewer iterations.
@@ -373,7 +376,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   auto multiply_row = [&](std::size_t i) {
     const Vec4 position_i = padded_position[i];
     const Vec4 x_i = padded_operand[i];
-    Vec4 result = fluid.mass[i] * x_i;
+    Vec4 result = Vec4::Zero();
     const std::size_t fluid_first = i * fluid_lists.stride;
     const Index* neighbor = fluid_lists.indices.data() + fluid_first;
     const Real* coefficient = system.fluid_pair_coefficient.data() + fluid_first;
@@ -387,15 +390,8 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
       const Vec4 r = position_i - padded_position[j];
       result += (coefficient[k] * r.dot(x_i - padded_operand[j])) * r;
     }
-    Vec3 product = result.head<3>();
-    const std::size_t boundary_first = i * boundary_lists.stride;
-    for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
-      const Real boundary_coefficient = system.boundary_pair_coefficient[boundary_first + k];
-      if (boundary_coefficient == 0) continue;
-      const Vec3 r = fluid.position[i] - boundary.position[boundary_lists.indices[boundary_first + k]];
-      product += (boundary_coefficient * r.dot(x_i.head<3>())) * r;
-    }
-    return product;
+    // The walls' pairs (fixed velocities, on the right-hand side) leave c r rᵀ x_i, summed in own_block.
+    return Vec3(result.head<3>() + system.own_block[i] * x_i.head<3>());
   };
 
   // The coarse level (see CoarseLevel): A's diagonal block of particle i and the block c r rᵀ of a pair.
