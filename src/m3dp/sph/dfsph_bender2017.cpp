@@ -40,9 +40,7 @@ struct SolverView {
   const Real* factor;
   Real* density_advected;
   Real* kappa;  // m_i κ_i of the current iteration (mass-weighted: see the update)
-  const Vec4* boundary_position;
-  const Vec4* boundary_velocity;
-  const Index* boundary_body;
+  const State::WallSums* wall_sums;
   const std::uint16_t* neighbor_count;
   const Index* fluid_neighbor;           // fluid lists, stride fluid_stride
   const Index* fluid_neighbor_count;
@@ -59,18 +57,28 @@ struct SolverView {
 SolverView pack_for_solve(State& state) {
   auto& fluid = state.fluid;
   auto& boundary = state.boundary;
+  const auto& lists = state.boundary_neighbors;
   state.solver_position.resize(fluid.size());
   state.solver_velocity.resize(fluid.size());
-  state.solver_boundary_position.resize(boundary.size());
-  state.solver_boundary_velocity.resize(boundary.size());
+  state.solver_wall_sums.resize(fluid.size());
   parallel_for_each_index(fluid.size(), [&](std::size_t i) {
     state.solver_position[i] = padded(fluid.position[i]);
     state.solver_velocity[i] = padded(fluid.velocity[i]);
   }, 4096);
-  parallel_for_each_index(boundary.size(), [&](std::size_t b) {
-    state.solver_boundary_position[b] = padded(boundary.position[b]);
-    state.solver_boundary_velocity[b] = padded(boundary.velocity[b]);
-  }, 4096);
+  parallel_for_each_index(state.active_count, [&](std::size_t i) {
+    State::WallSums sums{Vec4::Zero(), Vec3::Zero(), Real(0), State::kSeveralBodies};
+    const std::size_t first = i * lists.stride;
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index b = lists.indices[first + k];
+      const Vec3 gradient = state.boundary_pair_gradient[first + k] * (fluid.position[i] - boundary.position[b]);
+      const Index body = boundary.body[b];
+      sums.gradient.head<3>() += gradient;
+      sums.velocity_flux += boundary.velocity[b].dot(gradient);
+      sums.torque += (boundary.position[b] - state.bodies[body].pose.position).cross(gradient);
+      sums.body = (k == 0 || sums.body == body) ? body : State::kSeveralBodies;
+    }
+    state.solver_wall_sums[i] = sums;
+  }, 1024);
   return SolverView{state.solver_position.data(),
                     state.solver_velocity.data(),
                     fluid.density.data(),
@@ -78,9 +86,7 @@ SolverView pack_for_solve(State& state) {
                     fluid.dfsph_factor.data(),
                     fluid.density_advected.data(),
                     state.kappa.data(),
-                    state.solver_boundary_position.data(),
-                    state.solver_boundary_velocity.data(),
-                    boundary.body.data(),
+                    state.solver_wall_sums.data(),
                     fluid.neighbor_count.data(),
                     state.fluid_neighbors.indices.data(),
                     state.fluid_neighbors.counts.data(),
@@ -125,14 +131,12 @@ Real density_change_rate(const SolverView& view, std::size_t i) {
   const Vec4 position_i = view.position[i];
   const Vec4 velocity_i = view.velocity[i];
   const std::size_t fluid_first = i * view.fluid_stride;
-  const std::size_t boundary_first = i * view.boundary_stride;
   const Vec4 rate = velocity_position_products(view.velocity, view.position, view.fluid_neighbor + fluid_first,
                                                view.fluid_pair_gradient + fluid_first, view.fluid_neighbor_count[i], velocity_i,
-                                               position_i) +
-                    velocity_position_products(view.boundary_velocity, view.boundary_position, view.boundary_neighbor + boundary_first,
-                                               view.boundary_pair_gradient + boundary_first, view.boundary_neighbor_count[i],
-                                               velocity_i, position_i);
-  return rate.sum();
+                                               position_i);
+  // The walls: Σ_b g_b (v_i − v_b)·r_b = v_i·Σ_b g_b r_b − Σ_b g_b v_b·r_b.
+  const State::WallSums& walls = view.wall_sums[i];
+  return rate.sum() + velocity_i.dot(walls.gradient) - walls.velocity_flux;
 }
 
 /// One pressure velocity update with the m κ in view.kappa; adds the reaction on the bodies.
@@ -149,19 +153,26 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
         const Index j = view.fluid_neighbor[fluid_first + k];
         momentum_change -= ((weighted_kappa_i + view.kappa[j]) * view.fluid_pair_gradient[fluid_first + k]) * (position_i - view.position[j]);
       }
-      if (weighted_kappa_i != 0) {
-        const std::size_t boundary_first = i * view.boundary_stride;
-        const Index boundary_count = view.boundary_neighbor_count[i];
-        for (Index k = 0; k < boundary_count; ++k) {
-          const Index b = view.boundary_neighbor[boundary_first + k];
-          const Vec4 change = -(weighted_kappa_i * view.boundary_pair_gradient[boundary_first + k]) * (position_i - view.boundary_position[b]);
-          momentum_change += change;
-          // Reaction on the body: −m_i Δv_i / Δt.
-          const Vec3 force = -change.head<3>();
-          const Index body = view.boundary_body[b];
-          Wrench& wrench = wrenches[body];
-          wrench.force += force;
-          wrench.torque += (state.boundary.position[b] - state.bodies[body].pose.position).cross(force);
+      const State::WallSums& walls = view.wall_sums[i];
+      if (weighted_kappa_i != 0 && view.boundary_neighbor_count[i] > 0) {
+        // The walls' share, −m_i κ_i Σ_b g_b r_b, and its reaction on the bodies, +m_i κ_i g_b r_b each.
+        momentum_change -= weighted_kappa_i * walls.gradient;
+        if (walls.body != State::kSeveralBodies) {
+          Wrench& wrench = wrenches[walls.body];
+          wrench.force += weighted_kappa_i * walls.gradient.head<3>();
+          wrench.torque += weighted_kappa_i * walls.torque;
+        } else {
+          // Wall neighbours of several bodies (a corner where two meet): each body its own share.
+          const std::size_t boundary_first = i * view.boundary_stride;
+          for (Index k = 0; k < view.boundary_neighbor_count[i]; ++k) {
+            const Index b = view.boundary_neighbor[boundary_first + k];
+            const Vec3 force = (weighted_kappa_i * view.boundary_pair_gradient[boundary_first + k]) *
+                               (state.fluid.position[i] - state.boundary.position[b]);
+            const Index body = state.boundary.body[b];
+            Wrench& wrench = wrenches[body];
+            wrench.force += force;
+            wrench.torque += (state.boundary.position[b] - state.bodies[body].pose.position).cross(force);
+          }
         }
       }
       view.velocity[i] += (time_step / view.mass[i]) * momentum_change;

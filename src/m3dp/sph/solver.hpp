@@ -192,9 +192,20 @@ struct State {
   // Scratch reused every step (no allocation in the step once sized).
   std::vector<Real> kappa;           // (n) m κ of the current solver iteration
   // Positions and velocities padded to Vec4 (w = 0) for the pressure solves' sweeps: one aligned load
-  // and one SIMD operation per neighbour (1.4–1.5× faster sweeps than with Vec3). Fluid (n) and
-  // boundary particles; the velocities go back to the particles after each solve.
-  std::vector<Vec4> solver_position, solver_velocity, solver_boundary_position, solver_boundary_velocity;
+  // and one SIMD operation per neighbour (1.4–1.5× faster sweeps than with Vec3). The velocities go
+  // back to the particles after each solve. (n) each.
+  std::vector<Vec4> solver_position, solver_velocity;
+  // Each particle's sums over its wall neighbours, which do not change during a solve (the walls'
+  // positions and velocities are fixed for the step), so the solver's sweeps need no wall loop:
+  // with g_b = V_b (dW/dr)/r and r_b = x_i − x_b,
+  struct WallSums {
+    Vec4 gradient;        // Σ_b g_b r_b (1/m), w = 0
+    Vec3 torque;          // Σ_b (x_b − c) × g_b r_b about the body's origin c (1), if one body
+    Real velocity_flux;   // Σ_b g_b v_b·r_b (1/s)
+    Index body;           // the one body of all its wall neighbours, or kSeveralBodies
+  };
+  static constexpr Index kSeveralBodies = ~Index(0);
+  std::vector<WallSums> solver_wall_sums;  // (n)
   tbb::enumerable_thread_specific<std::vector<Wrench>> body_wrench_per_thread;
   std::vector<std::uint64_t> sort_keys;
   std::vector<Index> permutation;
