@@ -52,33 +52,17 @@ struct SolverView {
   Index boundary_stride;
 };
 
-/// Copies positions and velocities into the padded arrays and returns the view of the solve.
-/// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
+/// Copies positions and velocities into the padded arrays and returns the view of the solve (the walls'
+/// sums are the density pass's). Every fluid particle (resting ones are neighbours too); velocities go
+/// back with unpack_velocities.
 SolverView pack_for_solve(State& state) {
   auto& fluid = state.fluid;
-  auto& boundary = state.boundary;
-  const auto& lists = state.boundary_neighbors;
   state.solver_position.resize(fluid.size());
   state.solver_velocity.resize(fluid.size());
-  state.solver_wall_sums.resize(fluid.size());
   parallel_for_each_index(fluid.size(), [&](std::size_t i) {
     state.solver_position[i] = padded(fluid.position[i]);
     state.solver_velocity[i] = padded(fluid.velocity[i]);
   }, 4096);
-  parallel_for_each_index(state.active_count, [&](std::size_t i) {
-    State::WallSums sums{Vec4::Zero(), Vec3::Zero(), Real(0), State::kSeveralBodies};
-    const std::size_t first = i * lists.stride;
-    for (Index k = 0; k < lists.counts[i]; ++k) {
-      const Index b = lists.indices[first + k];
-      const Vec3 gradient = state.boundary_pair_gradient[first + k] * (fluid.position[i] - boundary.position[b]);
-      const Index body = boundary.body[b];
-      sums.gradient.head<3>() += gradient;
-      sums.velocity_flux += boundary.velocity[b].dot(gradient);
-      sums.torque += (boundary.position[b] - state.bodies[body].pose.position).cross(gradient);
-      sums.body = (k == 0 || sums.body == body) ? body : State::kSeveralBodies;
-    }
-    state.solver_wall_sums[i] = sums;
-  }, 1024);
   return SolverView{state.solver_position.data(),
                     state.solver_velocity.data(),
                     fluid.density.data(),
@@ -206,6 +190,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
   const auto& boundary_lists = state.boundary_neighbors;
   state.fluid_pair_gradient.resize(fluid_lists.indices.size());
   state.boundary_pair_gradient.resize(boundary_lists.indices.size());
+  state.solver_wall_sums.resize(fluid.size());
   const Real boundary_neighbor_weight = parameters.settings.boundary_spacing_factor * parameters.settings.boundary_spacing_factor;
   return with_kernel(parameters.settings.kernel,
                      parameters.settings.support_radius_factor * parameters.settings.particle_radius,
@@ -232,6 +217,8 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  gradient_squares += (mass_i / fluid.mass[j]) * gradient.squaredNorm();
                                }
                                const std::size_t boundary_first = i * boundary_lists.stride;
+                               // The walls' sums for the solves' sweeps (State::WallSums).
+                               State::WallSums walls{Vec4::Zero(), Vec3::Zero(), Real(0), State::kSeveralBodies};
                                for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
                                  const Index b = boundary_lists.indices[boundary_first + k];
                                  const Vec3 r = position_i - boundary.position[b];
@@ -239,8 +226,15 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  density_ratio += boundary.volume[b] * value;
                                  const Real pair_gradient = boundary.volume[b] * gradient_factor;
                                  state.boundary_pair_gradient[boundary_first + k] = pair_gradient;
-                                 gradient_sum += pair_gradient * r;
+                                 const Vec3 gradient = pair_gradient * r;
+                                 gradient_sum += gradient;
+                                 const Index body = boundary.body[b];
+                                 walls.gradient.head<3>() += gradient;
+                                 walls.velocity_flux += boundary.velocity[b].dot(gradient);
+                                 walls.torque += (boundary.position[b] - state.bodies[body].pose.position).cross(gradient);
+                                 walls.body = (k == 0 || walls.body == body) ? body : State::kSeveralBodies;
                                }
+                               state.solver_wall_sums[i] = walls;
                                fluid.density[i] = density_ratio * (mass_i / volume);
                                const Real denominator = gradient_sum.squaredNorm() + gradient_squares;
                                fluid.dfsph_factor[i] = denominator > kFactorEpsilon ? Real(1) / denominator : Real(0);

@@ -195,9 +195,9 @@ struct State {
   // and one SIMD operation per neighbour (1.4–1.5× faster sweeps than with Vec3). The velocities go
   // back to the particles after each solve. (n) each.
   std::vector<Vec4> solver_position, solver_velocity;
-  // Each particle's sums over its wall neighbours, which do not change during a solve (the walls'
-  // positions and velocities are fixed for the step), so the solver's sweeps need no wall loop:
-  // with g_b = V_b (dW/dr)/r and r_b = x_i − x_b,
+  // Each particle's sums over its wall neighbours, taken in the density pass: they do not change until
+  // advection (the walls' positions and velocities are fixed for the step), so the solves' sweeps
+  // need no wall loop. With g_b = V_b (dW/dr)/r and r_b = x_i − x_b,
   struct WallSums {
     Vec4 gradient;        // Σ_b g_b r_b (1/m), w = 0
     Vec3 torque;          // Σ_b (x_b − c) × g_b r_b about the body's origin c (1), if one body
