@@ -19,7 +19,7 @@ using Vec3 = Eigen::Matrix<Real, 3, 1>;
 /// A 3-vector padded to four lanes (w = 0): one SIMD register, so sweeps over neighbours load and
 /// combine whole vectors (the solver's pressure sweeps).
 using Vec4 = Eigen::Matrix<Real, 4, 1>;
-inline Vec4 padded(const Eigen::Matrix<Real, 3, 1>& vector) { return Vec4(vector.x(), vector.y(), vector.z(), Real(0)); }
+inline Vec4 padded(const Vec3& vector) { return Vec4(vector.x(), vector.y(), vector.z(), Real(0)); }
 using Vec3d = Eigen::Vector3d;
 using Mat3 = Eigen::Matrix<Real, 3, 3>;
 using Quat = Eigen::Quaternion<Real>;

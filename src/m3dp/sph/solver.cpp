@@ -464,6 +464,7 @@ void Solver::reserve(std::size_t capacity) {
   state_.kappa.reserve(capacity);
   state_.solver_position.reserve(capacity);
   state_.solver_velocity.reserve(capacity);
+  state_.solver_wall_sums.reserve(capacity);
   state_.sort_keys.reserve(capacity);
   state_.permutation.reserve(capacity);
   state_.scratch_vec3.reserve(capacity);
@@ -479,6 +480,7 @@ void Solver::reserve(std::size_t capacity) {
   system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);
   system.inverse_diagonal.reserve(capacity);
   system.own_block.reserve(capacity);
+  system.padded_operand.reserve(capacity);
   state_.surface_normal.reserve(capacity);
   state_.surface_flag.reserve(capacity);
   state_.surface_curvature.reserve(capacity);
