@@ -52,17 +52,13 @@ struct SolverView {
   Index boundary_stride;
 };
 
-/// Copies positions and velocities into the padded arrays and returns the view of the solve (the walls'
-/// sums are the density pass's). Every fluid particle (resting ones are neighbours too); velocities go
-/// back with unpack_velocities.
+/// Copies the velocities into the padded array and returns the view of the solve (the padded positions
+/// and the walls' sums are the density pass's: positions do not change until the step's advection).
+/// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
 SolverView pack_for_solve(State& state) {
   auto& fluid = state.fluid;
-  state.solver_position.resize(fluid.size());
   state.solver_velocity.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) {
-    state.solver_position[i] = padded(fluid.position[i]);
-    state.solver_velocity[i] = padded(fluid.velocity[i]);
-  }, 4096);
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_velocity[i] = padded(fluid.velocity[i]); }, 4096);
   return SolverView{state.solver_position.data(),
                     state.solver_velocity.data(),
                     fluid.density.data(),
@@ -191,6 +187,12 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
   state.fluid_pair_gradient.resize(fluid_lists.indices.size());
   state.boundary_pair_gradient.resize(boundary_lists.indices.size());
   state.solver_wall_sums.resize(fluid.size());
+  // Padded positions, for this pass's AVX2 sums and the solves' sweeps.
+  state.solver_position.resize(fluid.size());
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_position[i] = padded(fluid.position[i]); }, 4096);
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  const bool use_avx2 = avx2::available();
+#endif
   const Real boundary_neighbor_weight = parameters.settings.boundary_spacing_factor * parameters.settings.boundary_spacing_factor;
   return with_kernel(parameters.settings.kernel,
                      parameters.settings.support_radius_factor * parameters.settings.particle_radius,
@@ -205,7 +207,20 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                Vec3 gradient_sum = Vec3::Zero();
                                Real gradient_squares = 0;
                                const std::size_t fluid_first = i * fluid_lists.stride;
-                               for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+                               Index k = 0;
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+                               if (use_avx2) {
+                                 const avx2::DensityPairSums sums = avx2::density_pair_sums(
+                                     kernel, state.solver_position.data(), fluid.mass.data(), fluid_lists.indices.data() + fluid_first,
+                                     fluid_lists.counts[i], state.solver_position[i], mass_i, volume,
+                                     state.fluid_pair_gradient.data() + fluid_first);
+                                 density_ratio += sums.density_ratio;
+                                 gradient_sum += sums.gradient_sum;
+                                 gradient_squares += sums.gradient_squares;
+                                 k = sums.pairs_done;
+                               }
+#endif
+                               for (; k < fluid_lists.counts[i]; ++k) {
                                  const Index j = fluid_lists.indices[fluid_first + k];
                                  const Vec3 r = position_i - fluid.position[j];
                                  const auto [value, gradient_factor] = kernel.value_and_gradient_factor(r.norm());

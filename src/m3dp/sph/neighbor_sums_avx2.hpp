@@ -7,6 +7,7 @@
 // OpenVDB are built with). With FMA their results round differently from the generic loops: a run
 // is reproducible on one machine, not bit for bit across machines with and without AVX2.
 #include "m3dp/core/types.hpp"
+#include "m3dp/sph/kernels.hpp"
 
 #if (defined(__x86_64__) || defined(__i386__)) && (defined(__GNUC__) || defined(__clang__)) && !defined(M3DP_USE_DOUBLE)
 #define M3DP_NEIGHBOR_SUMS_AVX2 1
@@ -81,6 +82,115 @@ __attribute__((target("avx2,fma"))) inline Vec4 projections(const Vec4* b, const
     result += (weight[k] * r.dot(x_i - x[neighbor[k]])) * r;
   }
   return result;
+}
+
+
+/// r_k = c − v[neighbor[k]] for eight neighbours, as x, y and z lanes. The lanes hold the neighbours
+/// in the order 0 2 4 6 1 3 5 7 (what the transpose gives for free); kNeighborOrderLanes undoes it.
+struct EightDifferences {
+  __m256 x, y, z;
+};
+__attribute__((target("avx2,fma"))) inline EightDifferences eight_differences(const Vec4* vectors, const Index* neighbor, __m256 center) {
+  const __m256 r01 = _mm256_sub_ps(center, load_pair(vectors, neighbor[0], neighbor[1]));  // x0 y0 z0 0 | x1 y1 z1 0
+  const __m256 r23 = _mm256_sub_ps(center, load_pair(vectors, neighbor[2], neighbor[3]));
+  const __m256 r45 = _mm256_sub_ps(center, load_pair(vectors, neighbor[4], neighbor[5]));
+  const __m256 r67 = _mm256_sub_ps(center, load_pair(vectors, neighbor[6], neighbor[7]));
+  const __m256 xy0213 = _mm256_unpacklo_ps(r01, r23);  // x0 x2 y0 y2 | x1 x3 y1 y3
+  const __m256 zw0213 = _mm256_unpackhi_ps(r01, r23);
+  const __m256 xy4657 = _mm256_unpacklo_ps(r45, r67);
+  const __m256 zw4657 = _mm256_unpackhi_ps(r45, r67);
+  return {_mm256_shuffle_ps(xy0213, xy4657, _MM_SHUFFLE(1, 0, 1, 0)), _mm256_shuffle_ps(xy0213, xy4657, _MM_SHUFFLE(3, 2, 3, 2)),
+          _mm256_shuffle_ps(zw0213, zw4657, _MM_SHUFFLE(1, 0, 1, 0))};
+}
+
+/// W and (dW/dr)/r of eight distances (the scalar kernels' formulas, lane by lane).
+struct EightKernelValues {
+  __m256 value, gradient_factor;
+};
+__attribute__((target("avx2,fma"))) inline EightKernelValues eight_kernel_values(const CubicSplineKernel& kernel, __m256 distance) {
+  const __m256 inverse_support = _mm256_set1_ps(Real(1) / kernel.support_radius);
+  const __m256 q = _mm256_mul_ps(distance, inverse_support);
+  const __m256 one_minus_q = _mm256_sub_ps(_mm256_set1_ps(1), q);
+  const __m256 value_coefficient = _mm256_set1_ps(kernel.value_coefficient);
+  const __m256 gradient_coefficient = _mm256_set1_ps(kernel.gradient_coefficient);
+  const __m256 q_squared = _mm256_mul_ps(q, q);
+  const __m256 inner_value = _mm256_mul_ps(
+      value_coefficient, _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(6), _mm256_sub_ps(_mm256_mul_ps(q_squared, q), q_squared)), _mm256_set1_ps(1)));
+  const __m256 outer_cube = _mm256_mul_ps(_mm256_mul_ps(one_minus_q, one_minus_q), one_minus_q);
+  const __m256 outer_value = _mm256_mul_ps(_mm256_mul_ps(value_coefficient, _mm256_set1_ps(2)), outer_cube);
+  const __m256 inner_gradient = _mm256_mul_ps(_mm256_mul_ps(gradient_coefficient, _mm256_sub_ps(_mm256_mul_ps(_mm256_set1_ps(3), q), _mm256_set1_ps(2))),
+                                              _mm256_mul_ps(inverse_support, inverse_support));
+  // Where the outer piece is not taken (q ≤ 1/2, coincident particles included) its 1/r is discarded.
+  const __m256 outer_gradient = _mm256_div_ps(
+      _mm256_mul_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_setzero_ps(), gradient_coefficient), _mm256_mul_ps(one_minus_q, one_minus_q)), inverse_support),
+      distance);
+  const __m256 inner = _mm256_cmp_ps(q, _mm256_set1_ps(0.5f), _CMP_LE_OQ);
+  const __m256 inside = _mm256_cmp_ps(q, _mm256_set1_ps(1), _CMP_LE_OQ);
+  return {_mm256_and_ps(inside, _mm256_blendv_ps(outer_value, inner_value, inner)),
+          _mm256_and_ps(inside, _mm256_blendv_ps(outer_gradient, inner_gradient, inner))};
+}
+__attribute__((target("avx2,fma"))) inline EightKernelValues eight_kernel_values(const WendlandC2Kernel& kernel, __m256 distance) {
+  const __m256 q = _mm256_mul_ps(distance, _mm256_set1_ps(Real(1) / kernel.support_radius));
+  const __m256 one_minus_q = _mm256_sub_ps(_mm256_set1_ps(1), q);
+  const __m256 squared = _mm256_mul_ps(one_minus_q, one_minus_q);
+  const __m256 inside = _mm256_cmp_ps(q, _mm256_set1_ps(1), _CMP_LT_OQ);
+  const __m256 value = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(kernel.value_coefficient), _mm256_mul_ps(squared, squared)),
+                                     _mm256_add_ps(_mm256_set1_ps(1), _mm256_mul_ps(_mm256_set1_ps(4), q)));
+  const __m256 gradient = _mm256_mul_ps(_mm256_set1_ps(kernel.gradient_coefficient), _mm256_mul_ps(squared, one_minus_q));
+  return {_mm256_and_ps(inside, value), _mm256_and_ps(inside, gradient)};
+}
+
+/// The sum of a __m256's eight lanes.
+__attribute__((target("avx2,fma"))) inline Real lanes_added(__m256 sum) {
+  __m128 four = _mm_add_ps(_mm256_castps256_ps128(sum), _mm256_extractf128_ps(sum, 1));
+  four = _mm_add_ps(four, _mm_movehl_ps(four, four));
+  four = _mm_add_ss(four, _mm_movehdup_ps(four));
+  return _mm_cvtss_f32(four);
+}
+
+/// The density pass's sums over a particle's fluid neighbours, eight at a time (see
+/// compute_density_and_factor in dfsph_bender2017.cpp): Σ V W_ij, Σ g_ij r_ij and Σ (m_i/m_j) |g_ij r_ij|²
+/// with g_ij = V (dW/dr)/r, which is also stored per pair. Returns how many neighbours it took (a
+/// multiple of eight); the caller sums the rest.
+struct DensityPairSums {
+  Real density_ratio = 0;
+  Vec3 gradient_sum = Vec3::Zero();
+  Real gradient_squares = 0;
+  Index pairs_done = 0;
+};
+template <class Kernel>
+__attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(const Kernel& kernel, const Vec4* position, const Real* mass,
+                                                                            const Index* neighbor, Index count, const Vec4& position_i,
+                                                                            Real mass_i, Real volume, Real* pair_gradient) {
+  const __m256 center = broadcast(position_i);
+  const __m256 volume_lanes = _mm256_set1_ps(volume);
+  const __m256 mass_i_lanes = _mm256_set1_ps(mass_i);
+  const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  const __m256i neighbor_order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);  // lanes back to neighbour order
+  __m256 density = _mm256_setzero_ps(), gradient_x = _mm256_setzero_ps(), gradient_y = _mm256_setzero_ps(),
+         gradient_z = _mm256_setzero_ps(), squares = _mm256_setzero_ps();
+  Index k = 0;
+  for (; k + 8 <= count; k += 8) {
+    const EightDifferences r = eight_differences(position, neighbor + k, center);
+    const __m256 distance = _mm256_sqrt_ps(_mm256_fmadd_ps(r.x, r.x, _mm256_fmadd_ps(r.y, r.y, _mm256_mul_ps(r.z, r.z))));
+    const EightKernelValues w = eight_kernel_values(kernel, distance);
+    density = _mm256_fmadd_ps(volume_lanes, w.value, density);
+    const __m256 pair = _mm256_mul_ps(volume_lanes, w.gradient_factor);
+    _mm256_storeu_ps(pair_gradient + k, _mm256_permutevar8x32_ps(pair, neighbor_order));
+    const __m256 gx = _mm256_mul_ps(pair, r.x), gy = _mm256_mul_ps(pair, r.y), gz = _mm256_mul_ps(pair, r.z);
+    gradient_x = _mm256_add_ps(gradient_x, gx);
+    gradient_y = _mm256_add_ps(gradient_y, gy);
+    gradient_z = _mm256_add_ps(gradient_z, gz);
+    const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(neighbor + k)), transpose_order);
+    const __m256 mass_ratio = _mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4));
+    squares = _mm256_fmadd_ps(mass_ratio, _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz))), squares);
+  }
+  DensityPairSums sums;
+  sums.density_ratio = lanes_added(density);
+  sums.gradient_sum = Vec3(lanes_added(gradient_x), lanes_added(gradient_y), lanes_added(gradient_z));
+  sums.gradient_squares = lanes_added(squares);
+  sums.pairs_done = k;
+  return sums;
 }
 
 }  // namespace m3dp::sph::avx2
