@@ -106,17 +106,35 @@ Vec4 velocity_position_products(const Vec4* velocity, const Vec4* position, cons
   return sum;
 }
 
+/// The density change rate from the fluid pairs' lane sums (velocity_position_products): adds the walls,
+/// Σ_b g_b (v_i − v_b)·r_b = v_i·Σ_b g_b r_b − Σ_b g_b v_b·r_b.
+Real rate_with_walls(const SolverView& view, std::size_t i, const Vec4& fluid_lanes) {
+  const State::WallSums& walls = view.wall_sums[i];
+  return fluid_lanes.sum() + view.velocity[i].dot(walls.gradient) - walls.velocity_flux;
+}
+
 /// Σ_j V_j (v_i − v_j)·∇W_ij + Σ_b V_b (v_i − v_b)·∇W_ib: the rate of change of ρ_i/ρ0 (1/s), with minus sign.
 Real density_change_rate(const SolverView& view, std::size_t i) {
-  const Vec4 position_i = view.position[i];
-  const Vec4 velocity_i = view.velocity[i];
   const std::size_t fluid_first = i * view.fluid_stride;
   const Vec4 rate = velocity_position_products(view.velocity, view.position, view.fluid_neighbor + fluid_first,
-                                               view.fluid_pair_gradient + fluid_first, view.fluid_neighbor_count[i], velocity_i,
-                                               position_i);
-  // The walls: Σ_b g_b (v_i − v_b)·r_b = v_i·Σ_b g_b r_b − Σ_b g_b v_b·r_b.
-  const State::WallSums& walls = view.wall_sums[i];
-  return rate.sum() + velocity_i.dot(walls.gradient) - walls.velocity_flux;
+                                               view.fluid_pair_gradient + fluid_first, view.fluid_neighbor_count[i], view.velocity[i],
+                                               view.position[i]);
+  return rate_with_walls(view, i, rate);
+}
+
+/// Σ_{i in range} finish(i, density change rate of i), the rates' sweep of a solver iteration.
+template <class Finish>
+Real sum_over_rates(const SolverView& view, const tbb::blocked_range<std::size_t>& range, Finish&& finish) {
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  // One call for the range: a call per particle into the AVX2 code cost as much as its pairs.
+  if (avx2::available())
+    return avx2::difference_product_rows(range.begin(), range.end(), view.velocity, view.position, view.fluid_neighbor,
+                                         view.fluid_neighbor_count, view.fluid_stride, view.fluid_pair_gradient,
+                                         [&](std::size_t i, const Vec4& lanes) { return finish(i, rate_with_walls(view, i, lanes)); });
+#endif
+  Real total = 0;
+  for (std::size_t i = range.begin(); i != range.end(); ++i) total += finish(i, density_change_rate(view, i));
+  return total;
 }
 
 /// One pressure velocity update with the m κ in view.kappa; adds the reaction on the bodies.
@@ -280,13 +298,11 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
       return tbb::parallel_deterministic_reduce(
           tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
           [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
-            for (std::size_t i = range.begin(); i != range.end(); ++i) {
-              Real rate = density_change_rate(view, i);
-              rate = view.neighbor_count[i] < kMinNeighborsForDivergence ? Real(0) : std::max(rate, Real(0));
-              view.density_advected[i] = rate;
-              sum += rate;
-            }
-            return sum;
+            return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
+                     rate = view.neighbor_count[i] < kMinNeighborsForDivergence ? Real(0) : std::max(rate, Real(0));
+                     view.density_advected[i] = rate;
+                     return rate;
+                   });
           },
           std::plus<Real>());
     };
@@ -340,12 +356,11 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
       return tbb::parallel_deterministic_reduce(
           tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
           [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
-            for (std::size_t i = range.begin(); i != range.end(); ++i) {
-              const Real predicted = view.density[i] * volume / view.mass[i] + time_step * density_change_rate(view, i);
-              view.density_advected[i] = std::max(predicted, Real(1));
-              sum += view.density_advected[i] - Real(1);
-            }
-            return sum;
+            return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
+                     const Real predicted = view.density[i] * volume / view.mass[i] + time_step * rate;
+                     view.density_advected[i] = std::max(predicted, Real(1));
+                     return view.density_advected[i] - Real(1);
+                   });
           },
           std::plus<Real>());
     };

@@ -62,6 +62,18 @@ __attribute__((target("avx2,fma"))) inline Vec4 difference_products(const Vec4* 
   return result;
 }
 
+/// Σ_{i in [begin, end)} finish(i, Σ_k w_k (a_i − a_j) ⊙ (b_i − b_j)) over each particle's list: the
+/// sweep around difference_products, so that the per-particle sum is inlined rather than called.
+template <class Finish>
+__attribute__((target("avx2,fma"))) inline Real difference_product_rows(std::size_t begin, std::size_t end, const Vec4* a, const Vec4* b,
+                                                                         const Index* neighbor_lists, const Index* neighbor_counts,
+                                                                         std::size_t stride, const Real* weights, Finish&& finish) {
+  Real total = 0;
+  for (std::size_t i = begin; i < end; ++i)
+    total += finish(i, difference_products(a, b, neighbor_lists + i * stride, weights + i * stride, neighbor_counts[i], a[i], b[i]));
+  return total;
+}
+
 /// Σ_k w_k ((b_i − b_j)·(x_i − x_j)) (b_i − b_j), j = neighbor[k]: the viscous matrix-vector product's
 /// sum (b positions, x the operand).
 __attribute__((target("avx2,fma"))) inline Vec4 projections(const Vec4* b, const Vec4* x, const Index* neighbor, const Real* weight,
@@ -84,6 +96,41 @@ __attribute__((target("avx2,fma"))) inline Vec4 projections(const Vec4* b, const
   return result;
 }
 
+
+/// The implicit viscosity's product y = A x for the particles [begin, end) (see multiply_row in
+/// viscosity_weiler2018.cpp): y_i = Σ_j c_ij r_ij r_ijᵀ (x_i − x_j) + own_block_i x_i, with x and the
+/// positions padded. Returns Σ_i x_i·y_i over the range, added in index order in double. One call per
+/// range rather than per particle: the per-particle call and its result's round trip through memory
+/// cost as much as the pairs' sum.
+__attribute__((target("avx2,fma"))) inline double viscous_product_rows(std::size_t begin, std::size_t end, const Vec4* position,
+                                                                        const Vec4* operand, const Index* neighbor_lists,
+                                                                        const Index* neighbor_counts, std::size_t stride,
+                                                                        const Real* coefficients, const Mat3* own_block, Vec3* product) {
+  double operand_dot_product = 0;
+  for (std::size_t i = begin; i < end; ++i) {
+    const Index* neighbor = neighbor_lists + i * stride;
+    const Real* coefficient = coefficients + i * stride;
+    const Index count = neighbor_counts[i];
+    const __m256 position_i = broadcast(position[i]), operand_i = broadcast(operand[i]);
+    __m256 sum = _mm256_setzero_ps();
+    Index k = 0;
+    for (; k + 1 < count; k += 2) {
+      const Index j0 = neighbor[k], j1 = neighbor[k + 1];
+      const __m256 r = _mm256_sub_ps(position_i, load_pair(position, j0, j1));
+      const __m256 dot = _mm256_dp_ps(r, _mm256_sub_ps(operand_i, load_pair(operand, j0, j1)), 0x7F);
+      sum = _mm256_fmadd_ps(_mm256_mul_ps(dot, spread_pair(coefficient + k)), r, sum);
+    }
+    Vec4 result = halves_added(sum);
+    if (k < count) {
+      const Vec4 r = position[i] - position[neighbor[k]];
+      result += (coefficient[k] * r.dot(operand[i] - operand[neighbor[k]])) * r;
+    }
+    const Vec3 row = result.head<3>() + own_block[i] * operand[i].head<3>();
+    product[i] = row;
+    operand_dot_product += double(operand[i].head<3>().dot(row));
+  }
+  return operand_dot_product;
+}
 
 /// r_k = c − v[neighbor[k]] for eight neighbours, as x, y and z lanes. The lanes hold the neighbours
 /// in the order 0 2 4 6 1 3 5 7 (what the transpose gives for free); kNeighborOrderLanes undoes it.

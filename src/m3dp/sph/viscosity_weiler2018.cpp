@@ -432,10 +432,24 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   const double tolerance = settings.viscosity_tolerance * std::sqrt(start[0]);
   int iterations = 0;
   while (residual_norm > tolerance && iterations < settings.max_viscosity_iterations) {
-    const double curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-      system.product[i] = multiply_row(i);
-      sums[0] += double(system.direction[i].dot(system.product[i]));
-    })[0];
+    double curvature = 0;
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+    if (avx2::available()) {
+      curvature = tbb::parallel_deterministic_reduce(
+          tbb::blocked_range<std::size_t>(0, count, 256), 0.0,
+          [&](const tbb::blocked_range<std::size_t>& range, double sum) {
+            return sum + avx2::viscous_product_rows(range.begin(), range.end(), padded_position, padded_operand,
+                                                    fluid_lists.indices.data(), fluid_lists.counts.data(), fluid_lists.stride,
+                                                    system.fluid_pair_coefficient.data(), system.own_block.data(),
+                                                    system.product.data());
+          },
+          std::plus<double>());
+    } else
+#endif
+      curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+        system.product[i] = multiply_row(i);
+        sums[0] += double(system.direction[i].dot(system.product[i]));
+      })[0];
     if (!(curvature > 0)) break;
     const Real step = static_cast<Real>(residual_dot / curvature);
     const auto next = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
