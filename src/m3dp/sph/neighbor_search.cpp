@@ -187,13 +187,18 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
   x.resize(at + total);
   y.resize(at + total);
   z.resize(at + total);
+  // One loop over the four arrays: a bucket holds about eight points, too few for four library copies
+  // (their calls cost more than the copying: 5 % of the dam break).
+  Index* index_out = index.data();
+  Real *x_out = x.data(), *y_out = y.data(), *z_out = z.data();
   for (int k = 0; k < count; ++k) {
     const std::uint32_t begin = bucket_start_[buckets[k]], end = bucket_start_[buckets[k] + 1];
-    std::copy(sorted_index_.begin() + begin, sorted_index_.begin() + end, index.begin() + std::ptrdiff_t(at));
-    std::copy(sorted_x_.begin() + begin, sorted_x_.begin() + end, x.begin() + std::ptrdiff_t(at));
-    std::copy(sorted_y_.begin() + begin, sorted_y_.begin() + end, y.begin() + std::ptrdiff_t(at));
-    std::copy(sorted_z_.begin() + begin, sorted_z_.begin() + end, z.begin() + std::ptrdiff_t(at));
-    at += end - begin;
+    for (std::uint32_t slot = begin; slot < end; ++slot, ++at) {
+      index_out[at] = sorted_index_[slot];
+      x_out[at] = sorted_x_[slot];
+      y_out[at] = sorted_y_[slot];
+      z_out[at] = sorted_z_[slot];
+    }
   }
 }
 
