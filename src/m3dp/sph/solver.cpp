@@ -485,8 +485,8 @@ void Solver::reserve(std::size_t capacity) {
   state_.surface_flag.reserve(capacity);
   state_.surface_curvature.reserve(capacity);
   state_.elastic_stress.reserve(capacity);
-  for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product,
-                       &system.start_velocity})
+  for (auto* vector : {&system.rhs, &system.residual, &system.preconditioned, &system.product, &system.start_velocity,
+                       &system.aggregate_offset})
     vector->reserve(capacity);
 }
 

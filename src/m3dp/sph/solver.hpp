@@ -220,9 +220,10 @@ struct State {
     std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
     std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
     std::vector<Mat3> own_block;                  // (n) m_i I + the walls' Σ_b c_ib r rᵀ: A's part that acts on x_i alone (kg)
-    std::vector<Vec3> rhs, residual, direction, preconditioned, product, start_velocity;  // (n) each
+    std::vector<Vec3> rhs, residual, preconditioned, product, start_velocity;  // (n) each
     // The vector that A multiplies (the start velocity, then each CG direction), padded to Vec4 for the
-    // product's sweep as the pressure solves' copies (State::solver_position holds the positions).
+    // product's sweep as the pressure solves' copies (State::solver_position holds the positions). The
+    // CG direction lives only here.
     std::vector<Vec4> padded_operand;
     // The preconditioner's coarse level: aggregates of particles (cells of a coarse grid) that move
     // as one (see viscosity_weiler2018.cpp).
@@ -230,7 +231,9 @@ struct State {
     std::vector<Index> aggregate_order;           // (n) active particles grouped by aggregate
     std::vector<Index> aggregate_start;           // (aggregates + 1) into aggregate_order
     std::vector<Index> aggregate_of;              // (n) aggregate of each active particle
+    std::vector<Vec3> aggregate_offset;           // (n) x_i − its aggregate's centroid (m)
     std::vector<double> coarse_residual, coarse_correction;  // (6 × aggregates: translation, rotation)
+    std::vector<Real> coarse_motion;              // coarse_correction in single precision, for the per-particle sweep
     int previous_iterations = 0;                  // CG iterations of the last solve (whether to build the coarse level)
   } viscosity_system;
   std::vector<Mat3> elastic_stress;  // (n) R σ L of elastic particles this step (Peer et al. 2018)

@@ -88,6 +88,7 @@ class CoarseLevel {
     const auto& lists = state.fluid_neighbors;
     sort_by_cell(fluid.position, count, aggregate_size, system.aggregate_key, system.aggregate_order);
     system.aggregate_of.resize(count);
+    system.aggregate_offset.resize(count);
     system.aggregate_start.clear();
     for (std::size_t k = 0; k < count; ++k) {
       if (k == 0 || system.aggregate_key[system.aggregate_order[k]] != system.aggregate_key[system.aggregate_order[k - 1]])
@@ -102,6 +103,10 @@ class CoarseLevel {
       for (Index k = system.aggregate_start[aggregate]; k < system.aggregate_start[aggregate + 1]; ++k)
         sum += fluid.position[system.aggregate_order[k]].template cast<double>();
       centroid_[aggregate] = sum / double(system.aggregate_start[aggregate + 1] - system.aggregate_start[aggregate]);
+      for (Index k = system.aggregate_start[aggregate]; k < system.aggregate_start[aggregate + 1]; ++k) {
+        const Index i = system.aggregate_order[k];
+        system.aggregate_offset[i] = (fluid.position[i].template cast<double>() - centroid_[aggregate]).template cast<Real>();
+      }
     }, 16);
 
     // A_c block rows: each aggregate's diagonal block and its couplings to the aggregates around it.
@@ -169,6 +174,7 @@ class CoarseLevel {
     factorisation_.compute(matrix_);
     system.coarse_residual.resize(6 * aggregates_);
     system.coarse_correction.resize(6 * aggregates_);
+    system.coarse_motion.resize(6 * aggregates_);
     return factorisation_.info() == Eigen::Success;
   }
 
@@ -183,22 +189,23 @@ class CoarseLevel {
         // P_iᵀ r = (r, (x_i − c) × r).
         const Eigen::Vector3d r = residual[i].cast<double>();
         sum.head<3>() += r;
-        sum.tail<3>() += (fluid.position[i].cast<double>() - centroid_[aggregate]).cross(r);
+        sum.tail<3>() += system.aggregate_offset[i].cast<double>().cross(r);
       }
       for (int row = 0; row < 6; ++row) system.coarse_residual[6 * aggregate + row] = sum[row];
     }, 16);
     const Eigen::Map<const Eigen::VectorXd> right(system.coarse_residual.data(), Eigen::Index(system.coarse_residual.size()));
     Eigen::Map<Eigen::VectorXd>(system.coarse_correction.data(), Eigen::Index(system.coarse_correction.size())) =
         factorisation_.solve(right);
+    std::transform(system.coarse_correction.begin(), system.coarse_correction.end(), system.coarse_motion.begin(),
+                   [](double value) { return static_cast<Real>(value); });
   }
 
-  /// The coarse correction at particle i: t + ω × (x_i − c).
-  [[nodiscard]] Vec3 correction(const State& state, std::size_t i) const {
+  /// The coarse correction at particle i: t + ω × (x_i − c), in single precision (the sums and the
+  /// factorisation are double; this is a per-particle sweep of every CG iteration).
+  [[nodiscard]] static Vec3 correction(const State& state, std::size_t i) {
     const auto& system = state.viscosity_system;
-    const std::size_t aggregate = system.aggregate_of[i];
-    const double* motion = system.coarse_correction.data() + 6 * aggregate;  // t, then ω
-    const Eigen::Vector3d translation(motion[0], motion[1], motion[2]), rotation(motion[3], motion[4], motion[5]);
-    return (translation + rotation.cross(state.fluid.position[i].cast<double>() - centroid_[aggregate])).cast<Real>();
+    const Real* motion = system.coarse_motion.data() + 6 * system.aggregate_of[i];  // t, then ω
+    return Vec3(motion[0], motion[1], motion[2]) + Vec3(motion[3], motion[4], motion[5]).cross(system.aggregate_offset[i]);
   }
 
  private:
@@ -313,11 +320,9 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   auto& system = state.viscosity_system;
   system.fluid_pair_coefficient.resize(fluid_lists.indices.size());
   system.boundary_pair_coefficient.resize(boundary_lists.indices.size());
-  for (auto* vector : {&system.rhs, &system.residual, &system.direction, &system.preconditioned, &system.product,
-                       &system.start_velocity})
+  for (auto* vector : {&system.rhs, &system.residual, &system.preconditioned, &system.product, &system.start_velocity})
     vector->resize(fluid.size());
   // A.x reads x at every neighbour: resting particles are fixed (zero velocity), so zero in the direction.
-  std::fill(system.direction.begin() + static_cast<std::ptrdiff_t>(count), system.direction.end(), Vec3::Zero());
   system.padded_operand.resize(fluid.size());
   std::fill(system.padded_operand.begin() + static_cast<std::ptrdiff_t>(count), system.padded_operand.end(), Vec4::Zero());
   state.solver_position.resize(fluid.size());
@@ -420,10 +425,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     sums[1] += double(residual.squaredNorm());
   });
   double residual_dot = precondition();
-  parallel_for_each_index(count, [&](std::size_t i) {
-    system.direction[i] = system.preconditioned[i];
-    system.padded_operand[i] = padded(system.direction[i]);
-  }, 1024);
+  parallel_for_each_index(count, [&](std::size_t i) { system.padded_operand[i] = padded(system.preconditioned[i]); }, 1024);
   double residual_norm = std::sqrt(start[1]);
   // Relative to the momentum ‖b‖, not to the first residual: the first residual is mostly the rough,
   // particle-scale part of the change, which CG removes first; the smooth part (a stiff paste spreading
@@ -448,12 +450,12 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 #endif
       curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
         system.product[i] = multiply_row(i);
-        sums[0] += double(system.direction[i].dot(system.product[i]));
+        sums[0] += double(system.padded_operand[i].head<3>().dot(system.product[i]));
       })[0];
     if (!(curvature > 0)) break;
     const Real step = static_cast<Real>(residual_dot / curvature);
     const auto next = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-      velocity[i] += step * system.direction[i];
+      velocity[i] += step * system.padded_operand[i].head<3>();
       system.residual[i] -= step * system.product[i];
       sums[0] += double(system.residual[i].squaredNorm());
     });
@@ -462,8 +464,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const Real beta = static_cast<Real>(next_residual_dot / residual_dot);
     residual_dot = next_residual_dot;
     parallel_for_each_index(count, [&](std::size_t i) {
-      system.direction[i] = system.preconditioned[i] + beta * system.direction[i];
-      system.padded_operand[i] = padded(system.direction[i]);
+      system.padded_operand[i] = padded(system.preconditioned[i]) + beta * system.padded_operand[i];
     }, 1024);
     ++iterations;
   }
