@@ -28,6 +28,7 @@ struct FluidParticles {
   std::vector<Real> viscosity;           // (n) Pa·s, effective dynamic viscosity of this step (rheology, age)
   std::vector<Real> shear_rate;          // (n) 1/s, √(2 D:D) of this step (non-Newtonian phases only)
   std::vector<Vec3> viscous_change;      // (n) m/s, last step's velocity change by the implicit viscosity (warm start)
+  std::vector<Vec3> viscous_velocity;    // (n) m/s, the velocity the last implicit viscosity solve ended with (warm start)
   std::vector<Real> rest_time;           // (n) s the particle has been at rest (see SolverSettings::rest_detection);
                                          //     negative: woken by load, held awake that much longer
   std::vector<Real> rest_load;           // (n) Pa, weight per area above it when it came to rest (< 0: not yet measured)
@@ -54,6 +55,7 @@ struct FluidParticles {
     visit(viscosity);
     visit(shear_rate);
     visit(viscous_change);
+    visit(viscous_velocity);
     visit(rest_time);
     visit(rest_load);
     visit(angular_velocity);

@@ -302,6 +302,7 @@ std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& v
     fluid.viscosity[i] = parameters_.phases[phase].rheology.viscosity;
     fluid.shear_rate[i] = 0;
     fluid.viscous_change[i] = Vec3::Zero();
+    fluid.viscous_velocity[i] = velocity;
     fluid.rest_time[i] = 0;
     fluid.rest_load[i] = -1;
     fluid.angular_velocity[i] = Vec3::Zero();
@@ -331,6 +332,7 @@ void Solver::update_rest_partition() {
     if (i != last) fluid.swap(i, last);
     fluid.velocity[last] = Vec3::Zero();
     fluid.viscous_change[last] = Vec3::Zero();
+    fluid.viscous_velocity[last] = Vec3::Zero();
     fluid.angular_velocity[last] = Vec3::Zero();
     fluid.kappa_density[last] = 0;
     fluid.kappa_divergence[last] = 0;
@@ -858,6 +860,7 @@ void Solver::emit(StepStats& stats) {
         fluid.viscosity[i] = parameters_.phases[settings.phase].rheology.viscosity;
         fluid.shear_rate[i] = 0;
         fluid.viscous_change[i] = Vec3::Zero();
+        fluid.viscous_velocity[i] = fluid.velocity[i];
         fluid.rest_time[i] = 0;
         fluid.rest_load[i] = -1;
         fluid.angular_velocity[i] = Vec3::Zero();
