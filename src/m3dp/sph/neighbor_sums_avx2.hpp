@@ -74,39 +74,15 @@ __attribute__((target("avx2,fma"))) inline Real difference_product_rows(std::siz
   return total;
 }
 
-/// Σ_k w_k ((b_i − b_j)·(x_i − x_j)) (b_i − b_j), j = neighbor[k]: the viscous matrix-vector product's
-/// sum (b positions, x the operand).
-__attribute__((target("avx2,fma"))) inline Vec4 projections(const Vec4* b, const Vec4* x, const Index* neighbor, const Real* weight,
-                                                            Index count, const Vec4& b_i, const Vec4& x_i) {
-  const __m256 b_ii = broadcast(b_i), x_ii = broadcast(x_i);
-  __m256 sum = _mm256_setzero_ps();
-  Index k = 0;
-  for (; k + 1 < count; k += 2) {
-    const Index j0 = neighbor[k], j1 = neighbor[k + 1];
-    const __m256 r = _mm256_sub_ps(b_ii, load_pair(b, j0, j1));
-    // Each half's dot product over x, y, z, in all four of its lanes.
-    const __m256 dot = _mm256_dp_ps(r, _mm256_sub_ps(x_ii, load_pair(x, j0, j1)), 0x7F);
-    sum = _mm256_fmadd_ps(_mm256_mul_ps(dot, spread_pair(weight + k)), r, sum);
-  }
-  Vec4 result = halves_added(sum);
-  if (k < count) {
-    const Vec4 r = b_i - b[neighbor[k]];
-    result += (weight[k] * r.dot(x_i - x[neighbor[k]])) * r;
-  }
-  return result;
-}
-
-
 /// The implicit viscosity's product y = A x for the particles [begin, end) (see multiply_row in
-/// viscosity_weiler2018.cpp): y_i = Σ_j c_ij r_ij r_ijᵀ (x_i − x_j) + own_block_i x_i, with x and the
-/// positions padded. Returns Σ_i x_i·y_i over the range, added in index order in double. One call per
-/// range rather than per particle: the per-particle call and its result's round trip through memory
-/// cost as much as the pairs' sum.
-__attribute__((target("avx2,fma"))) inline double viscous_product_rows(std::size_t begin, std::size_t end, const Vec4* position,
-                                                                        const Vec4* operand, const Index* neighbor_lists,
-                                                                        const Index* neighbor_counts, std::size_t stride,
-                                                                        const Real* coefficients, const Mat3* own_block, Vec3* product) {
-  double operand_dot_product = 0;
+/// viscosity_weiler2018.cpp): calls finish(i, y_i) with y_i = Σ_j c_ij r_ij r_ijᵀ (x_i − x_j) +
+/// own_block_i x_i, x and the positions padded. One call per range rather than per particle: the
+/// per-particle call and its result's round trip through memory cost as much as the pairs' sum.
+template <class Finish>
+__attribute__((target("avx2,fma"))) inline void viscous_product_rows(std::size_t begin, std::size_t end, const Vec4* position,
+                                                                      const Vec4* operand, const Index* neighbor_lists,
+                                                                      const Index* neighbor_counts, std::size_t stride,
+                                                                      const Real* coefficients, const Mat3* own_block, Finish&& finish) {
   for (std::size_t i = begin; i < end; ++i) {
     const Index* neighbor = neighbor_lists + i * stride;
     const Real* coefficient = coefficients + i * stride;
@@ -125,11 +101,8 @@ __attribute__((target("avx2,fma"))) inline double viscous_product_rows(std::size
       const Vec4 r = position[i] - position[neighbor[k]];
       result += (coefficient[k] * r.dot(operand[i] - operand[neighbor[k]])) * r;
     }
-    const Vec3 row = result.head<3>() + own_block[i] * operand[i].head<3>();
-    product[i] = row;
-    operand_dot_product += double(operand[i].head<3>().dot(row));
+    finish(i, Vec3(result.head<3>() + own_block[i] * operand[i].head<3>()));
   }
-  return operand_dot_product;
 }
 
 /// r_k = c − v[neighbor[k]] for eight neighbours, as x, y and z lanes. The lanes hold the neighbours

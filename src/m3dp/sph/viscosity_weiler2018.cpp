@@ -55,6 +55,23 @@ std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
       });
 }
 
+/// The same over the rows of a matrix-vector product: rows(range, visit) calls visit(i, y_i) for the
+/// range's particles in order, and body(i, y_i, sums) adds particle i's terms.
+template <std::size_t N, class Rows, class Body>
+std::array<double, N> deterministic_row_sums(std::size_t count, Rows&& rows, Body&& body) {
+  using Sums = std::array<double, N>;
+  return tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
+      [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
+        rows(range, [&](std::size_t i, const Vec3& row) { body(i, row, sums); });
+        return sums;
+      },
+      [](Sums a, const Sums& b) {
+        for (std::size_t n = 0; n < N; ++n) a[n] += b[n];
+        return a;
+      });
+}
+
 // Aggregates of the coarse level: cells of this many particle spacings (up to 512 particles). In the clay
 // bench (48.8k particles) 4 spacings took 26 CG iterations a step but the factorisation of their
 // 4.5k unknowns cost more than it saved (280 ms a step in the solve), 6 took 33 (181 ms), 8 took 42
@@ -80,9 +97,9 @@ class CoarseLevel {
   using Basis = Eigen::Matrix<double, 3, 6>;
 
   /// Groups the active particles into aggregates and factorises A_c, from A's pair coefficients c (a
-  /// pair's block is c r rᵀ) and `diagonal(i)`, particle i's diagonal block.
-  template <class Diagonal>
-  bool build(State& state, std::size_t count, Real aggregate_size, Diagonal&& diagonal) {
+  /// pair's block is c r rᵀ) and `own_block(i)`, the part of A that acts on x_i alone (m_i I and walls).
+  template <class OwnBlock>
+  bool build(State& state, std::size_t count, Real aggregate_size, OwnBlock&& own_block) {
     auto& system = state.viscosity_system;
     const auto& fluid = state.fluid;
     const auto& lists = state.fluid_neighbors;
@@ -122,19 +139,20 @@ class CoarseLevel {
         for (Index k = system.aggregate_start[aggregate]; k < system.aggregate_start[aggregate + 1]; ++k) {
           const std::size_t i = system.aggregate_order[k];
           const Basis basis_i = basis(fluid.position[i], aggregate);
-          // A_ii less the pairs inside the aggregate (which move with it and cancel exactly).
-          Eigen::Matrix3d own = diagonal(i).template cast<double>();
+          // A_ii less the pairs inside the aggregate (which move with it and cancel exactly): the part
+          // that acts on x_i alone, and the pairs to resting particles (fixed) or other aggregates.
+          Eigen::Matrix3d own = own_block(i).template cast<double>();
           const std::size_t first = i * lists.stride;
           for (Index slot = 0; slot < lists.counts[i]; ++slot) {
             const Index j = lists.indices[first + slot];
-            if (j >= count) continue;  // resting: fixed, only in the diagonal
-            const Index other = system.aggregate_of[j];
+            const Index other = j < count ? system.aggregate_of[j] : Index(aggregate);
+            if (j < count && other == aggregate) continue;
             const Eigen::Vector3d r = (fluid.position[i] - fluid.position[j]).template cast<double>();
             const double coefficient = double(system.fluid_pair_coefficient[first + slot]);
-            if (other == aggregate) {
-              own.noalias() -= coefficient * r * r.transpose();
-              continue;
-            }
+            own.noalias() += coefficient * r * r.transpose();
+            // Only the lower triangle of A_c is factorised: the blocks of aggregates after this one are
+            // not needed (half the pairs' 6×6 products).
+            if (j >= count || other > aggregate) continue;
             std::size_t at = 1;
             while (at < used && neighbours[at] != other) ++at;
             if (at == used) {
@@ -377,7 +395,8 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     system.padded_operand[i] = padded(fluid.velocity[i]);
   }, 128);
 
-  // y = A x for particle i, x in system.padded_operand (padded: one SIMD load and operation per neighbour).
+  // y = A x for particle i, x in system.padded_operand (padded: one SIMD operation per neighbour); the generic
+  // loop of rows() below, which takes the AVX2 sweep where there is one.
   const Vec4* padded_position = state.solver_position.data();
   const Vec4* padded_operand = system.padded_operand.data();
   auto multiply_row = [&](std::size_t i) {
@@ -387,11 +406,6 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const std::size_t fluid_first = i * fluid_lists.stride;
     const Index* neighbor = fluid_lists.indices.data() + fluid_first;
     const Real* coefficient = system.fluid_pair_coefficient.data() + fluid_first;
-#ifdef M3DP_NEIGHBOR_SUMS_AVX2
-    if (avx2::available()) {
-      result += avx2::projections(padded_position, padded_operand, neighbor, coefficient, fluid_lists.counts[i], position_i, x_i);
-    } else
-#endif
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = neighbor[k];
       const Vec4 r = position_i - padded_position[j];
@@ -400,12 +414,24 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     // The walls' pairs (fixed velocities, on the right-hand side) leave c r rᵀ x_i, summed in own_block.
     return Vec3(result.head<3>() + system.own_block[i] * x_i.head<3>());
   };
+  // visit(i, (A x)_i) for the particles of a range, in order.
+  auto rows = [&](const tbb::blocked_range<std::size_t>& range, auto&& visit) {
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+    if (avx2::available()) {
+      avx2::viscous_product_rows(range.begin(), range.end(), padded_position, padded_operand, fluid_lists.indices.data(),
+                                 fluid_lists.counts.data(), fluid_lists.stride, system.fluid_pair_coefficient.data(),
+                                 system.own_block.data(), visit);
+      return;
+    }
+#endif
+    for (std::size_t i = range.begin(); i != range.end(); ++i) visit(i, multiply_row(i));
+  };
 
-  // The coarse level (see CoarseLevel): A's diagonal block of particle i and the block c r rᵀ of a pair.
+  // The coarse level (see CoarseLevel), from A's blocks: each particle's own block and the pairs' c r rᵀ.
   CoarseLevel coarse;
   const bool two_level = system.previous_iterations > kCoarseLevelFromIterations &&
                          coarse.build(state, count, kAggregateSpacings * 2 * settings.particle_radius,
-                                      [&](std::size_t i) -> Mat3 { return system.inverse_diagonal[i].inverse(); });
+                                      [&](std::size_t i) -> const Mat3& { return system.own_block[i]; });
   // z = D⁻¹ r (+ the coarse correction) into system.preconditioned; returns r·z.
   auto precondition = [&]() {
     if (two_level) coarse.solve(state, system.residual);
@@ -420,8 +446,8 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   // Preconditioned conjugate gradients on v (in fluid.velocity), from the warm start. Each iteration is
   // four sweeps: A p with p·Ap, the update with r·r, the preconditioner with r·z, and the new direction.
   auto& velocity = fluid.velocity;
-  const auto start = deterministic_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
-    const Vec3 residual = system.rhs[i] - multiply_row(i);
+  const auto start = deterministic_row_sums<2>(count, rows, [&](std::size_t i, const Vec3& row, std::array<double, 2>& sums) {
+    const Vec3 residual = system.rhs[i] - row;
     system.residual[i] = residual;
     sums[0] += double(system.rhs[i].squaredNorm());
     sums[1] += double(residual.squaredNorm());
@@ -441,8 +467,8 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   if (residual_norm > kFarOff * settings.viscosity_tolerance * std::sqrt(start[0])) {
     parallel_for_each_index(count, [&](std::size_t i) { system.padded_operand[i] = padded(fluid.viscous_velocity[i]); }, 1024);
     // v_A = velocity, r_A = residual; v_B = viscous_velocity, r_B into product. A v = b − r.
-    const auto sums = deterministic_sums<5>(count, [&](std::size_t i, std::array<double, 5>& sums) {
-      const Vec3 residual = system.rhs[i] - multiply_row(i);
+    const auto sums = deterministic_row_sums<5>(count, rows, [&](std::size_t i, const Vec3& row, std::array<double, 5>& sums) {
+      const Vec3 residual = system.rhs[i] - row;
       system.product[i] = residual;
       const Vec3 product_a = system.rhs[i] - system.residual[i], product_b = system.rhs[i] - residual;
       sums[0] += double(velocity[i].dot(product_a));                    // v_A·A v_A
@@ -472,24 +498,10 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   const double tolerance = settings.viscosity_tolerance * std::sqrt(start[0]);
   int iterations = 0;
   while (residual_norm > tolerance && iterations < settings.max_viscosity_iterations) {
-    double curvature = 0;
-#ifdef M3DP_NEIGHBOR_SUMS_AVX2
-    if (avx2::available()) {
-      curvature = tbb::parallel_deterministic_reduce(
-          tbb::blocked_range<std::size_t>(0, count, 256), 0.0,
-          [&](const tbb::blocked_range<std::size_t>& range, double sum) {
-            return sum + avx2::viscous_product_rows(range.begin(), range.end(), padded_position, padded_operand,
-                                                    fluid_lists.indices.data(), fluid_lists.counts.data(), fluid_lists.stride,
-                                                    system.fluid_pair_coefficient.data(), system.own_block.data(),
-                                                    system.product.data());
-          },
-          std::plus<double>());
-    } else
-#endif
-      curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-        system.product[i] = multiply_row(i);
-        sums[0] += double(system.padded_operand[i].head<3>().dot(system.product[i]));
-      })[0];
+    const double curvature = deterministic_row_sums<1>(count, rows, [&](std::size_t i, const Vec3& row, std::array<double, 1>& sums) {
+      system.product[i] = row;
+      sums[0] += double(system.padded_operand[i].head<3>().dot(row));
+    })[0];
     if (!(curvature > 0)) break;
     const Real step = static_cast<Real>(residual_dot / curvature);
     const auto next = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
