@@ -168,6 +168,66 @@ __attribute__((target("avx2,fma"))) inline Real lanes_added(__m256 sum) {
   return _mm_cvtss_f32(four);
 }
 
+/// The implicit viscosity's pair coefficients for the particles [begin, end) (the set-up of
+/// solve_implicit_viscosity): c_ij = s_i · 2 μ_i μ_j · (m_j/ρ_j) · g_ij / ((μ_i + μ_j)(|r_ij|² + ε)), zero where
+/// μ_i + μ_j = 0, stored per pair; then finish(i, Σ_j c_ij r_ij r_ijᵀ). scale(i) is s_i. Eight pairs at a
+/// time, the rest as the generic loop does them.
+template <class Scale, class Finish>
+__attribute__((target("avx2,fma"))) inline void viscous_coefficient_rows(std::size_t begin, std::size_t end, const Vec4* position,
+                                                                          const Real* viscosity, const Real* mass, const Real* density,
+                                                                          const Index* neighbor_lists, const Index* neighbor_counts,
+                                                                          std::size_t stride, const Real* pair_gradients, Real regularisation,
+                                                                          Real* coefficients, Scale&& scale, Finish&& finish) {
+  const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  const __m256i neighbor_order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+  const __m256 epsilon = _mm256_set1_ps(regularisation);
+  for (std::size_t i = begin; i < end; ++i) {
+    const Index* neighbor = neighbor_lists + i * stride;
+    const Real* pair_gradient = pair_gradients + i * stride;
+    Real* coefficient = coefficients + i * stride;
+    const Index count = neighbor_counts[i];
+    const Real mu_i = viscosity[i], scale_i = scale(i);
+    const __m256 center = broadcast(position[i]), mu_ii = _mm256_set1_ps(mu_i), numerator_i = _mm256_set1_ps(2 * scale_i * mu_i);
+    __m256 xx = _mm256_setzero_ps(), xy = xx, xz = xx, yy = xx, yz = xx, zz = xx;
+    Index k = 0;
+    for (; k + 8 <= count; k += 8) {
+      const EightDifferences r = eight_differences(position, neighbor + k, center);
+      const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(neighbor + k)), transpose_order);
+      const __m256 mu_j = _mm256_i32gather_ps(viscosity, indices, 4);
+      const __m256 gradient = _mm256_permutevar8x32_ps(_mm256_loadu_ps(pair_gradient + k), transpose_order);
+      const __m256 distance_squared = _mm256_fmadd_ps(r.x, r.x, _mm256_fmadd_ps(r.y, r.y, _mm256_mul_ps(r.z, r.z)));
+      const __m256 numerator = _mm256_mul_ps(_mm256_mul_ps(numerator_i, mu_j), _mm256_mul_ps(_mm256_i32gather_ps(mass, indices, 4), gradient));
+      const __m256 denominator = _mm256_mul_ps(_mm256_mul_ps(_mm256_add_ps(mu_ii, mu_j), _mm256_i32gather_ps(density, indices, 4)),
+                                               _mm256_add_ps(distance_squared, epsilon));
+      const __m256 c = _mm256_and_ps(_mm256_cmp_ps(denominator, _mm256_setzero_ps(), _CMP_GT_OQ), _mm256_div_ps(numerator, denominator));
+      _mm256_storeu_ps(coefficient + k, _mm256_permutevar8x32_ps(c, neighbor_order));
+      const __m256 cx = _mm256_mul_ps(c, r.x), cy = _mm256_mul_ps(c, r.y);
+      xx = _mm256_fmadd_ps(cx, r.x, xx);
+      xy = _mm256_fmadd_ps(cx, r.y, xy);
+      xz = _mm256_fmadd_ps(cx, r.z, xz);
+      yy = _mm256_fmadd_ps(cy, r.y, yy);
+      yz = _mm256_fmadd_ps(cy, r.z, yz);
+      zz = _mm256_fmadd_ps(_mm256_mul_ps(c, r.z), r.z, zz);
+    }
+    Mat3 coupling;
+    coupling(0, 0) = lanes_added(xx);
+    coupling(0, 1) = coupling(1, 0) = lanes_added(xy);
+    coupling(0, 2) = coupling(2, 0) = lanes_added(xz);
+    coupling(1, 1) = lanes_added(yy);
+    coupling(1, 2) = coupling(2, 1) = lanes_added(yz);
+    coupling(2, 2) = lanes_added(zz);
+    for (; k < count; ++k) {
+      const Index j = neighbor[k];
+      const Vec3 r = (position[i] - position[j]).head<3>();
+      const Real denominator = (mu_i + viscosity[j]) * density[j] * (r.squaredNorm() + regularisation);
+      const Real c = denominator > 0 ? 2 * scale_i * mu_i * viscosity[j] * mass[j] * pair_gradient[k] / denominator : Real(0);
+      coefficient[k] = c;
+      coupling += c * r * r.transpose();
+    }
+    finish(i, coupling);
+  }
+}
+
 /// The density pass's sums over a particle's fluid neighbours, eight at a time (see
 /// compute_density_and_factor in dfsph_bender2017.cpp): Σ V W_ij, Σ g_ij r_ij and Σ (m_i/m_j) |g_ij r_ij|²
 /// with g_ij = V (dW/dr)/r, which is also stored per pair. Returns how many neighbours it took (a

@@ -332,7 +332,6 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     return 0;
   }
 
-  const Real inverse_volume = 1 / particle_rest_volume(settings.particle_radius);  // ρ0_j = m_j / V
   const Real support_radius = settings.support_radius_factor * settings.particle_radius;
   const Real regularisation = Real(0.01) * support_radius * support_radius;
   const auto& fluid_lists = state.fluid_neighbors;
@@ -350,35 +349,29 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   system.inverse_diagonal.resize(count);
   system.own_block.resize(count);
 
-  // Coefficients, preconditioner and right-hand side (positions do not move during the solve).
-  parallel_for_each_index(count, [&](std::size_t i) {
+  // Coefficients, preconditioner and right-hand side (positions do not move during the solve). A fluid
+  // pair's c = s_i · 2 μ_i μ_j/(μ_i + μ_j) · (m_j/ρ_j) · g_ij / (r² + ε): μ_ij = 2μ_iμ_j/(μ_i + μ_j) (pair_viscosity)
+  // and V_j (dW/dr)/r = (ρ0_j/ρ_j) × the pair gradient g_ij (which holds (m_j/ρ0_j)(dW/dr)/r; negative), with
+  // s_i = −Δt 2(d+2) calibration V_i / V.
+  const Real volume = particle_rest_volume(settings.particle_radius);
+  auto pair_scale = [&](std::size_t i) {
+    return -time_step * kDimensionFactor * calibration.fluid * (fluid.mass[i] / fluid.density[i]) / volume;
+  };
+  // The rest of particle i's set-up, given its fluid pairs' Σ c r rᵀ.
+  auto finish_particle = [&](std::size_t i, const Mat3& fluid_coupling) {
     const FluidPhase& phase = parameters.phases[fluid.phase[i]];
     const Vec3 position_i = fluid.position[i];
     const Real mass_i = fluid.mass[i];
     const Real volume_i = mass_i / fluid.density[i];
-    const Real mu_i = fluid.viscosity[i];
     Mat3 own_block = mass_i * Mat3::Identity();  // the mass and the walls' coupling
     Vec3 rhs = mass_i * fluid.velocity[i];
-    Mat3 fluid_coupling = Mat3::Zero();
-    const std::size_t fluid_first = i * fluid_lists.stride;
-    for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
-      const Index j = fluid_lists.indices[fluid_first + k];
-      const Vec3 r = position_i - fluid.position[j];
-      const Real mu_ij = pair_viscosity(mu_i, fluid.viscosity[j]);
-      // V_j (dW/dr)/r = (ρ0_j/ρ_j) × pair gradient (which holds (m_j/ρ0_j)(dW/dr)/r); negative.
-      const Real coefficient = -time_step * kDimensionFactor * calibration.fluid * mu_ij * volume_i *
-                               (fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k] /
-                               (r.squaredNorm() + regularisation);
-      system.fluid_pair_coefficient[fluid_first + k] = coefficient;
-      fluid_coupling += coefficient * r * r.transpose();
-    }
     const std::size_t boundary_first = i * boundary_lists.stride;
     for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
       Real coefficient = 0;
       if (phase.has_wall_friction()) {
         const Index b = boundary_lists.indices[boundary_first + k];
         const Vec3 r = position_i - boundary.position[b];
-        coefficient = -time_step * kDimensionFactor * calibration.boundary * phase.wall_viscosity(mu_i) * volume_i *
+        coefficient = -time_step * kDimensionFactor * calibration.boundary * phase.wall_viscosity(fluid.viscosity[i]) * volume_i *
                       state.boundary_pair_gradient[boundary_first + k] / (r.squaredNorm() + regularisation);
         own_block += coefficient * r * r.transpose();
         rhs += (coefficient * r.dot(boundary.velocity[b])) * r;
@@ -393,7 +386,35 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     system.start_velocity[i] = fluid.velocity[i];
     fluid.velocity[i] += fluid.viscous_change[i];
     system.padded_operand[i] = padded(fluid.velocity[i]);
-  }, 128);
+  };
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+    if (avx2::available()) {
+      avx2::viscous_coefficient_rows(range.begin(), range.end(), state.solver_position.data(), fluid.viscosity.data(), fluid.mass.data(),
+                                     fluid.density.data(), fluid_lists.indices.data(), fluid_lists.counts.data(), fluid_lists.stride,
+                                     state.fluid_pair_gradient.data(), regularisation, system.fluid_pair_coefficient.data(), pair_scale,
+                                     finish_particle);
+      return;
+    }
+#endif
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const Vec3 position_i = fluid.position[i];
+      const Real mu_i = fluid.viscosity[i], scale_i = pair_scale(i);
+      Mat3 fluid_coupling = Mat3::Zero();
+      const std::size_t fluid_first = i * fluid_lists.stride;
+      for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
+        const Index j = fluid_lists.indices[fluid_first + k];
+        const Vec3 r = position_i - fluid.position[j];
+        const Real denominator = (mu_i + fluid.viscosity[j]) * fluid.density[j] * (r.squaredNorm() + regularisation);
+        const Real coefficient = denominator > 0 ? 2 * scale_i * mu_i * fluid.viscosity[j] * fluid.mass[j] *
+                                                       state.fluid_pair_gradient[fluid_first + k] / denominator
+                                                 : Real(0);
+        system.fluid_pair_coefficient[fluid_first + k] = coefficient;
+        fluid_coupling += coefficient * r * r.transpose();
+      }
+      finish_particle(i, fluid_coupling);
+    }
+  });
 
   // y = A x for particle i, x in system.padded_operand (padded: one SIMD operation per neighbour); the generic
   // loop of rows() below, which takes the AVX2 sweep where there is one.
