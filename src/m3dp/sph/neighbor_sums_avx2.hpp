@@ -228,6 +228,61 @@ __attribute__((target("avx2,fma"))) inline void viscous_coefficient_rows(std::si
   }
 }
 
+/// The symmetric part of Σ_j w_j (v_j − v_i) r_ijᵀ, w_j = scale · (m_j/ρ_j) · g_ij, for the particles [begin, end)
+/// that wants(i) (the velocity gradient of update_effective_viscosity); finish(i, that) for every one
+/// (zero where not wanted). Eight pairs at a time, the rest as the generic loop does them.
+template <class Wants, class Finish>
+__attribute__((target("avx2,fma"))) inline void velocity_gradient_rows(std::size_t begin, std::size_t end, const Vec4* position,
+                                                                        const Vec4* velocity, const Real* mass, const Real* density,
+                                                                        const Index* neighbor_lists, const Index* neighbor_counts,
+                                                                        std::size_t stride, const Real* pair_gradients, Real scale,
+                                                                        Wants&& wants, Finish&& finish) {
+  const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  const __m256 minus_scale = _mm256_set1_ps(-scale);
+  for (std::size_t i = begin; i < end; ++i) {
+    if (!wants(i)) {
+      finish(i, Mat3::Zero().eval());
+      continue;
+    }
+    const Index* neighbor = neighbor_lists + i * stride;
+    const Real* pair_gradient = pair_gradients + i * stride;
+    const Index count = neighbor_counts[i];
+    const __m256 position_i = broadcast(position[i]), velocity_i = broadcast(velocity[i]);
+    __m256 xx = _mm256_setzero_ps(), yy = xx, zz = xx, xy = xx, xz = xx, yz = xx;  // xy: Σ a_x r_y + a_y r_x, ...
+    Index k = 0;
+    for (; k + 8 <= count; k += 8) {
+      const EightDifferences r = eight_differences(position, neighbor + k, position_i);
+      const EightDifferences dv = eight_differences(velocity, neighbor + k, velocity_i);  // v_i − v_j
+      const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(neighbor + k)), transpose_order);
+      const __m256 gradient = _mm256_permutevar8x32_ps(_mm256_loadu_ps(pair_gradient + k), transpose_order);
+      // −w: the differences are v_i − v_j.
+      const __m256 weight = _mm256_div_ps(_mm256_mul_ps(_mm256_mul_ps(minus_scale, _mm256_i32gather_ps(mass, indices, 4)), gradient),
+                                          _mm256_i32gather_ps(density, indices, 4));
+      const __m256 ax = _mm256_mul_ps(weight, dv.x), ay = _mm256_mul_ps(weight, dv.y), az = _mm256_mul_ps(weight, dv.z);
+      xx = _mm256_fmadd_ps(ax, r.x, xx);
+      yy = _mm256_fmadd_ps(ay, r.y, yy);
+      zz = _mm256_fmadd_ps(az, r.z, zz);
+      xy = _mm256_fmadd_ps(ax, r.y, _mm256_fmadd_ps(ay, r.x, xy));
+      xz = _mm256_fmadd_ps(ax, r.z, _mm256_fmadd_ps(az, r.x, xz));
+      yz = _mm256_fmadd_ps(ay, r.z, _mm256_fmadd_ps(az, r.y, yz));
+    }
+    Mat3 gradient_sum;
+    gradient_sum(0, 0) = lanes_added(xx);
+    gradient_sum(1, 1) = lanes_added(yy);
+    gradient_sum(2, 2) = lanes_added(zz);
+    gradient_sum(0, 1) = gradient_sum(1, 0) = Real(0.5) * lanes_added(xy);
+    gradient_sum(0, 2) = gradient_sum(2, 0) = Real(0.5) * lanes_added(xz);
+    gradient_sum(1, 2) = gradient_sum(2, 1) = Real(0.5) * lanes_added(yz);
+    Mat3 rest = Mat3::Zero();
+    for (; k < count; ++k) {
+      const Index j = neighbor[k];
+      const Real weight = scale * (mass[j] / density[j]) * pair_gradient[k];
+      rest += (weight * (velocity[j] - velocity[i]).head<3>()) * (position[i] - position[j]).head<3>().transpose();
+    }
+    finish(i, Mat3(gradient_sum + Real(0.5) * (rest + rest.transpose())));
+  }
+}
+
 /// The density pass's sums over a particle's fluid neighbours, eight at a time (see
 /// compute_density_and_factor in dfsph_bender2017.cpp): Σ V W_ij, Σ g_ij r_ij and Σ (m_i/m_j) |g_ij r_ij|²
 /// with g_ij = V (dW/dr)/r, which is also stored per pair. Returns how many neighbours it took (a
