@@ -24,7 +24,7 @@ constexpr std::size_t kFoundSlack = 8;
 /// The buffer's candidates closer than the radius to `query`, but `self`, into buffer.found, in the
 /// candidates' order; returns how many.
 Index keep_candidates_within_generic(NeighborLists::CandidateBuffer& buffer, const Vec3& query, Real radius_squared, Index self) {
-  const std::size_t candidate_count = buffer.index.size();
+  const std::size_t candidate_count = buffer.count;
   const Real* x = buffer.x.data();
   const Real* y = buffer.y.data();
   const Real* z = buffer.z.data();
@@ -76,7 +76,7 @@ constexpr std::array<std::uint64_t, 256> kPackTable = make_pack_table();
 /// went from 18.7-21.0 to 15.1-16.4 ms a step).
 __attribute__((target("avx2,popcnt"))) Index keep_candidates_within_avx2(NeighborLists::CandidateBuffer& buffer,
                                                                              const Vec3& query, Real radius_squared, Index self) {
-  const std::size_t candidate_count = buffer.index.size();
+  const std::size_t candidate_count = buffer.count;
   const Real* x = buffer.x.data();
   const Real* y = buffer.y.data();
   const Real* z = buffer.z.data();
@@ -175,22 +175,23 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
   }, 2048);
 }
 
-void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3>& cell, std::vector<Index>& index,
-                                                std::vector<Real>& x, std::vector<Real>& y, std::vector<Real>& z) const {
+void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const {
   if (sorted_index_.empty()) return;
   std::uint32_t buckets[27];
   const int count = buckets_around_cell(cell, buckets);
   std::size_t total = 0;
   for (int k = 0; k < count; ++k) total += bucket_start_[buckets[k] + 1] - bucket_start_[buckets[k]];
-  std::size_t at = index.size();
-  index.resize(at + total);
-  x.resize(at + total);
-  y.resize(at + total);
-  z.resize(at + total);
+  std::size_t at = buffer.count;
+  if (buffer.index.size() < at + total) {  // grow only; values past `count` are never read
+    buffer.index.resize(at + total);
+    buffer.x.resize(at + total);
+    buffer.y.resize(at + total);
+    buffer.z.resize(at + total);
+  }
   // One loop over the four arrays: a bucket holds about eight points, too few for four library copies
   // (their calls cost more than the copying: 5 % of the dam break).
-  Index* index_out = index.data();
-  Real *x_out = x.data(), *y_out = y.data(), *z_out = z.data();
+  Index* index_out = buffer.index.data();
+  Real *x_out = buffer.x.data(), *y_out = buffer.y.data(), *z_out = buffer.z.data();
   for (int k = 0; k < count; ++k) {
     const std::uint32_t begin = bucket_start_[buckets[k]], end = bucket_start_[buckets[k] + 1];
     for (std::uint32_t slot = begin; slot < end; ++slot, ++at) {
@@ -200,6 +201,7 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
       z_out[at] = sorted_z_[slot];
     }
   }
+  buffer.count = at;
 }
 
 void find_neighbors(const SpatialHashGrid& grid, std::span<const Vec3> query_positions, Real radius,
@@ -229,13 +231,10 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
         const Vec3 query = query_positions[i];
         const auto cell = grid.cell_of(query);
         if (!buffer.valid || cell != buffer.cell) {
-          buffer.index.clear();
-          buffer.x.clear();
-          buffer.y.clear();
-          buffer.z.clear();
-          for (const SpatialHashGrid* each : grids) each->append_points_around_cell(cell, buffer.index, buffer.x, buffer.y, buffer.z);
-          buffer.distance_squared.resize(buffer.index.size());
-          buffer.found.resize(buffer.index.size() + kFoundSlack);
+          buffer.count = 0;
+          for (const SpatialHashGrid* each : grids) each->append_points_around_cell(cell, buffer);
+          if (buffer.distance_squared.size() < buffer.count) buffer.distance_squared.resize(buffer.count);
+          if (buffer.found.size() < buffer.count + kFoundSlack) buffer.found.resize(buffer.count + kFoundSlack);
           buffer.cell = cell;
           buffer.valid = true;
         }

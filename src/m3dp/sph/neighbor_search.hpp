@@ -26,6 +26,7 @@ struct NeighborLists {
   struct CandidateBuffer {
     std::array<std::int32_t, 3> cell{};
     bool valid = false;
+    std::size_t count = 0;              // candidates held; the arrays only grow (no zero-fill per gather)
     std::vector<Index> index;
     std::vector<Real> x, y, z;          // positions as separate arrays: the distance loop vectorises
     std::vector<Real> distance_squared;
@@ -56,10 +57,9 @@ class SpatialHashGrid {
   /// Calls visit(point_index, point_position) for every point in the 27 cells around `cell`.
   template <class Visit>
   void for_each_point_around_cell(const std::array<std::int32_t, 3>& cell, Visit&& visit) const;
-  /// Appends the points in the 27 cells around `cell` (indices and coordinates) to the arrays, each
-  /// point once: whole bucket ranges, copied, for the neighbour search's candidate buffers.
-  void append_points_around_cell(const std::array<std::int32_t, 3>& cell, std::vector<Index>& index, std::vector<Real>& x,
-                                 std::vector<Real>& y, std::vector<Real>& z) const;
+  /// Appends the points in the 27 cells around `cell` (indices and coordinates) to the buffer's
+  /// candidates, each point once: whole bucket ranges, copied, for the neighbour search.
+  void append_points_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const;
 
   [[nodiscard]] Real cell_size() const { return cell_size_; }
   [[nodiscard]] std::size_t point_count() const { return sorted_index_.size(); }
@@ -117,13 +117,20 @@ void sort_by_cell(std::span<const Vec3> positions, std::size_t count, Real cell_
 
 // ---- template implementation ----
 inline int SpatialHashGrid::buckets_around_cell(const std::array<std::int32_t, 3>& cell, std::uint32_t (&buckets)[27]) const {
+  // Distinct cells rarely share a bucket: a 256-bit filter of the buckets seen so far sends only the
+  // few that may repeat one to the full comparison.
+  std::uint64_t seen_filter[4] = {0, 0, 0, 0};
   int count = 0;
   for (int dz = -1; dz <= 1; ++dz)
     for (int dy = -1; dy <= 1; ++dy)
       for (int dx = -1; dx <= 1; ++dx) {
         const std::uint32_t bucket = bucket_of_cell(cell[0] + dx, cell[1] + dy, cell[2] + dz);
+        const std::uint32_t bit = (bucket ^ (bucket >> 8)) & 255u;
+        const std::uint64_t mask = std::uint64_t(1) << (bit & 63u);
         bool seen = false;
-        for (int k = 0; k < count; ++k) seen |= (buckets[k] == bucket);
+        if (seen_filter[bit >> 6] & mask)
+          for (int k = 0; k < count; ++k) seen |= (buckets[k] == bucket);
+        seen_filter[bit >> 6] |= mask;
         if (!seen) buckets[count++] = bucket;
       }
   return count;
