@@ -162,7 +162,14 @@ struct State {
   std::vector<BoundaryBody> bodies;
   std::vector<NozzleState> nozzles;
 
-  SpatialHashGrid fluid_grid;
+  SpatialHashGrid fluid_grid;    // the active particles, every step
+  // The resting particles (neighbours too, but fixed): rebuilt only when the resting range, its
+  // particles or their positions changed (first index, ids and positions as built).
+  SpatialHashGrid resting_grid;
+  std::size_t resting_grid_first = 0;            // the first resting index when it was built
+  std::vector<Index> resting_grid_subset;
+  std::vector<std::uint64_t> resting_grid_ids;
+  std::vector<Vec3> resting_grid_positions;
   // Boundary particles in two grids: static bodies' sorted once (a large floor costs nothing per
   // step), moving bodies' every step, and only those bodies near the fluid or a nozzle (a robot
   // arm's upper links usually are not).
