@@ -1,8 +1,11 @@
 #pragma once
 // AVX2 versions of the solvers' hottest sums over a particle's neighbour list, on padded vectors
-// (Vec4, w = 0): two neighbours per 256-bit instruction. (The neighbour search's AVX2 filter uses
-// the same switch.) Chosen at run time (avx2::available()); the
-// build stays generic x86-64, so only these functions are compiled for AVX2 (GCC/Clang target
+// (Vec4, w = 0): two neighbours per 256-bit instruction where the sum is over vectors, eight (the
+// positions transposed to x, y and z lanes) where it needs distances or per-pair scalars. The
+// `..._rows` functions take a range of particles and call a `finish` for each, which inlines into
+// them: an AVX2 function cannot be inlined into generic code, and a call per particle cost as much
+// as its pairs. (The neighbour search's AVX2 filter uses the same switch.) Chosen at run time
+// (avx2::available()); the build stays generic x86-64, so only these functions are compiled for AVX2 (GCC/Clang target
 // attribute) and the rest of the program keeps Eigen's default alignment (which Debian's DART and
 // OpenVDB are built with). With FMA their results round differently from the generic loops: a run
 // is reproducible on one machine, not bit for bit across machines with and without AVX2.
