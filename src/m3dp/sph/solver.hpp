@@ -198,9 +198,10 @@ struct State {
 
   // Scratch reused every step (no allocation in the step once sized).
   std::vector<Real> kappa;           // (n) m κ of the current solver iteration
-  // Positions and velocities padded to Vec4 (w = 0) for the pressure solves' sweeps: one aligned load
-  // and one SIMD operation per neighbour (1.4–1.5× faster sweeps than with Vec3). The velocities go
-  // back to the particles after each solve. (n) each.
+  // Positions and velocities padded to Vec4 (w = 0) for the solvers' sweeps: one aligned load and one
+  // SIMD operation per neighbour (1.4–1.5× faster sweeps than with Vec3). The positions are packed once
+  // a step, in the density pass, and read until advection by the pressure solves, the shear rates and
+  // the implicit viscosity; the velocities are packed by each user and go back after each solve. (n) each.
   std::vector<Vec4> solver_position, solver_velocity;
   // Each particle's sums over its wall neighbours, taken in the density pass: they do not change until
   // advection (the walls' positions and velocities are fixed for the step), so the solves' sweeps

@@ -38,15 +38,15 @@ bool phase_needs_shear_rate(const FluidPhase& phase) {
   return phase.rheology.model != material::RheologyModel::newtonian || phase.ageing.enabled();
 }
 
-/// Runs body(i, sums) over every particle and returns the N sums (double), added in a fixed order:
-/// the same on every run, so two identical simulations stay identical.
-template <std::size_t N, class Body>
-std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
+/// Runs range_body(range, sums) over ranges of the particles and returns the N sums (double), added in a
+/// fixed order: the same on every run, so two identical simulations stay identical.
+template <std::size_t N, class RangeBody>
+std::array<double, N> deterministic_range_sums(std::size_t count, RangeBody&& range_body) {
   using Sums = std::array<double, N>;
   return tbb::parallel_deterministic_reduce(
       tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
       [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) body(i, sums);
+        range_body(range, sums);
         return sums;
       },
       [](Sums a, const Sums& b) {
@@ -55,21 +55,21 @@ std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
       });
 }
 
+/// body(i, sums) for every particle.
+template <std::size_t N, class Body>
+std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
+  return deterministic_range_sums<N>(count, [&](const tbb::blocked_range<std::size_t>& range, std::array<double, N>& sums) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) body(i, sums);
+  });
+}
+
 /// The same over the rows of a matrix-vector product: rows(range, visit) calls visit(i, y_i) for the
 /// range's particles in order, and body(i, y_i, sums) adds particle i's terms.
 template <std::size_t N, class Rows, class Body>
 std::array<double, N> deterministic_row_sums(std::size_t count, Rows&& rows, Body&& body) {
-  using Sums = std::array<double, N>;
-  return tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
-      [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
-        rows(range, [&](std::size_t i, const Vec3& row) { body(i, row, sums); });
-        return sums;
-      },
-      [](Sums a, const Sums& b) {
-        for (std::size_t n = 0; n < N; ++n) a[n] += b[n];
-        return a;
-      });
+  return deterministic_range_sums<N>(count, [&](const tbb::blocked_range<std::size_t>& range, std::array<double, N>& sums) {
+    rows(range, [&](std::size_t i, const Vec3& row) { body(i, row, sums); });
+  });
 }
 
 // Aggregates of the coarse level: cells of this many particle spacings (up to 512 particles). In the clay
@@ -370,8 +370,6 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   // A.x reads x at every neighbour: resting particles are fixed (zero velocity), so zero in the direction.
   system.padded_operand.resize(fluid.size());
   std::fill(system.padded_operand.begin() + static_cast<std::ptrdiff_t>(count), system.padded_operand.end(), Vec4::Zero());
-  state.solver_position.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_position[i] = padded(fluid.position[i]); }, 4096);
   system.inverse_diagonal.resize(count);
   system.own_block.resize(count);
 
@@ -442,7 +440,8 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     }
   });
 
-  // y = A x for particle i, x in system.padded_operand (padded: one SIMD operation per neighbour); the generic
+  // y = A x for particle i, x in system.padded_operand (padded: one SIMD operation per neighbour; the
+  // positions are the density pass's padded copies, unchanged until advection); the generic
   // loop of rows() below, which takes the AVX2 sweep where there is one.
   const Vec4* padded_position = state.solver_position.data();
   const Vec4* padded_operand = system.padded_operand.data();
