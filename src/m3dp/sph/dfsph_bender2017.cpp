@@ -42,14 +42,14 @@ struct SolverView {
   Real* kappa;  // m_i κ_i of the current iteration (mass-weighted: see the update)
   const State::WallSums* wall_sums;
   const std::uint16_t* neighbor_count;
-  const Index* fluid_neighbor;           // fluid lists, stride fluid_stride
+  const Index* fluid_neighbor;           // fluid lists, particle i's from fluid_first[i]
   const Index* fluid_neighbor_count;
   const Real* fluid_pair_gradient;       // V_j (dW/dr)/r per slot
-  Index fluid_stride;
+  const std::size_t* fluid_first;
   const Index* boundary_neighbor;
   const Index* boundary_neighbor_count;
   const Real* boundary_pair_gradient;
-  Index boundary_stride;
+  const std::size_t* boundary_first;
 };
 
 /// Copies the velocities into the padded array and returns the view of the solve (the padded positions
@@ -71,11 +71,11 @@ SolverView pack_for_solve(State& state) {
                     state.fluid_neighbors.indices.data(),
                     state.fluid_neighbors.counts.data(),
                     state.fluid_pair_gradient.data(),
-                    state.fluid_neighbors.stride,
+                    state.fluid_neighbors.firsts.data(),
                     state.boundary_neighbors.indices.data(),
                     state.boundary_neighbors.counts.data(),
                     state.boundary_pair_gradient.data(),
-                    state.boundary_neighbors.stride};
+                    state.boundary_neighbors.firsts.data()};
 }
 
 /// The solve's velocities back into the particles (only the active ones changed).
@@ -115,7 +115,7 @@ Real rate_with_walls(const SolverView& view, std::size_t i, const Vec4& fluid_la
 
 /// Σ_j V_j (v_i − v_j)·∇W_ij + Σ_b V_b (v_i − v_b)·∇W_ib: the rate of change of ρ_i/ρ0 (1/s), with minus sign.
 Real density_change_rate(const SolverView& view, std::size_t i) {
-  const std::size_t fluid_first = i * view.fluid_stride;
+  const std::size_t fluid_first = view.fluid_first[i];
   const Vec4 rate = velocity_position_products(view.velocity, view.position, view.fluid_neighbor + fluid_first,
                                                view.fluid_pair_gradient + fluid_first, view.fluid_neighbor_count[i], view.velocity[i],
                                                view.position[i]);
@@ -129,7 +129,7 @@ Real sum_over_rates(const SolverView& view, const tbb::blocked_range<std::size_t
   // One call for the range: a call per particle into the AVX2 code cost as much as its pairs.
   if (avx2::available())
     return avx2::difference_product_rows(range.begin(), range.end(), view.velocity, view.position, view.fluid_neighbor,
-                                         view.fluid_neighbor_count, view.fluid_stride, view.fluid_pair_gradient,
+                                         view.fluid_neighbor_count, view.fluid_first, view.fluid_pair_gradient,
                                          [&](std::size_t i, const Vec4& lanes) { return finish(i, rate_with_walls(view, i, lanes)); });
 #endif
   Real total = 0;
@@ -145,7 +145,7 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
       const Real weighted_kappa_i = view.kappa[i];  // m_i κ_i
       const Vec4 position_i = view.position[i];
       Vec4 momentum_change = Vec4::Zero();  // per Δt: m_i Δv_i / Δt (w stays 0)
-      const std::size_t fluid_first = i * view.fluid_stride;
+      const std::size_t fluid_first = view.fluid_first[i];
       const Index fluid_count = view.fluid_neighbor_count[i];
       for (Index k = 0; k < fluid_count; ++k) {
         const Index j = view.fluid_neighbor[fluid_first + k];
@@ -161,7 +161,7 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
           wrench.torque += weighted_kappa_i * walls.torque;
         } else {
           // Wall neighbours of several bodies (a corner where two meet): each body its own share.
-          const std::size_t boundary_first = i * view.boundary_stride;
+          const std::size_t boundary_first = view.boundary_first[i];
           for (Index k = 0; k < view.boundary_neighbor_count[i]; ++k) {
             const Index b = view.boundary_neighbor[boundary_first + k];
             const Vec3 force = (weighted_kappa_i * view.boundary_pair_gradient[boundary_first + k]) *
@@ -224,7 +224,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                const Real mass_i = fluid.mass[i];
                                Vec3 gradient_sum = Vec3::Zero();
                                Real gradient_squares = 0;
-                               const std::size_t fluid_first = i * fluid_lists.stride;
+                               const std::size_t fluid_first = fluid_lists.first(i);
                                Index k = 0;
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
                                if (use_avx2) {
@@ -249,7 +249,7 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  gradient_sum += gradient;
                                  gradient_squares += (mass_i / fluid.mass[j]) * gradient.squaredNorm();
                                }
-                               const std::size_t boundary_first = i * boundary_lists.stride;
+                               const std::size_t boundary_first = boundary_lists.first(i);
                                // The walls' sums for the solves' sweeps (State::WallSums).
                                State::WallSums walls{Vec4::Zero(), Vec3::Zero(), Real(0), State::kSeveralBodies};
                                for (Index k = 0; k < boundary_lists.counts[i]; ++k) {

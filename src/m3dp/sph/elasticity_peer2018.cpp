@@ -63,7 +63,7 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
       const Vec3 reference_i = fluid.reference_position[i];
       const Vec3 position_i = fluid.position[i];
       Mat3 moment = Mat3::Zero(), stretch = Mat3::Zero();
-      const std::size_t first = i * lists.stride;
+      const std::size_t first = lists.first(i);
       for (Index k = 0; k < lists.counts[i]; ++k) {
         const Index j = lists.indices[first + k];
         if (!same_material(i, j)) continue;
@@ -91,7 +91,7 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
       if (!parameters.phases[fluid.phase[i]].elasticity.enabled) return;
       const Vec3 reference_i = fluid.reference_position[i];
             Vec3 force = Vec3::Zero();
-      const std::size_t first = i * lists.stride;
+      const std::size_t first = lists.first(i);
       for (Index k = 0; k < lists.counts[i]; ++k) {
         const Index j = lists.indices[first + k];
         if (!same_material(i, j)) continue;

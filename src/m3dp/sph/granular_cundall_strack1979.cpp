@@ -70,7 +70,7 @@ void compute_granular_contacts(const Parameters& parameters, State& state, std::
       const Vec3 position_i = fluid.position[i];
       const Vec3 velocity_i = fluid.velocity[i];
       Vec3 force = Vec3::Zero();
-      const std::size_t fluid_first = i * fluid_lists.stride;
+      const std::size_t fluid_first = fluid_lists.first(i);
       for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
         const Index j = fluid_lists.indices[fluid_first + k];
         const Vec3 r = position_i - fluid.position[j];
@@ -81,7 +81,7 @@ void compute_granular_contacts(const Parameters& parameters, State& state, std::
       }
       // A wall does not move under the impact: the reduced mass is the particle's own.
       const ContactLaw wall_law = contact_law(contact_i, contact_i, mass_i);
-      const std::size_t boundary_first = i * boundary_lists.stride;
+      const std::size_t boundary_first = boundary_lists.first(i);
       for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
         const Index b = boundary_lists.indices[boundary_first + k];
         const Vec3 contact = contact_force(position_i - boundary.position[b], velocity_i - boundary.velocity[b], diameter, wall_law);

@@ -45,7 +45,7 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
         Vec3 curl_omega = Vec3::Zero(), curl_velocity = Vec3::Zero(), smoothed = Vec3::Zero();
         Real weight_sum = kernel.W_zero() * fluid.mass[i] / fluid.density[i];
         smoothed += weight_sum * omega_i;
-        const std::size_t fluid_first = i * fluid_lists.stride;
+        const std::size_t fluid_first = fluid_lists.first(i);
         for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
           const Index j = fluid_lists.indices[fluid_first + k];
           const Vec3 r = position_i - fluid.position[j];
@@ -57,7 +57,7 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
           smoothed += weight * fluid.angular_velocity[j];
           weight_sum += weight;
         }
-        const std::size_t boundary_first = i * boundary_lists.stride;
+        const std::size_t boundary_first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[boundary_first + k];
           const Vec3 r = position_i - boundary.position[b];

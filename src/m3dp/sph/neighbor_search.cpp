@@ -120,12 +120,6 @@ Index keep_candidates_within(NeighborLists::CandidateBuffer& buffer, const Vec3&
 
 }  // namespace
 
-std::size_t NeighborLists::total() const {
-  std::size_t sum = 0;
-  for (const Index count : counts) sum += count;
-  return sum;
-}
-
 void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
   build_points(positions, nullptr, positions.size(), cell_size);
 }
@@ -218,7 +212,7 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
   out.counts.resize(query_count);
   for (;;) {
     const std::size_t needed = query_count * out.stride;
-    if (out.indices.size() < needed) out.indices.resize(needed);
+    if (out.staging.size() < needed) out.staging.resize(needed);
     std::atomic<Index> most_needed{0};
     const Index stride = out.stride;
     const std::size_t order_count = query_order.empty() ? query_count : query_order.size();
@@ -241,7 +235,7 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
         const Index self = exclude_same_index ? static_cast<Index>(i) : std::numeric_limits<Index>::max();
         const Index count = keep_candidates_within(buffer, query, radius_squared, self);
         const Index* found = buffer.found.data();
-        std::copy_n(found, std::min(count, stride), out.indices.data() + i * stride);
+        std::copy_n(found, std::min(count, stride), out.staging.data() + i * stride);
         out.counts[i] = std::min(count, stride);
         if (count > stride) {
           Index previous = most_needed.load(std::memory_order_relaxed);
@@ -254,12 +248,26 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
     // Rare: a denser region than ever before. Grow and redo this search.
     out.stride = most_needed.load() + 16;
   }
-  // Keep each list sorted by index: neighbours then sit in memory order (after Z-order reordering).
-  if (!sort_lists) return;
-  parallel_for_each_index(query_count, [&](std::size_t i) {
-    Index* begin = out.indices.data() + i * out.stride;
-    std::sort(begin, begin + out.counts[i]);
-  }, 64);
+  // Pack the lists back to back in particle order (see NeighborLists).
+  out.firsts.resize(query_count);
+  std::size_t total = 0;
+  for (std::size_t i = 0; i < query_count; ++i) {
+    out.firsts[i] = total;
+    total += out.counts[i];
+  }
+  out.indices.resize(total);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, query_count, 512), [&](const tbb::blocked_range<std::size_t>& range) {
+    // One copy loop over the range, not a memmove call per list (a few dozen indices each).
+    Index* packed = out.indices.data() + out.firsts[range.begin()];
+    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+      const Index* staged = out.staging.data() + i * out.stride;
+      const Index count = out.counts[i];
+      for (Index k = 0; k < count; ++k) packed[k] = staged[k];
+      // Sorted by index, neighbours sit in memory order (after Z-order reordering).
+      if (sort_lists) std::sort(packed, packed + count);
+      packed += count;
+    }
+  });
 }
 
 namespace {

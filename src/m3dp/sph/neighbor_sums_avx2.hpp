@@ -70,10 +70,10 @@ __attribute__((target("avx2,fma"))) inline Vec4 difference_products(const Vec4* 
 template <class Finish>
 __attribute__((target("avx2,fma"))) inline Real difference_product_rows(std::size_t begin, std::size_t end, const Vec4* a, const Vec4* b,
                                                                          const Index* neighbor_lists, const Index* neighbor_counts,
-                                                                         std::size_t stride, const Real* weights, Finish&& finish) {
+                                                                         const std::size_t* firsts, const Real* weights, Finish&& finish) {
   Real total = 0;
   for (std::size_t i = begin; i < end; ++i)
-    total += finish(i, difference_products(a, b, neighbor_lists + i * stride, weights + i * stride, neighbor_counts[i], a[i], b[i]));
+    total += finish(i, difference_products(a, b, neighbor_lists + firsts[i], weights + firsts[i], neighbor_counts[i], a[i], b[i]));
   return total;
 }
 
@@ -84,11 +84,11 @@ __attribute__((target("avx2,fma"))) inline Real difference_product_rows(std::siz
 template <class Finish>
 __attribute__((target("avx2,fma"))) inline void viscous_product_rows(std::size_t begin, std::size_t end, const Vec4* position,
                                                                       const Vec4* operand, const Index* neighbor_lists,
-                                                                      const Index* neighbor_counts, std::size_t stride,
+                                                                      const Index* neighbor_counts, const std::size_t* firsts,
                                                                       const Real* coefficients, const Mat3* own_block, Finish&& finish) {
   for (std::size_t i = begin; i < end; ++i) {
-    const Index* neighbor = neighbor_lists + i * stride;
-    const Real* coefficient = coefficients + i * stride;
+    const Index* neighbor = neighbor_lists + firsts[i];
+    const Real* coefficient = coefficients + firsts[i];
     const Index count = neighbor_counts[i];
     const __m256 position_i = broadcast(position[i]), operand_i = broadcast(operand[i]);
     __m256 sum = _mm256_setzero_ps();
@@ -179,15 +179,15 @@ template <class Scale, class Finish>
 __attribute__((target("avx2,fma"))) inline void viscous_coefficient_rows(std::size_t begin, std::size_t end, const Vec4* position,
                                                                           const Real* viscosity, const Real* mass, const Real* density,
                                                                           const Index* neighbor_lists, const Index* neighbor_counts,
-                                                                          std::size_t stride, const Real* pair_gradients, Real regularisation,
+                                                                          const std::size_t* firsts, const Real* pair_gradients, Real regularisation,
                                                                           Real* coefficients, Scale&& scale, Finish&& finish) {
   const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   const __m256i neighbor_order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
   const __m256 epsilon = _mm256_set1_ps(regularisation);
   for (std::size_t i = begin; i < end; ++i) {
-    const Index* neighbor = neighbor_lists + i * stride;
-    const Real* pair_gradient = pair_gradients + i * stride;
-    Real* coefficient = coefficients + i * stride;
+    const Index* neighbor = neighbor_lists + firsts[i];
+    const Real* pair_gradient = pair_gradients + firsts[i];
+    Real* coefficient = coefficients + firsts[i];
     const Index count = neighbor_counts[i];
     const Real mu_i = viscosity[i], scale_i = scale(i);
     const __m256 center = broadcast(position[i]), mu_ii = _mm256_set1_ps(mu_i), numerator_i = _mm256_set1_ps(2 * scale_i * mu_i);
@@ -238,7 +238,7 @@ template <class Wants, class Finish>
 __attribute__((target("avx2,fma"))) inline void velocity_gradient_rows(std::size_t begin, std::size_t end, const Vec4* position,
                                                                         const Vec4* velocity, const Real* mass, const Real* density,
                                                                         const Index* neighbor_lists, const Index* neighbor_counts,
-                                                                        std::size_t stride, const Real* pair_gradients, Real scale,
+                                                                        const std::size_t* firsts, const Real* pair_gradients, Real scale,
                                                                         Wants&& wants, Finish&& finish) {
   const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   const __m256 minus_scale = _mm256_set1_ps(-scale);
@@ -247,8 +247,8 @@ __attribute__((target("avx2,fma"))) inline void velocity_gradient_rows(std::size
       finish(i, Mat3::Zero().eval());
       continue;
     }
-    const Index* neighbor = neighbor_lists + i * stride;
-    const Real* pair_gradient = pair_gradients + i * stride;
+    const Index* neighbor = neighbor_lists + firsts[i];
+    const Real* pair_gradient = pair_gradients + firsts[i];
     const Index count = neighbor_counts[i];
     const __m256 position_i = broadcast(position[i]), velocity_i = broadcast(velocity[i]);
     __m256 xx = _mm256_setzero_ps(), yy = xx, zz = xx, xy = xx, xz = xx, yz = xx;  // xy: Σ a_x r_y + a_y r_x, ...

@@ -477,9 +477,13 @@ void Solver::reserve(std::size_t capacity) {
   state_.scratch_u16.reserve(capacity);
   state_.scratch_u64.reserve(capacity);
   state_.fluid_neighbors.counts.reserve(capacity);
+  state_.fluid_neighbors.firsts.reserve(capacity);
   state_.fluid_neighbors.indices.reserve(capacity * state_.fluid_neighbors.stride);
+  state_.fluid_neighbors.staging.reserve(capacity * state_.fluid_neighbors.stride);
   state_.boundary_neighbors.counts.reserve(capacity);
+  state_.boundary_neighbors.firsts.reserve(capacity);
   state_.boundary_neighbors.indices.reserve(capacity * state_.boundary_neighbors.stride);
+  state_.boundary_neighbors.staging.reserve(capacity * state_.boundary_neighbors.stride);
   auto& system = state_.viscosity_system;
   system.fluid_pair_coefficient.reserve(capacity * state_.fluid_neighbors.stride);
   system.boundary_pair_coefficient.reserve(capacity * state_.boundary_neighbors.stride);

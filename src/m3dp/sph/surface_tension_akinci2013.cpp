@@ -117,7 +117,7 @@ void add_wall_adhesion(const Parameters& parameters, State& state, const Surface
       const Real rest_density_i = fluid.mass[i] * inverse_volume;
       const Real beta = calibration.adhesion_per_work * phase_i.adhesion / (rest_density_i * rest_density_i);
       Vec3 acceleration = Vec3::Zero();
-      const std::size_t boundary_first = i * boundary_lists.stride;
+      const std::size_t boundary_first = boundary_lists.first(i);
       for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
         const Index b = boundary_lists.indices[boundary_first + k];
         const Vec3 r = fluid.position[i] - boundary.position[b];
@@ -159,7 +159,7 @@ void add_akinci_surface_tension(const Parameters& parameters, State& state, cons
     const Real density_ratio_i = fluid.density[i] * volume / fluid.mass[i];  // ρ_i/ρ0_i
     const Real rest_density_i = fluid.mass[i] * inverse_volume;
     Vec3 acceleration = Vec3::Zero();
-    const std::size_t fluid_first = i * fluid_lists.stride;
+    const std::size_t fluid_first = fluid_lists.first(i);
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = fluid_lists.indices[fluid_first + k];
       const Real tension = Real(0.5) * (phase_i.surface_tension + parameters.phases[fluid.phase[j]].surface_tension);
@@ -187,13 +187,13 @@ Vec3 colour_gradient(const State& state, std::size_t i, Real rest_volume) {
   // The pair factor holds V (dW/dr)/r with V the rest volume; m_j/ρ_j = (m_j/(V ρ_j)) V.
   const Real inverse_volume = rest_volume > 0 ? 1 / rest_volume : Real(0);
   Vec3 sum = Vec3::Zero();
-  const std::size_t first = i * fluid_lists.stride;
+  const std::size_t first = fluid_lists.first(i);
   for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
     const Index j = fluid_lists.indices[first + k];
     const Real scale = rest_volume > 0 ? fluid.mass[j] * inverse_volume / fluid.density[j] : Real(1);
     sum += (scale * state.fluid_pair_gradient[first + k]) * (fluid.position[i] - fluid.position[j]);
   }
-  const std::size_t boundary_first = i * boundary_lists.stride;
+  const std::size_t boundary_first = boundary_lists.first(i);
   for (Index k = 0; k < boundary_lists.counts[i]; ++k)
     sum += state.boundary_pair_gradient[boundary_first + k] *
            (fluid.position[i] - state.boundary.position[boundary_lists.indices[boundary_first + k]]);

@@ -187,7 +187,7 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
     const Real magnitude = colour_gradient[i].norm();
     if (!(magnitude > threshold)) return;
     const Vec3 outward = -colour_gradient[i] / magnitude;
-    const std::size_t first = i * fluid_lists.stride;
+    const std::size_t first = fluid_lists.first(i);
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Vec3 r = fluid.position[fluid_lists.indices[first + k]] - fluid.position[i];
       if (r.dot(outward) > cone_cosine * r.norm()) return;
@@ -195,7 +195,7 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
     // Walls are left out of the cone: the particle in the corner between a drop's side and the floor
     // would be hidden by the floor, and, without a pull, the drop's pressure pushed it out under the rim.
     // (A face lying on a wall is no surface: there ∇c, with the wall in it, stays under the threshold.)
-    const std::size_t boundary_first = i * boundary_lists.stride;
+    const std::size_t boundary_first = boundary_lists.first(i);
     outermost[i] = 1;
     // The wall next to it, if any: its direction (towards the wall particles) and a point of its
     // geometric surface, a radius in front of the nearest wall particle along it.
@@ -261,7 +261,7 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
         weighted = kernel.W_zero() * layer_curvature[i];
         weights = kernel.W_zero();
       }
-      const std::size_t first = i * fluid_lists.stride;
+      const std::size_t first = fluid_lists.first(i);
       for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
         const Index j = fluid_lists.indices[first + k];
         if (outermost[j] != kFitted || colour_gradient[j].dot(colour_gradient[i]) <= 0) continue;

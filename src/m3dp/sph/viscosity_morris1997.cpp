@@ -42,7 +42,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
       {
         Vec3 viscous = Vec3::Zero();
         const Real mu_i = fluid.viscosity[i];
-        const std::size_t first = i * fluid_lists.stride;
+        const std::size_t first = fluid_lists.first(i);
         for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
           const Index j = fluid_lists.indices[first + k];
           const Vec3 r = position_i - fluid.position[j];
@@ -55,7 +55,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
       if (phase.has_wall_friction()) {
         const Real wall_viscosity = phase.wall_viscosity(fluid.viscosity[i]);
         const Real mass_i = fluid.mass[i];
-        const std::size_t first = i * boundary_lists.stride;
+        const std::size_t first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[first + k];
           const Vec3 r = position_i - boundary.position[b];

@@ -142,7 +142,7 @@ class CoarseLevel {
           // A_ii less the pairs inside the aggregate (which move with it and cancel exactly): the part
           // that acts on x_i alone, and the pairs to resting particles (fixed) or other aggregates.
           Eigen::Matrix3d own = own_block(i).template cast<double>();
-          const std::size_t first = i * lists.stride;
+          const std::size_t first = lists.first(i);
           for (Index slot = 0; slot < lists.counts[i]; ++slot) {
             const Index j = lists.indices[first + slot];
             const Index other = j < count ? system.aggregate_of[j] : Index(aggregate);
@@ -270,7 +270,7 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
       if (phase.has_wall_friction()) {
         const Vec3 position_i = fluid.position[i];
         const Vec3 velocity_i = fluid.velocity[i];
-        const std::size_t boundary_first = i * boundary_lists.stride;
+        const std::size_t boundary_first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[boundary_first + k];
           gradient += (calibration.boundary_gradient * state.boundary_pair_gradient[boundary_first + k] * (boundary.velocity[b] - velocity_i)) *
@@ -300,7 +300,7 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
         if (use_avx2) {
           avx2::velocity_gradient_rows(range.begin(), range.end(), state.solver_position.data(), state.solver_velocity.data(),
                                        fluid.mass.data(), fluid.density.data(), fluid_lists.indices.data(), fluid_lists.counts.data(),
-                                       fluid_lists.stride, state.fluid_pair_gradient.data(), calibration.fluid_gradient * inverse_volume,
+                                       fluid_lists.firsts.data(), state.fluid_pair_gradient.data(), calibration.fluid_gradient * inverse_volume,
                                        wants_shear_rate,
                                        [&](std::size_t i, const Mat3& gradient) { largest = std::max(largest, finish_particle(i, gradient)); });
           return largest;
@@ -311,7 +311,7 @@ Real update_effective_viscosity(const Parameters& parameters, State& state, cons
           if (wants_shear_rate(i)) {
             const Vec3 position_i = fluid.position[i];
             const Vec3 velocity_i = fluid.velocity[i];
-            const std::size_t fluid_first = i * fluid_lists.stride;
+            const std::size_t fluid_first = fluid_lists.first(i);
             for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
               const Index j = fluid_lists.indices[fluid_first + k];
               const Real weight =
@@ -389,7 +389,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const Real volume_i = mass_i / fluid.density[i];
     Mat3 own_block = mass_i * Mat3::Identity();  // the mass and the walls' coupling
     Vec3 rhs = mass_i * fluid.velocity[i];
-    const std::size_t boundary_first = i * boundary_lists.stride;
+    const std::size_t boundary_first = boundary_lists.first(i);
     for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
       Real coefficient = 0;
       if (phase.has_wall_friction()) {
@@ -415,7 +415,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
     if (avx2::available()) {
       avx2::viscous_coefficient_rows(range.begin(), range.end(), state.solver_position.data(), fluid.viscosity.data(), fluid.mass.data(),
-                                     fluid.density.data(), fluid_lists.indices.data(), fluid_lists.counts.data(), fluid_lists.stride,
+                                     fluid.density.data(), fluid_lists.indices.data(), fluid_lists.counts.data(), fluid_lists.firsts.data(),
                                      state.fluid_pair_gradient.data(), regularisation, system.fluid_pair_coefficient.data(), pair_scale,
                                      finish_particle);
       return;
@@ -425,7 +425,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
       const Vec3 position_i = fluid.position[i];
       const Real mu_i = fluid.viscosity[i], scale_i = pair_scale(i);
       Mat3 fluid_coupling = Mat3::Zero();
-      const std::size_t fluid_first = i * fluid_lists.stride;
+      const std::size_t fluid_first = fluid_lists.first(i);
       for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
         const Index j = fluid_lists.indices[fluid_first + k];
         const Vec3 r = position_i - fluid.position[j];
@@ -449,7 +449,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     const Vec4 position_i = padded_position[i];
     const Vec4 x_i = padded_operand[i];
     Vec4 result = Vec4::Zero();
-    const std::size_t fluid_first = i * fluid_lists.stride;
+    const std::size_t fluid_first = fluid_lists.first(i);
     const Index* neighbor = fluid_lists.indices.data() + fluid_first;
     const Real* coefficient = system.fluid_pair_coefficient.data() + fluid_first;
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
@@ -465,7 +465,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
     if (avx2::available()) {
       avx2::viscous_product_rows(range.begin(), range.end(), padded_position, padded_operand, fluid_lists.indices.data(),
-                                 fluid_lists.counts.data(), fluid_lists.stride, system.fluid_pair_coefficient.data(),
+                                 fluid_lists.counts.data(), fluid_lists.firsts.data(), system.fluid_pair_coefficient.data(),
                                  system.own_block.data(), visit);
       return;
     }
@@ -581,7 +581,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
       std::vector<Wrench>& wrenches = thread_body_wrenches(state);
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-        const std::size_t boundary_first = i * boundary_lists.stride;
+        const std::size_t boundary_first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Real coefficient = system.boundary_pair_coefficient[boundary_first + k];
           if (coefficient == 0) continue;
