@@ -143,25 +143,28 @@ TEST(ImplicitViscosity, TheCoarseLevelSolvesTheSameSystemInFewerIterations) {
   solver.add_particles(sph::lattice_in_box(Aabb{Vec3(-0.03f, -0.03f, 0), Vec3(0.03f, 0.03f, 0.03f)}, d), Vec3::Zero(), 0);
   while (solver.time() < 0.04) solver.step();  // landed: the floor stops it and it starts to spread
   sph::State saved = solver.state();
-  // From a cold start (no warm start from the last step's viscous change): the whole solve.
-  std::fill(saved.fluid.viscous_change.begin(), saved.fluid.viscous_change.end(), Vec3::Zero());
+  // The compared solves start cold (from v*): the whole solve. From the last step's solution, how many
+  // iterations remain depends on how close the blended start happens to land (4 or 36 with block
+  // Jacobi, with rounding), not on the preconditioner.
+  parameters.settings.warm_start = false;
+  sph::Solver cold(parameters);
   saved.viscosity_system.previous_iterations = 0;  // block Jacobi alone
-  solver.restore(saved);
-  const int jacobi_iterations = solver.step().viscosity_iterations;
-  const std::vector<Vec3> jacobi_velocity = solver.fluid().velocity;
+  cold.restore(saved);
+  const int jacobi_iterations = cold.step().viscosity_iterations;
+  const std::vector<Vec3> jacobi_velocity = cold.fluid().velocity;
   saved.viscosity_system.previous_iterations = 1000;  // with the coarse level
-  solver.restore(saved);
-  const int two_level_iterations = solver.step().viscosity_iterations;
+  cold.restore(saved);
+  const int two_level_iterations = cold.step().viscosity_iterations;
   double largest_speed = 0, largest_difference = 0;
   for (std::size_t i = 0; i < jacobi_velocity.size(); ++i) {
     largest_speed = std::max(largest_speed, double(jacobi_velocity[i].norm()));
-    largest_difference = std::max(largest_difference, double((solver.fluid().velocity[i] - jacobi_velocity[i]).norm()));
+    largest_difference = std::max(largest_difference, double((cold.fluid().velocity[i] - jacobi_velocity[i]).norm()));
   }
   std::printf("%zu particles, 1e4 Pa s, 1 ms step: %d CG iterations with block Jacobi, %d with the coarse level; "
               "velocities differ by at most %.2f %% of the fastest (%.3g m/s)\n",
               jacobi_velocity.size(), jacobi_iterations, two_level_iterations, 100 * largest_difference / largest_speed,
               largest_speed);
-  EXPECT_LT(two_level_iterations, 0.6 * jacobi_iterations);  // measured 19 against 38
+  EXPECT_LT(two_level_iterations, 0.6 * jacobi_iterations);  // measured 19 against 39
   EXPECT_LT(largest_difference, 0.05 * largest_speed);
 }
 

@@ -65,7 +65,7 @@ struct SolverSettings {
   // for a settled flow; 1 forced iteration cost 6 of 12 ms a step in the 47k dam break).
   int min_divergence_iterations = 0;
   bool divergence_solver = true;
-  bool warm_start = true;
+  bool warm_start = true;                     // the solves start from the last step's solution (false: cold, v* and κ = 0)
   Aabb bounds;                                // particles leaving it are removed (m)
   Real max_speed = 100;                       // m/s; faster means the state exploded
   int reorder_interval = 32;                  // steps between Z-order reorderings

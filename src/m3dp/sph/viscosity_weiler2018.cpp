@@ -408,7 +408,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
     // Warm start: v* plus last step's viscous change. A stiff paste's viscosity undoes nearly the same
     // pressure-driven spreading every step, so this guess is close and CG needs far fewer iterations.
     system.start_velocity[i] = fluid.velocity[i];
-    fluid.velocity[i] += fluid.viscous_change[i];
+    if (settings.warm_start) fluid.velocity[i] += fluid.viscous_change[i];
     system.padded_operand[i] = padded(fluid.velocity[i]);
   };
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
@@ -510,7 +510,7 @@ int solve_implicit_viscosity(const Parameters& parameters, State& state, Real ti
   // tolerance, and a blend with the last solution, small as it is (3 % in a sessile water drop), would
   // take part of this step's kicks away without an iteration to put them back (the drop then shed 8 %).
   constexpr double kFarOff = 10;
-  if (residual_norm > kFarOff * settings.viscosity_tolerance * std::sqrt(start[0])) {
+  if (settings.warm_start && residual_norm > kFarOff * settings.viscosity_tolerance * std::sqrt(start[0])) {
     parallel_for_each_index(count, [&](std::size_t i) { system.padded_operand[i] = padded(fluid.viscous_velocity[i]); }, 1024);
     // v_A = velocity, r_A = residual; v_B = viscous_velocity, r_B into product. A v = b − r.
     const auto sums = deterministic_row_sums<5>(count, rows, [&](std::size_t i, const Vec3& row, std::array<double, 5>& sums) {
