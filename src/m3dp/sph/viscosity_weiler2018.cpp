@@ -94,7 +94,6 @@ constexpr int kCoarseLevelFromIterations = 12;
 class CoarseLevel {
  public:
   using Block = Eigen::Matrix<double, 6, 6>;
-  using Basis = Eigen::Matrix<double, 3, 6>;
 
   /// Groups the active particles into aggregates and factorises A_c, from A's pair coefficients c (a
   /// pair's block is c r rᵀ) and `own_block(i)`, the part of A that acts on x_i alone (m_i I and walls).
@@ -136,33 +135,65 @@ class CoarseLevel {
         Block* blocks = block_.data() + aggregate * kMaxCoarseNeighbours;
         std::size_t used = 1;
         neighbours[0] = static_cast<Index>(aggregate);
+        // Particle i's pairs to an earlier aggregate B add −Σ_j c (P_iᵀ r)(P_jᵀ r)ᵀ to block (A, B), with
+        // Pᵀ r = (r, d × r), d = x − c: that is [[S, T], [d_i]×[S, T]] with S = Σ_j c r rᵀ and
+        // T = Σ_j c r (d_j × r)ᵀ, summed per B in single precision (a few pairs each) and then
+        // added once (a 6×6 product in double per pair cost most of the build).
+        std::array<Index, kMaxCoarseNeighbours> group_other;
+        std::array<Mat3, kMaxCoarseNeighbours> group_s, group_t;
         for (Index k = system.aggregate_start[aggregate]; k < system.aggregate_start[aggregate + 1]; ++k) {
           const std::size_t i = system.aggregate_order[k];
-          const Basis basis_i = basis(fluid.position[i], aggregate);
+          const Vec3 position_i = fluid.position[i];
           // A_ii less the pairs inside the aggregate (which move with it and cancel exactly): the part
           // that acts on x_i alone, and the pairs to resting particles (fixed) or other aggregates.
-          Eigen::Matrix3d own = own_block(i).template cast<double>();
+          Mat3 own = own_block(i);
+          std::size_t groups = 0;
           const std::size_t first = lists.first(i);
           for (Index slot = 0; slot < lists.counts[i]; ++slot) {
             const Index j = lists.indices[first + slot];
             const Index other = j < count ? system.aggregate_of[j] : Index(aggregate);
             if (j < count && other == aggregate) continue;
-            const Eigen::Vector3d r = (fluid.position[i] - fluid.position[j]).template cast<double>();
-            const double coefficient = double(system.fluid_pair_coefficient[first + slot]);
-            own.noalias() += coefficient * r * r.transpose();
+            const Vec3 r = position_i - fluid.position[j];
+            const Vec3 scaled = system.fluid_pair_coefficient[first + slot] * r;
+            const Mat3 pair_block = scaled * r.transpose();
+            own += pair_block;
             // Only the lower triangle of A_c is factorised: the blocks of aggregates after this one are
-            // not needed (half the pairs' 6×6 products).
+            // not needed.
             if (j >= count || other > aggregate) continue;
+            std::size_t group = 0;
+            while (group < groups && group_other[group] != other) ++group;
+            if (group == groups) {
+              group_other[groups++] = other;
+              group_s[group].setZero();
+              group_t[group].setZero();
+            }
+            group_s[group] += pair_block;
+            group_t[group] += scaled * system.aggregate_offset[j].cross(r).transpose();
+          }
+          const Eigen::Vector3d offset_i = system.aggregate_offset[i].template cast<double>();
+          Eigen::Matrix3d cross_i;  // [d_i]×
+          cross_i << 0, -offset_i.z(), offset_i.y(), offset_i.z(), 0, -offset_i.x(), -offset_i.y(), offset_i.x(), 0;
+          for (std::size_t group = 0; group < groups; ++group) {
+            const Index other = group_other[group];
             std::size_t at = 1;
             while (at < used && neighbours[at] != other) ++at;
             if (at == used) {
               if (used == kMaxCoarseNeighbours) continue;  // cannot happen with cells ≥ the support radius
               neighbours[used++] = other;
             }
-            // P_iᵀ (c r rᵀ) P_j = c (P_iᵀ r)(P_jᵀ r)ᵀ, with Pᵀ r = (r, (x − c) × r).
-            blocks[at].noalias() -= coefficient * (basis_i.transpose() * r) * (basis(fluid.position[j], other).transpose() * r).transpose();
+            const Eigen::Matrix3d pairs_s = group_s[group].template cast<double>(), pairs_t = group_t[group].template cast<double>();
+            blocks[at].template topLeftCorner<3, 3>() -= pairs_s;
+            blocks[at].template topRightCorner<3, 3>() -= pairs_t;
+            blocks[at].template bottomLeftCorner<3, 3>() -= cross_i * pairs_s;
+            blocks[at].template bottomRightCorner<3, 3>() -= cross_i * pairs_t;
           }
-          blocks[0].noalias() += basis_i.transpose() * own * basis_i;
+          // P_iᵀ O P_i with P_i = [I  −[d_i]×]: [[O, −O [d_i]×], [[d_i]× O, −[d_i]× O [d_i]×]].
+          const Eigen::Matrix3d own_d = own.template cast<double>();
+          const Eigen::Matrix3d own_cross = own_d * cross_i;
+          blocks[0].template topLeftCorner<3, 3>() += own_d;
+          blocks[0].template topRightCorner<3, 3>() -= own_cross;
+          blocks[0].template bottomLeftCorner<3, 3>() -= own_cross.transpose();  // [d]× O = −(O [d]×)ᵀ, O symmetric
+          blocks[0].template bottomRightCorner<3, 3>() -= cross_i * own_cross;
         }
         // An aggregate of one or two particles (or a line of them) has a rotation nothing resists: A_c
         // would be singular there, and its factorisation sent the coarse correction astray (CG needed
@@ -226,16 +257,6 @@ class CoarseLevel {
   }
 
  private:
-  /// P_i = [I  −[x − c]×]: the velocity at x of the aggregate's translation t and rotation ω.
-  [[nodiscard]] Basis basis(const Vec3& position, std::size_t aggregate) const {
-    const Eigen::Vector3d d = position.cast<double>() - centroid_[aggregate];
-    Basis result;
-    result << 1, 0, 0, 0, d.z(), -d.y(),  //
-        0, 1, 0, -d.z(), 0, d.x(),        //
-        0, 0, 1, d.y(), -d.x(), 0;
-    return result;
-  }
-
   std::size_t aggregates_ = 0;
   std::vector<Eigen::Vector3d> centroid_;
   std::vector<Index> neighbour_, used_;
