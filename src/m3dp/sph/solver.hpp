@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <memory>
 #include <vector>
 
 #include "m3dp/core/types.hpp"
@@ -151,6 +152,27 @@ struct Wrench {
 };
 
 /// Everything that changes during a run.
+namespace stages {
+class CoarseViscosityLevel;  // the implicit viscosity's coarse level (viscosity_weiler2018.cpp)
+
+/// Owns the coarse level between solves (its buffers, and the factorisation's analysis, reused while
+/// A_c keeps its pattern). A copy (a State snapshot) copies it, so a restored state steps as the
+/// original would.
+class CoarseViscosityLevelHolder {
+ public:
+  CoarseViscosityLevelHolder();
+  CoarseViscosityLevelHolder(const CoarseViscosityLevelHolder& other);
+  CoarseViscosityLevelHolder(CoarseViscosityLevelHolder&& other) noexcept;
+  CoarseViscosityLevelHolder& operator=(const CoarseViscosityLevelHolder& other);
+  CoarseViscosityLevelHolder& operator=(CoarseViscosityLevelHolder&& other) noexcept;
+  ~CoarseViscosityLevelHolder();
+  CoarseViscosityLevel& get();  // made on first use
+
+ private:
+  std::unique_ptr<CoarseViscosityLevel> level_;
+};
+}  // namespace stages
+
 struct State {
   FluidParticles fluid;
   // The first active_count particles are simulated; the rest have come to rest (rest_detection) and
@@ -243,6 +265,7 @@ struct State {
     std::vector<double> coarse_residual, coarse_correction;  // (6 × aggregates: translation, rotation)
     std::vector<Real> coarse_motion;              // coarse_correction in single precision, for the per-particle sweep
     int previous_iterations = 0;                  // CG iterations of the last solve (whether to build the coarse level)
+    stages::CoarseViscosityLevelHolder coarse_level;
   } viscosity_system;
   std::vector<Mat3> elastic_stress;  // (n) R σ L of elastic particles this step (Peer et al. 2018)
   std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij, or the colour gradient ∇c of the CSF
