@@ -156,8 +156,8 @@ namespace stages {
 class CoarseViscosityLevel;  // the implicit viscosity's coarse level (viscosity_weiler2018.cpp)
 
 /// Owns the coarse level between solves (its buffers, and the factorisation's analysis, reused while
-/// A_c keeps its pattern). A copy (a State snapshot) copies it, so a restored state steps as the
-/// original would.
+/// A_c keeps its pattern). A copy (a State snapshot) starts with an empty one: every solve builds the
+/// level again, and a restored state steps as the original would.
 class CoarseViscosityLevelHolder {
  public:
   CoarseViscosityLevelHolder();

@@ -92,18 +92,11 @@ constexpr int kCoarseLevelFromIterations = 12;
 /// P_i = [I  −[x_i − c]×] (v_i = t + ω × (x_i − c), c the aggregate's centroid) and A_c = Pᵀ A P,
 /// built and factorised for every solve (six unknowns per aggregate of up to 512 particles). It lives
 /// in the solver's state: its buffers are reused, and so is the factorisation's symbolic analysis
-/// (the AMD ordering, 0.66 of 1.5 ms in the clay bench) while A_c keeps its pattern. Rigid motions are what the viscous term cannot see: a
-/// pair's c r rᵀ (v_i − v_j) vanishes for a common translation and for a common rotation.
+/// (the AMD ordering, 0.66 of 1.5 ms in the clay bench) while A_c keeps its pattern. Rigid motions
+/// are what the viscous term cannot see: a pair's c r rᵀ (v_i − v_j) vanishes for a common
+/// translation and for a common rotation.
 class CoarseViscosityLevel {
  public:
-  CoarseViscosityLevel() = default;
-  /// A copy factorises the copied A_c again (Eigen's factorisations do not copy).
-  CoarseViscosityLevel(const CoarseViscosityLevel& other)
-      : aggregates_(other.aggregates_), centroid_(other.centroid_), matrix_(other.matrix_),
-        pattern_outer_(other.pattern_outer_), pattern_inner_(other.pattern_inner_) {
-    if (!pattern_outer_.empty()) factorisation_.compute(matrix_);
-  }
-  CoarseViscosityLevel& operator=(const CoarseViscosityLevel&) = delete;
   using Block = Eigen::Matrix<double, 6, 6>;
 
   /// Groups the active particles into aggregates and factorises A_c, from A's pair coefficients c (a
@@ -291,11 +284,12 @@ class CoarseViscosityLevel {
 };
 
 CoarseViscosityLevelHolder::CoarseViscosityLevelHolder() = default;
-CoarseViscosityLevelHolder::CoarseViscosityLevelHolder(const CoarseViscosityLevelHolder& other)
-    : level_(other.level_ ? std::make_unique<CoarseViscosityLevel>(*other.level_) : nullptr) {}
+// A copy starts with a level of its own, empty: every solve builds the level again, and a fresh
+// analysis of the same pattern gives the same factorisation (Eigen's factorisations do not copy).
+CoarseViscosityLevelHolder::CoarseViscosityLevelHolder(const CoarseViscosityLevelHolder& /*other*/) {}
 CoarseViscosityLevelHolder::CoarseViscosityLevelHolder(CoarseViscosityLevelHolder&& other) noexcept = default;
 CoarseViscosityLevelHolder& CoarseViscosityLevelHolder::operator=(const CoarseViscosityLevelHolder& other) {
-  if (this != &other) level_ = other.level_ ? std::make_unique<CoarseViscosityLevel>(*other.level_) : nullptr;
+  if (this != &other) level_.reset();
   return *this;
 }
 CoarseViscosityLevelHolder& CoarseViscosityLevelHolder::operator=(CoarseViscosityLevelHolder&& other) noexcept = default;
