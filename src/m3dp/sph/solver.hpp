@@ -9,9 +9,9 @@
 #include <chrono>
 #include <limits>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
-#include <memory>
 #include <vector>
 
 #include "m3dp/core/types.hpp"
@@ -151,7 +151,6 @@ struct Wrench {
   Vec3 torque = Vec3::Zero();
 };
 
-/// Everything that changes during a run.
 namespace stages {
 class CoarseViscosityLevel;  // the implicit viscosity's coarse level (viscosity_weiler2018.cpp)
 
@@ -173,6 +172,7 @@ class CoarseViscosityLevelHolder {
 };
 }  // namespace stages
 
+/// Everything that changes during a run.
 struct State {
   FluidParticles fluid;
   // The first active_count particles are simulated; the rest have come to rest (rest_detection) and
