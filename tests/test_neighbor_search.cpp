@@ -1,8 +1,10 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <numeric>
 #include <random>
 
+#include "m3dp/core/error.hpp"
 #include "m3dp/sph/neighbor_search.hpp"
 
 using namespace m3dp;
@@ -107,4 +109,110 @@ TEST(NeighborSearch, MortonCodeOrdersByOctant) {
   EXPECT_LT(morton_code(1, 1, 1), morton_code(2, 0, 0));
   EXPECT_LT(morton_code(-1, -1, -1), morton_code(0, 0, 0));
   EXPECT_EQ(morton_code(0, 1, 0), morton_code(0, 0, 0) + 2 * (morton_code(1, 0, 0) - morton_code(0, 0, 0)));
+}
+
+namespace {
+/// A fluid of active and resting particles beside static and moving boundary particles, for the kept
+/// lists: the grids as the solver keeps them (cells of radius + skin).
+struct KeptListsScene {
+  static constexpr Real kRadius = Real(0.08), kSkin = Real(0.01);
+  static constexpr std::size_t kActive = 2000, kResting = 500, kStatic = 800, kMoving = 300;
+  std::mt19937 random{5};
+  std::vector<Vec3> fluid, boundary;
+  std::vector<std::uint64_t> ids;
+  std::vector<Index> resting_subset, static_subset, moving_subset;
+  SpatialHashGrid resting_grid, static_grid, moving_grid;
+  SkinnedNeighborSearch search;
+  NeighborLists fluid_lists, boundary_lists;
+
+  KeptListsScene() {
+    std::uniform_real_distribution<float> coordinate(0, 1);
+    fluid.resize(kActive + kResting);
+    for (auto& p : fluid) p = Vec3(coordinate(random), coordinate(random), coordinate(random));
+    boundary.resize(kStatic + kMoving);
+    for (auto& p : boundary) p = Vec3(coordinate(random), coordinate(random), coordinate(random));
+    ids.resize(fluid.size());
+    std::iota(ids.begin(), ids.end(), std::uint64_t(100));
+    for (Index k = kActive; k < fluid.size(); ++k) resting_subset.push_back(k);
+    for (Index k = 0; k < boundary.size(); ++k) (k < kStatic ? static_subset : moving_subset).push_back(k);
+    resting_grid.build(fluid, resting_subset, kRadius + kSkin);
+    static_grid.build(boundary, static_subset, kRadius + kSkin);
+  }
+  bool update(std::size_t max_movers) {
+    moving_grid.build(boundary, moving_subset, kRadius + kSkin);
+    SkinnedNeighborSearch::Inputs inputs;
+    inputs.fluid_positions = fluid;
+    inputs.fluid_ids = ids;
+    inputs.active_count = kActive;
+    inputs.resting_grid = &resting_grid;
+    inputs.static_boundary_grid = &static_grid;
+    inputs.moving_boundary_grid = &moving_grid;
+    inputs.boundary_positions = boundary;
+    inputs.moving_boundary_indices = moving_subset;
+    return search.update(inputs, kRadius, kSkin, max_movers, fluid_lists, boundary_lists);
+  }
+  /// Every active particle's lists hold exactly its neighbours within the radius (any order), and
+  /// the fluid pairs between active particles come from both ends.
+  void expect_exact_lists() const {
+    for (std::size_t i = 0; i < kActive; ++i) {
+      auto fluid_span = fluid_lists.of(i);
+      std::vector<Index> got(fluid_span.begin(), fluid_span.end());
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, brute_force(fluid, fluid[i], kRadius, i)) << "fluid list of particle " << i;
+      for (const Index j : got)
+        if (j < kActive) {
+          const auto back = fluid_lists.of(j);
+          ASSERT_NE(std::find(back.begin(), back.end(), Index(i)), back.end()) << "pair " << i << "-" << j << " from one end only";
+        }
+      auto boundary_span = boundary_lists.of(i);
+      got.assign(boundary_span.begin(), boundary_span.end());
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, brute_force(boundary, fluid[i], kRadius, boundary.size())) << "boundary list of particle " << i;
+    }
+  }
+};
+}  // namespace
+
+TEST(SkinnedNeighborSearch, KeptListsStayExactWhileParticlesDriftAFewJumpAndBodiesMove) {
+  KeptListsScene scene;
+  EXPECT_TRUE(scene.update(50));  // the first update searches
+  scene.expect_exact_lists();
+  const std::vector<Vec3> searched_at(scene.fluid.begin(), scene.fluid.end());
+  std::uniform_real_distribution<float> unit(-1, 1);
+  std::uniform_int_distribution<std::size_t> pick(0, KeptListsScene::kActive - 1);
+  for (int step = 1; step <= 6; ++step) {
+    // Every active particle within skin/2 of where the search saw it (kept lists must hold), 30 of them
+    // anywhere nearby (movers), and the moving body's particles anywhere.
+    const Real drift = Real(0.45) * KeptListsScene::kSkin / std::sqrt(Real(3));
+    for (std::size_t i = 0; i < KeptListsScene::kActive; ++i)
+      scene.fluid[i] = searched_at[i] + drift * Vec3(unit(scene.random), unit(scene.random), unit(scene.random));
+    for (int n = 0; n < 30; ++n) scene.fluid[pick(scene.random)] += Real(0.1) * Vec3(unit(scene.random), unit(scene.random), unit(scene.random));
+    for (std::size_t k = KeptListsScene::kStatic; k < scene.boundary.size(); ++k)
+      scene.boundary[k] += Real(0.05) * Vec3(unit(scene.random), unit(scene.random), unit(scene.random));
+    EXPECT_FALSE(scene.update(50)) << "step " << step << ": the lists should have been kept";
+    EXPECT_GT(scene.search.mover_count(), 20u);
+    scene.expect_exact_lists();
+  }
+  // Too many movers: a new search, and lists as exact.
+  for (int n = 0; n < 200; ++n) scene.fluid[pick(scene.random)] += Real(0.1) * Vec3(unit(scene.random), unit(scene.random), unit(scene.random));
+  EXPECT_TRUE(scene.update(50));
+  EXPECT_EQ(scene.search.mover_count(), 0u);
+  scene.expect_exact_lists();
+  // Reordered particles (the ids moved): a new search.
+  std::swap(scene.fluid[3], scene.fluid[7]);
+  std::swap(scene.ids[3], scene.ids[7]);
+  EXPECT_TRUE(scene.update(50));
+  scene.expect_exact_lists();
+  EXPECT_FALSE(scene.update(50));
+}
+
+TEST(SkinnedNeighborSearch, RefusesGridsWithoutTheSkin) {
+  KeptListsScene scene;
+  scene.static_grid.build(scene.boundary, scene.static_subset, KeptListsScene::kRadius);
+  try {
+    scene.update(50);
+    FAIL() << "expected an error";
+  } catch (const Error& error) {
+    EXPECT_NE(std::string(error.what()).find("radius + skin"), std::string::npos) << error.what();
+  }
 }

@@ -90,6 +90,7 @@ void time_steps(sim::Simulation& simulation, const BenchOptions& options) {
   for (int i = 0; i < options.warmup_steps; ++i) simulation.step();
   sph::StageTimes sum;
   double particle_steps = 0, density_iterations = 0, divergence_iterations = 0, viscosity_iterations = 0, simulated = 0;
+  const std::uint64_t searches_before = solver.state().neighbor_searches;
   const auto start = std::chrono::steady_clock::now();
   for (int i = 0; i < options.steps; ++i) {
     const auto& stats = simulation.step();
@@ -109,6 +110,8 @@ void time_steps(sim::Simulation& simulation, const BenchOptions& options) {
              options.steps, seconds, particle_steps / seconds, 1000 * seconds / n, simulated / n, simulated / seconds);
   fmt::print("iterations per step: density {:.2f}, divergence {:.2f}, viscosity {:.2f}\n", density_iterations / n,
              divergence_iterations / n, viscosity_iterations / n);
+  fmt::print("neighbour searches: {} in {} steps (the others kept the lists, skin {} support radii)\n",
+             solver.state().neighbor_searches - searches_before, options.steps, solver.parameters().settings.neighbor_skin);
   fmt::print("stage,ms_per_step\n");
   const std::pair<const char*, double> stages[] = {
       {"bodies", sum.bodies},   {"remove", sum.remove},   {"emit", sum.emit},         {"reorder", sum.reorder},

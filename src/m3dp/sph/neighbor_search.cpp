@@ -10,6 +10,9 @@
 #include <bit>
 #include <limits>
 
+#include <fmt/format.h>
+
+#include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 
 #include "m3dp/sph/neighbor_sums_avx2.hpp"  // avx2::available() and the intrinsics
@@ -248,7 +251,11 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
     // Rare: a denser region than ever before. Grow and redo this search.
     out.stride = most_needed.load() + 16;
   }
-  // Pack the lists back to back in particle order (see NeighborLists).
+  pack_staged_lists(out, query_count, sort_lists);
+}
+
+void pack_staged_lists(NeighborLists& out, std::size_t query_count, bool sort_lists) {
+  // Back to back in particle order (see NeighborLists).
   out.firsts.resize(query_count);
   std::size_t total = 0;
   for (std::size_t i = 0; i < query_count; ++i) {
@@ -268,6 +275,232 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
       packed += count;
     }
   });
+}
+
+namespace {
+
+/// Fills `lists` with `count` fixed-stride lists: fill(k, slots, stride) writes list k into slots (at
+/// most `stride` of them) and returns its full length. A list that did not fit grows the stride and
+/// the whole pass runs again (rare: a denser region than ever before).
+template <class Fill>
+void fill_staged_lists(NeighborLists& lists, std::size_t count, std::size_t grain, Fill&& fill) {
+  lists.counts.resize(count);
+  for (;;) {
+    const Index stride = lists.stride;
+    if (lists.staging.size() < count * stride) lists.staging.resize(count * stride);
+    std::atomic<Index> most_needed{0};
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, grain), [&](const tbb::blocked_range<std::size_t>& range) {
+      for (std::size_t k = range.begin(); k != range.end(); ++k) {
+        const Index found = fill(k, lists.staging.data() + k * stride, stride);
+        lists.counts[k] = std::min(found, stride);
+        if (found > stride) {
+          Index previous = most_needed.load(std::memory_order_relaxed);
+          while (found > previous && !most_needed.compare_exchange_weak(previous, found)) {
+          }
+        }
+      }
+    });
+    if (most_needed.load() == 0) return;
+    lists.stride = most_needed.load() + 16;
+  }
+}
+
+/// Squared distance written out term by term: the same value from either end of a pair (a − b and
+/// b − a round alike), so a pair is kept from both ends or from neither.
+inline Real distance_squared(const Vec3& a, const Vec3& b) {
+  const Real dx = a.x() - b.x(), dy = a.y() - b.y(), dz = a.z() - b.z();
+  return dx * dx + dy * dy + dz * dz;
+}
+
+}  // namespace
+
+bool SkinnedNeighborSearch::update(const Inputs& inputs, Real radius, Real skin, std::size_t max_movers,
+                                   NeighborLists& fluid_out, NeighborLists& boundary_out) {
+  const std::size_t active = inputs.active_count;
+  const std::span<const Vec3> positions = inputs.fluid_positions;
+  const Real cell_size = radius + skin;
+  for (const SpatialHashGrid* grid : {inputs.resting_grid, inputs.static_boundary_grid, inputs.moving_boundary_grid})
+    if (grid->point_count() > 0 && grid->cell_size() != cell_size)
+      throw Error(fmt::format("SkinnedNeighborSearch: a grid's cells are {} m, not radius + skin = {} m", grid->cell_size(), cell_size));
+  bool search_anew = !valid_ || radius != radius_ || skin != skin_ || active != active_count_ ||
+                     inputs.fixed_grids_version != fixed_grids_version_ || ids_.size() != inputs.fluid_ids.size() ||
+                     !std::equal(ids_.begin(), ids_.end(), inputs.fluid_ids.begin());
+  is_mover_.resize(positions.size());
+  movers_.clear();
+  if (!search_anew) {
+    // With |Δx_i| + |Δx_j| ≤ skin a pair now within r was within r + skin at the search. A hair under
+    // half the skin: the bound must survive rounding.
+    const Real limit = Real(0.499) * skin;
+    const Real limit_squared = limit * limit;
+    const std::size_t mover_total = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, active, 2048), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
+          for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            const bool moved = distance_squared(positions[i], reference_positions_[i]) > limit_squared;
+            is_mover_[i] = moved;
+            found += moved;
+          }
+          return found;
+        },
+        std::plus<std::size_t>());
+    search_anew = mover_total > max_movers;
+    if (!search_anew && mover_total > 0)
+      for (std::size_t i = 0; i < active; ++i)
+        if (is_mover_[i]) movers_.push_back(static_cast<Index>(i));
+  }
+  if (search_anew) search(inputs, radius, skin);
+  std::fill(is_mover_.begin() + std::ptrdiff_t(active), is_mover_.end(), std::uint8_t(0));
+
+  const Real radius_squared = radius * radius;
+  find_mover_lists(inputs, radius_squared);
+  find_moving_boundary_pairs(inputs, radius_squared);
+  filter_lists(fluid_superset_, positions, positions, radius_squared, !movers_.empty(), mover_fluid_, added_fluid_, fluid_out);
+  filter_lists(boundary_superset_, inputs.boundary_positions, positions, radius_squared, false, mover_boundary_, added_boundary_,
+               boundary_out);
+  return search_anew;
+}
+
+void SkinnedNeighborSearch::search(const Inputs& inputs, Real radius, Real skin) {
+  const std::size_t active = inputs.active_count;
+  const std::span<const Vec3> active_positions = inputs.fluid_positions.first(active);
+  active_grid_.build(active_positions, radius + skin);
+  const std::span<const Index> query_order = active_grid_.points_in_grid_order();
+  const SpatialHashGrid* fluid_grids[] = {&active_grid_, inputs.resting_grid};
+  find_neighbors(fluid_grids, active_positions, radius + skin, true, fluid_superset_, false, query_order);
+  const SpatialHashGrid* static_grids[] = {inputs.static_boundary_grid};
+  find_neighbors(static_grids, active_positions, radius + skin, false, boundary_superset_, false, query_order);
+  reference_positions_.assign(active_positions.begin(), active_positions.end());
+  ids_.assign(inputs.fluid_ids.begin(), inputs.fluid_ids.end());
+  radius_ = radius;
+  skin_ = skin;
+  active_count_ = active;
+  fixed_grids_version_ = inputs.fixed_grids_version;
+  std::fill(is_mover_.begin(), is_mover_.end(), std::uint8_t(0));
+  movers_.clear();
+  valid_ = true;
+}
+
+void SkinnedNeighborSearch::find_mover_lists(const Inputs& inputs, Real radius_squared) {
+  const std::span<const Vec3> positions = inputs.fluid_positions;
+  mover_slot_.resize(inputs.active_count);
+  for (std::size_t k = 0; k < movers_.size(); ++k) mover_slot_[movers_[k]] = static_cast<Index>(k);
+  // A mover's fluid neighbours: the others in the kept grids (where they were, within skin/2 of where
+  // they are, so inside the 27 cells of r + skin) and the other movers, which may be anywhere.
+  fill_staged_lists(mover_fluid_, movers_.size(), 16, [&](std::size_t k, Index* slots, Index stride) {
+    const Index mover = movers_[k];
+    const Vec3 position = positions[mover];
+    Index found = 0;
+    auto keep = [&](Index j) {
+      if (distance_squared(positions[j], position) >= radius_squared) return;
+      if (found < stride) slots[found] = j;
+      ++found;
+    };
+    const auto cell = active_grid_.cell_of(position);
+    for (const SpatialHashGrid* grid : {static_cast<const SpatialHashGrid*>(&active_grid_), inputs.resting_grid})
+      grid->for_each_point_around_cell(cell, [&](Index j, const Vec3&) {
+        if (!is_mover_[j]) keep(j);
+      });
+    for (const Index other : movers_)
+      if (other != mover) keep(other);
+    return found;
+  });
+  // Its boundary neighbours: every boundary grid holds its particles where they are.
+  fill_staged_lists(mover_boundary_, movers_.size(), 16, [&](std::size_t k, Index* slots, Index stride) {
+    const Vec3 position = positions[movers_[k]];
+    Index found = 0;
+    const auto cell = active_grid_.cell_of(position);
+    for (const SpatialHashGrid* grid : {inputs.static_boundary_grid, inputs.moving_boundary_grid})
+      grid->for_each_point_around_cell(cell, [&](Index b, const Vec3& point) {
+        if (distance_squared(point, position) >= radius_squared) return;
+        if (found < stride) slots[found] = b;
+        ++found;
+      });
+    return found;
+  });
+  // Each mover's pairs with particles that are not movers join those particles' lists.
+  auto& added = added_fluid_;
+  added.firsts.assign(inputs.active_count + 1, 0);
+  for (std::size_t k = 0; k < movers_.size(); ++k)
+    for (std::size_t n = 0; n < mover_fluid_.counts[k]; ++n) {
+      const Index j = mover_fluid_.staging[k * mover_fluid_.stride + n];
+      if (j < inputs.active_count && !is_mover_[j]) ++added.firsts[j + 1];
+    }
+  for (std::size_t i = 0; i < inputs.active_count; ++i) added.firsts[i + 1] += added.firsts[i];
+  added.items.resize(added.firsts.back());
+  added.cursor.assign(added.firsts.begin(), added.firsts.end() - 1);
+  for (std::size_t k = 0; k < movers_.size(); ++k)
+    for (std::size_t n = 0; n < mover_fluid_.counts[k]; ++n) {
+      const Index j = mover_fluid_.staging[k * mover_fluid_.stride + n];
+      if (j < inputs.active_count && !is_mover_[j]) added.items[added.cursor[j]++] = movers_[k];
+    }
+}
+
+void SkinnedNeighborSearch::find_moving_boundary_pairs(const Inputs& inputs, Real radius_squared) {
+  const std::span<const Vec3> positions = inputs.fluid_positions;
+  const std::span<const Index> moving = inputs.moving_boundary_indices;
+  // Each moving boundary particle's active fluid neighbours that are not movers (those searched the
+  // moving grid themselves), found in the kept grid as the movers find theirs.
+  fill_staged_lists(moving_boundary_hits_, moving.size(), 64, [&](std::size_t k, Index* slots, Index stride) {
+    const Vec3 position = inputs.boundary_positions[moving[k]];
+    Index found = 0;
+    active_grid_.for_each_point_around_cell(active_grid_.cell_of(position), [&](Index j, const Vec3&) {
+      if (is_mover_[j] || distance_squared(positions[j], position) >= radius_squared) return;
+      if (found < stride) slots[found] = j;
+      ++found;
+    });
+    return found;
+  });
+  auto& added = added_boundary_;
+  added.firsts.assign(inputs.active_count + 1, 0);
+  const Index stride = moving_boundary_hits_.stride;
+  for (std::size_t k = 0; k < moving.size(); ++k)
+    for (std::size_t n = 0; n < moving_boundary_hits_.counts[k]; ++n) ++added.firsts[moving_boundary_hits_.staging[k * stride + n] + 1];
+  for (std::size_t i = 0; i < inputs.active_count; ++i) added.firsts[i + 1] += added.firsts[i];
+  added.items.resize(added.firsts.back());
+  added.cursor.assign(added.firsts.begin(), added.firsts.end() - 1);
+  for (std::size_t k = 0; k < moving.size(); ++k)
+    for (std::size_t n = 0; n < moving_boundary_hits_.counts[k]; ++n) {
+      const Index j = moving_boundary_hits_.staging[k * stride + n];
+      added.items[added.cursor[j]++] = moving[k];
+    }
+}
+
+void SkinnedNeighborSearch::filter_lists(const NeighborLists& superset, std::span<const Vec3> neighbor_positions,
+                                         std::span<const Vec3> positions, Real radius_squared, bool skip_movers,
+                                         const NeighborLists& mover_lists, const AddedPairs& added, NeighborLists& out) const {
+  fill_staged_lists(out, active_count_, 256, [&](std::size_t i, Index* slots, Index stride) {
+    if (is_mover_[i]) {
+      const std::size_t slot = mover_slot_[i];
+      const Index count = mover_lists.counts[slot];
+      std::copy_n(mover_lists.staging.data() + slot * mover_lists.stride, std::min(count, stride), slots);
+      return count;
+    }
+    const Vec3 position = positions[i];
+    const std::span<const Index> candidates = superset.of(i);
+    const std::size_t added_count = added.firsts[i + 1] - added.firsts[i];
+    Index found = 0;
+    if (candidates.size() + added_count <= stride) {
+      // Branch-free: about three candidates in four are kept, irregularly.
+      for (const Index j : candidates) {
+        slots[found] = j;
+        found += static_cast<Index>((distance_squared(neighbor_positions[j], position) < radius_squared) &
+                                    !(skip_movers && is_mover_[j]));
+      }
+      std::copy_n(added.items.data() + added.firsts[i], added_count, slots + found);
+      return found + static_cast<Index>(added_count);
+    }
+    for (const Index j : candidates)
+      if (distance_squared(neighbor_positions[j], position) < radius_squared && !(skip_movers && is_mover_[j])) {
+        if (found < stride) slots[found] = j;
+        ++found;
+      }
+    for (std::size_t n = added.firsts[i]; n < added.firsts[i + 1]; ++n) {
+      if (found < stride) slots[found] = added.items[n];
+      ++found;
+    }
+    return found;
+  });
+  pack_staged_lists(out, active_count_, false);
 }
 
 namespace {

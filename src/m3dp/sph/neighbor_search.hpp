@@ -115,6 +115,75 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
                     bool exclude_same_index, NeighborLists& out, bool sort_lists = true,
                     std::span<const Index> query_order = {});
 
+/// Packs the fixed-stride lists in out.staging (out.counts of the first `count` particles) back to back
+/// in particle order into out.indices and out.firsts; with `sort_lists` each list in index order.
+void pack_staged_lists(NeighborLists& out, std::size_t count, bool sort_lists);
+
+/// Neighbour lists kept across steps with a skin (Verlet lists): one search of radius r + skin gives
+/// every particle a superset of its neighbours, and while no two particles have together moved more
+/// than the skin since, every pair within r is in it; a step's lists are then the superset's pairs
+/// still within r, found without the grids. For slow material: a settled print costs its 27-cell
+/// search once in many steps.
+///
+/// A few fast particles ("movers", farther than skin/2 from where they were at the search: a strand
+/// falling from the nozzle onto a settled print) do not force a new search. They search the kept grids
+/// themselves, and their pairs join their neighbours' lists. Moving bodies' boundary particles never
+/// enter the supersets: each step they search the kept fluid grid the same way.
+///
+/// The lists hold the same pairs as a search of radius r would give (in another order: summation
+/// order only), symmetric, and the same for any number of threads.
+class SkinnedNeighborSearch {
+ public:
+  struct Inputs {
+    std::span<const Vec3> fluid_positions;          // every fluid particle; the first active_count query
+    std::span<const std::uint64_t> fluid_ids;       // to notice added, removed and reordered particles
+    std::size_t active_count = 0;
+    const SpatialHashGrid* resting_grid = nullptr;  // fixed fluid neighbours that do not query
+    const SpatialHashGrid* static_boundary_grid = nullptr;
+    const SpatialHashGrid* moving_boundary_grid = nullptr;
+    std::span<const Vec3> boundary_positions;
+    std::span<const Index> moving_boundary_indices;  // the boundary particles in moving_boundary_grid
+    std::uint64_t fixed_grids_version = 0;           // changes whenever the resting or static grid changed
+  };
+  /// This step's lists of radius `radius` (m) into fluid_out and boundary_out, as find_neighbors with
+  /// lists in grid order would give them. The three grids' cells must be radius + skin. Searches anew
+  /// when the particles or the fixed grids changed, or when more than max_movers moved too far;
+  /// returns true when it did.
+  bool update(const Inputs& inputs, Real radius, Real skin, std::size_t max_movers, NeighborLists& fluid_out,
+              NeighborLists& boundary_out);
+  /// The next update searches anew.
+  void invalidate() { valid_ = false; }
+  [[nodiscard]] std::size_t mover_count() const { return movers_.size(); }
+
+ private:
+  /// Each particle's pairs from the movers' searches (fluid) or the moving boundary particles' (boundary),
+  /// as lists by particle: items[firsts[i], firsts[i + 1]).
+  struct AddedPairs {
+    std::vector<Index> firsts, cursor, items;
+  };
+  void search(const Inputs& inputs, Real radius, Real skin);
+  void find_mover_lists(const Inputs& inputs, Real radius_squared);
+  void find_moving_boundary_pairs(const Inputs& inputs, Real radius_squared);
+  void filter_lists(const NeighborLists& superset, std::span<const Vec3> neighbor_positions, std::span<const Vec3> positions,
+                    Real radius_squared, bool skip_movers, const NeighborLists& mover_lists, const AddedPairs& added,
+                    NeighborLists& out) const;
+
+  bool valid_ = false;
+  Real radius_ = 0, skin_ = 0;
+  std::uint64_t fixed_grids_version_ = 0;
+  std::size_t active_count_ = 0;
+  std::vector<std::uint64_t> ids_;
+  std::vector<Vec3> reference_positions_;  // the active particles' at the search
+  SpatialHashGrid active_grid_;            // the active particles at the search
+  NeighborLists fluid_superset_, boundary_superset_;  // radius r + skin; boundary: static bodies only
+  std::vector<std::uint8_t> is_mover_;     // (fluid particles)
+  std::vector<Index> movers_;              // in index order
+  std::vector<Index> mover_slot_;          // (active) a mover's place in movers_
+  NeighborLists mover_fluid_, mover_boundary_;  // fixed-stride lists of the movers, by slot
+  NeighborLists moving_boundary_hits_;     // fixed-stride: each moving boundary particle's fluid particles
+  AddedPairs added_fluid_, added_boundary_;
+};
+
 /// 63-bit Morton (Z-order) code of a grid cell; used to reorder particles so neighbours sit near in memory.
 std::uint64_t morton_code(std::int32_t x, std::int32_t y, std::int32_t z);
 /// The first `count` positions in Z-order of cells of size `cell_size`: keys[i] is the Morton code of

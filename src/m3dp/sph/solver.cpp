@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <chrono>
 #include <cmath>
 #include <numeric>
@@ -20,6 +21,12 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double elapsed_ms(Clock::time_point since) {
   return std::chrono::duration<double, std::milli>(Clock::now() - since).count();
+}
+
+/// Fast particles that kept neighbour lists tolerate (SkinnedNeighborSearch): each searches the grids
+/// itself and all of them pairwise, so a few hundred cost less than a new search of every particle.
+std::size_t most_movers(std::size_t active_count) {
+  return std::clamp<std::size_t>(active_count / 64, 32, 1024);
 }
 
 /// Disc samples on a square lattice of spacing `spacing` inside radius D/2 (at least the centre).
@@ -167,6 +174,8 @@ Solver::Solver(Parameters parameters) : parameters_(std::move(parameters)) {
       boundary_volume_scale_ * wall_share(settings.kernel, support_radius(), wall_spacing, Real(1.1) * settings.particle_radius);
   derive_material_data();
   state_.time_step = settings.max_time_step;
+  if (!(settings.neighbor_skin >= 0)) throw Error(fmt::format("sph::Solver: neighbor_skin must be >= 0, got {}", settings.neighbor_skin));
+  state_.search_cell_size = support_radius();
 }
 
 void Solver::derive_material_data() {
@@ -522,6 +531,7 @@ const StepStats& Solver::step() {
   const auto& settings = parameters_.settings;
   auto start = Clock::now();
 
+  choose_neighbor_search();
   update_bodies();
   stats.stage_ms.bodies = elapsed_ms(start);
 
@@ -691,18 +701,20 @@ Real Solver::step_granular(StepStats& stats) {
 void Solver::update_bodies() {
   auto& boundary = state_.boundary;
   const Real support = support_radius();
+  const Real cell_size = state_.search_cell_size;
   if (state_.static_boundary_dirty) {
+    ++state_.fixed_grids_version;
     state_.static_boundary_indices.clear();
     for (const auto& body : state_.bodies)
       if (body.is_static)
         for (Index k = 0; k < body.particle_count; ++k) state_.static_boundary_indices.push_back(body.first_particle + k);
-    state_.static_boundary_grid.build(boundary.position, state_.static_boundary_indices, support);
+    state_.static_boundary_grid.build(boundary.position, state_.static_boundary_indices, cell_size);
     state_.static_boundary_dirty = false;
   }
   state_.moving_boundary_indices.clear();
   const bool any_moving = std::any_of(state_.bodies.begin(), state_.bodies.end(), [](const BoundaryBody& body) { return !body.is_static; });
   if (!any_moving) {
-    state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, support);
+    state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, cell_size);
     return;
   }
   // Where fluid can be this step: around the particles and every nozzle that is extruding. A
@@ -753,7 +765,7 @@ void Solver::update_bodies() {
         state_.moving_boundary_indices.push_back(body.first_particle + k);
     }
   }
-  state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, support);
+  state_.moving_boundary_grid.build(boundary.position, state_.moving_boundary_indices, cell_size);
 }
 
 void Solver::remove_out_of_bounds(StepStats& stats) {
@@ -928,8 +940,59 @@ void Solver::reorder() {
   });
 }
 
+void Solver::choose_neighbor_search() {
+  const auto& settings = parameters_.settings;
+  const Real support = support_radius();
+  const Real skin = settings.neighbor_skin * support;
+  const std::size_t active = state_.active_count;
+  bool use_skin = state_.skin_in_use;
+  if (!(skin > 0)) {
+    use_skin = false;
+  } else if (use_skin) {
+    // Kept lists searched anew in half of the last eight steps cost more than a search every step.
+    if (std::popcount(state_.recent_searches & 0xffu) >= 4) {
+      use_skin = false;
+      // Each switch rebuilds the fixed grids for the other cell size: where kept lists keep failing
+      // soon (a print whose resting set changes every few steps), they are tried ever more rarely.
+      const bool failed_soon = state_.step - state_.skin_since_step < 64;
+      state_.skin_backoff = failed_soon ? std::min(2 * state_.skin_backoff, 4096) : 64;
+      state_.skin_cooldown = state_.skin_backoff;
+    }
+  } else if (state_.skin_cooldown > 0) {
+    --state_.skin_cooldown;
+  } else {
+    // Would kept lists last? A particle that moves more than skin/8 a step leaves its skin/2 within
+    // four steps; a few of them (a falling strand) search for themselves, many force new searches.
+    const Real step_limit = skin / 8 / state_.time_step;
+    const Real speed_limit_squared = step_limit * step_limit;
+    const std::size_t fast = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, active, 4096), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
+          for (std::size_t i = range.begin(); i != range.end(); ++i) found += state_.fluid.velocity[i].squaredNorm() > speed_limit_squared;
+          return found;
+        },
+        std::plus<std::size_t>());
+    state_.calm_steps = fast <= most_movers(active) ? state_.calm_steps + 1 : 0;
+    if (state_.calm_steps >= 8) use_skin = true;
+  }
+  if (use_skin != state_.skin_in_use) {
+    state_.skin_in_use = use_skin;
+    state_.skin_since_step = state_.step;
+    state_.calm_steps = 0;
+    state_.recent_searches = 0;
+    state_.skinned_search.invalidate();
+  }
+  // Lists of radius support + skin need cells as large in every grid.
+  const Real cell_size = use_skin ? support + skin : support;
+  if (cell_size != state_.search_cell_size) {
+    state_.search_cell_size = cell_size;
+    state_.static_boundary_dirty = true;
+  }
+}
+
 void Solver::search_neighbors() {
   const Real support = support_radius();
+  const Real cell_size = state_.search_cell_size;
   const auto& fluid = state_.fluid;
   const std::size_t active_count = state_.active_count;
   // The active particles in one grid, every step; the resting ones (neighbours too) in another, built
@@ -938,21 +1001,41 @@ void Solver::search_neighbors() {
   // Lists stay in grid order, which is as deterministic: sorting them by index cost 12 of 43 ms per
   // step in the 47k dam break and made the solver's sweeps no faster.
   const std::span<const Vec3> active(fluid.position.data(), active_count);
-  state_.fluid_grid.build(active, support);
   const std::size_t resting_count = fluid.size() - active_count;
   const bool resting_changed =
       state_.resting_grid_first != active_count || state_.resting_grid_ids.size() != resting_count ||
+      state_.resting_grid.cell_size() != cell_size ||
       !std::equal(state_.resting_grid_ids.begin(), state_.resting_grid_ids.end(), fluid.id.begin() + std::ptrdiff_t(active_count)) ||
       !std::equal(state_.resting_grid_positions.begin(), state_.resting_grid_positions.end(),
                   fluid.position.begin() + std::ptrdiff_t(active_count));
   if (resting_changed) {
+    ++state_.fixed_grids_version;
     state_.resting_grid_first = active_count;  // the grid holds indices, not ids
     state_.resting_grid_ids.assign(fluid.id.begin() + std::ptrdiff_t(active_count), fluid.id.end());
     state_.resting_grid_positions.assign(fluid.position.begin() + std::ptrdiff_t(active_count), fluid.position.end());
     state_.resting_grid_subset.resize(resting_count);
     std::iota(state_.resting_grid_subset.begin(), state_.resting_grid_subset.end(), static_cast<Index>(active_count));
-    state_.resting_grid.build(fluid.position, state_.resting_grid_subset, support);
+    state_.resting_grid.build(fluid.position, state_.resting_grid_subset, cell_size);
   }
+  if (state_.skin_in_use) {
+    SkinnedNeighborSearch::Inputs inputs;
+    inputs.fluid_positions = fluid.position;
+    inputs.fluid_ids = fluid.id;
+    inputs.active_count = active_count;
+    inputs.resting_grid = &state_.resting_grid;
+    inputs.static_boundary_grid = &state_.static_boundary_grid;
+    inputs.moving_boundary_grid = &state_.moving_boundary_grid;
+    inputs.boundary_positions = state_.boundary.position;
+    inputs.moving_boundary_indices = state_.moving_boundary_indices;
+    inputs.fixed_grids_version = state_.fixed_grids_version;
+    const bool searched = state_.skinned_search.update(inputs, support, cell_size - support, most_movers(active_count),
+                                                       state_.fluid_neighbors, state_.boundary_neighbors);
+    state_.recent_searches = (state_.recent_searches << 1) | (searched ? 1u : 0u);
+    state_.neighbor_searches += searched;
+    return;
+  }
+  ++state_.neighbor_searches;
+  state_.fluid_grid.build(active, cell_size);
   // Queries in the active grid's order: a cell's particles come together and share one candidate
   // gather (in index order they drift apart between reorderings).
   const std::span<const Index> query_order = state_.fluid_grid.points_in_grid_order();

@@ -70,6 +70,10 @@ struct SolverSettings {
   Aabb bounds;                                // particles leaving it are removed (m)
   Real max_speed = 100;                       // m/s; faster means the state exploded
   int reorder_interval = 32;                  // steps between Z-order reorderings
+  // Neighbour lists kept across steps (SkinnedNeighborSearch) with this skin, a fraction of the support
+  // radius, while the material is slow: each step the solver predicts from the speeds whether they
+  // would last, and returns to a search every step where they did not (a splash). 0: never.
+  Real neighbor_skin = Real(0.1);
   ViscositySolver viscosity_solver = ViscositySolver::implicit_weiler2018;
   Real viscosity_tolerance = Real(1e-2);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
   int max_viscosity_iterations = 300;
@@ -200,6 +204,18 @@ struct State {
   bool static_boundary_dirty = true;
   std::vector<Index> static_boundary_indices;
   std::vector<Index> moving_boundary_indices;  // this step's: particles of the moving bodies near the fluid
+  // Every grid's cell: the support radius, or support + skin while lists are kept across steps.
+  Real search_cell_size = 0;
+  std::uint64_t fixed_grids_version = 0;  // counts rebuilds of the resting and static boundary grids
+  // Lists kept across steps for slow material (SolverSettings::neighbor_skin) and when to use them.
+  SkinnedNeighborSearch skinned_search;
+  bool skin_in_use = false;
+  int calm_steps = 0;                 // consecutive steps the speeds predicted kept lists to last
+  int skin_cooldown = 0;              // steps before kept lists may be tried again
+  int skin_backoff = 64;              // the next cooldown: doubles each time kept lists fail soon
+  std::int64_t skin_since_step = 0;   // the step the last switch happened
+  std::uint32_t recent_searches = 0;  // bit k: the kept lists were searched anew k steps ago
+  std::uint64_t neighbor_searches = 0;  // steps that searched the grids for every particle (all, without kept lists)
   NeighborLists fluid_neighbors;     // fluid → fluid
   NeighborLists boundary_neighbors;  // fluid → boundary
   // Per neighbour pair (same slots as the lists), filled with the densities each step:
@@ -389,6 +405,9 @@ class Solver {
   /// Wakes resting material whose load has grown towards its yield stress (and the column above it).
   void wake_loaded_rest();
   void reorder();
+  /// Whether this step keeps neighbour lists from earlier steps (slow material) or searches anew,
+  /// and every grid's cell size for it.
+  void choose_neighbor_search();
   void search_neighbors();
   void keep_out_of_boundaries();
   void check_state() const;
