@@ -468,39 +468,47 @@ void SkinnedNeighborSearch::find_moving_boundary_pairs(const Inputs& inputs, Rea
 void SkinnedNeighborSearch::filter_lists(const NeighborLists& superset, std::span<const Vec3> neighbor_positions,
                                          std::span<const Vec3> positions, Real radius_squared, bool skip_movers,
                                          const NeighborLists& mover_lists, const AddedPairs& added, NeighborLists& out) const {
-  fill_staged_lists(out, active_count_, 256, [&](std::size_t i, Index* slots, Index stride) {
-    if (is_mover_[i]) {
-      const std::size_t slot = mover_slot_[i];
-      const Index count = mover_lists.counts[slot];
-      std::copy_n(mover_lists.staging.data() + slot * mover_lists.stride, std::min(count, stride), slots);
-      return count;
-    }
-    const Vec3 position = positions[i];
-    const std::span<const Index> candidates = superset.of(i);
-    const std::size_t added_count = added.firsts[i + 1] - added.firsts[i];
-    Index found = 0;
-    if (candidates.size() + added_count <= stride) {
-      // Branch-free: about three candidates in four are kept, irregularly.
-      for (const Index j : candidates) {
-        slots[found] = j;
-        found += static_cast<Index>((distance_squared(neighbor_positions[j], position) < radius_squared) &
-                                    !(skip_movers && is_mover_[j]));
+  // Written in place, without staging and packing: each block of particles gets room for its lists'
+  // longest possible lengths (superset plus added pairs, or a mover's own list) and fills it from the
+  // front. The lists are back to back within a block, with the unused room after it; the sweeps read
+  // lists by firsts and counts, and a gap every few hundred lists does not slow them.
+  constexpr std::size_t kBlock = 512;
+  const std::size_t count = active_count_;
+  out.counts.resize(count);
+  out.firsts.resize(count);
+  std::size_t room = 0;
+  for (std::size_t i = 0; i < count; ++i) {
+    out.firsts[i] = room;  // the longest lists' starts; a block's first is where its room begins
+    room += is_mover_[i] ? mover_lists.counts[mover_slot_[i]] : superset.counts[i] + (added.firsts[i + 1] - added.firsts[i]);
+  }
+  out.indices.resize(room);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, (count + kBlock - 1) / kBlock, 1), [&](const tbb::blocked_range<std::size_t>& blocks) {
+    for (std::size_t block = blocks.begin(); block != blocks.end(); ++block) {
+      const std::size_t begin = block * kBlock, end = std::min(count, begin + kBlock);
+      std::size_t at = out.firsts[begin];
+      for (std::size_t i = begin; i < end; ++i) {
+        Index* slots = out.indices.data() + at;
+        Index found = 0;
+        if (is_mover_[i]) {
+          const std::size_t slot = mover_slot_[i];
+          found = mover_lists.counts[slot];
+          std::copy_n(mover_lists.staging.data() + slot * mover_lists.stride, found, slots);
+        } else {
+          const Vec3 position = positions[i];
+          // Branch-free: about three candidates in four are kept, irregularly.
+          for (const Index j : superset.of(i)) {
+            slots[found] = j;
+            found += static_cast<Index>((distance_squared(neighbor_positions[j], position) < radius_squared) &
+                                        !(skip_movers && is_mover_[j]));
+          }
+          for (std::size_t n = added.firsts[i]; n < added.firsts[i + 1]; ++n) slots[found++] = added.items[n];
+        }
+        out.firsts[i] = at;
+        out.counts[i] = found;
+        at += found;
       }
-      std::copy_n(added.items.data() + added.firsts[i], added_count, slots + found);
-      return found + static_cast<Index>(added_count);
     }
-    for (const Index j : candidates)
-      if (distance_squared(neighbor_positions[j], position) < radius_squared && !(skip_movers && is_mover_[j])) {
-        if (found < stride) slots[found] = j;
-        ++found;
-      }
-    for (std::size_t n = added.firsts[i]; n < added.firsts[i + 1]; ++n) {
-      if (found < stride) slots[found] = added.items[n];
-      ++found;
-    }
-    return found;
   });
-  pack_staged_lists(out, active_count_, false);
 }
 
 namespace {

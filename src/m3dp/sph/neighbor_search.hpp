@@ -19,7 +19,8 @@ namespace m3dp::sph {
 /// slots a particle, grown outside the hot loop when a particle has more) in its own query order, then
 /// packs them: the solvers' sweeps stream the lists and their per-pair arrays (indexed like
 /// `indices`), and the unused slots of fixed-stride lists made each sweep read a third more memory
-/// (a stride of 72 instead of 48 cost the dam break's pressure solve 22 %).
+/// (a stride of 72 instead of 48 cost the dam break's pressure solve 22 %). SkinnedNeighborSearch writes
+/// them back to back within blocks of particles, with unused room after each block (no packing pass).
 struct NeighborLists {
   Index stride = 48;
   std::vector<Index> counts;
@@ -44,6 +45,7 @@ struct NeighborLists {
     return {indices.data() + firsts[particle], counts[particle]};
   }
   [[nodiscard]] std::size_t first(std::size_t particle) const { return firsts[particle]; }
+  /// Slots of `indices` (and of the per-pair arrays): every pair, and any unused room between blocks.
   [[nodiscard]] std::size_t total() const { return indices.size(); }
 };
 
