@@ -1,6 +1,7 @@
 // The rheology laws and ageing against their formulas (material module).
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "m3dp/material/material.hpp"
@@ -72,6 +73,31 @@ TEST(Rheology, BinghamAndHerschelBulkleyRegularisedAfterPapanastasiou) {
   herschel_bulkley.flow_index = Real(0.5);
   herschel_bulkley.regularization = 1000;
   EXPECT_NEAR(herschel_bulkley.effective_viscosity(4, 100, 1) * 4, 100 + 30 * 2, 1e-3);
+}
+
+TEST(Rheology, CappedYieldStressMaterialAgreesWithTheFullFormulaAcrossTheCap) {
+  // The clay preset's parameters: below about 0.15 1/s the yield term alone exceeds the cap, and the
+  // model returns the cap without evaluating the formula; above, the formula. Both sides, and the
+  // rates around the switch, against the formula in double.
+  for (const RheologyModel kind : {RheologyModel::herschel_bulkley, RheologyModel::bingham}) {
+    auto rheology = model(kind);
+    rheology.yield_stress = 1500;
+    rheology.consistency = 150;
+    rheology.flow_index = Real(0.35);
+    rheology.viscosity = 20;  // Bingham's plastic viscosity
+    rheology.regularization = 1000;
+    rheology.max_viscosity = 1e4;
+    int capped = 0;
+    for (double rate = 1e-6; rate < 100; rate *= 1.05) {
+      const double m = rheology.regularization, tau0 = rheology.yield_stress;
+      const double yield_term = tau0 * -std::expm1(-m * rate) / rate;
+      const double other = kind == RheologyModel::bingham ? rheology.viscosity : rheology.consistency * std::pow(rate, rheology.flow_index - 1);
+      const double expected = std::min(other + yield_term, double(rheology.max_viscosity));
+      EXPECT_NEAR(rheology.effective_viscosity(Real(rate), rheology.yield_stress, 1), expected, 1e-5 * expected) << "rate " << rate;
+      capped += expected == double(rheology.max_viscosity);
+    }
+    EXPECT_GT(capped, 100);  // the sweep covers the capped range well
+  }
 }
 
 TEST(Ageing, RousselLinearBuildUpAndViscosityGrowth) {
