@@ -198,6 +198,51 @@ TEST(SkinnedNeighborSearch, KeptListsStayExactWhileParticlesDriftAFewJumpAndBodi
   EXPECT_TRUE(scene.update(50));
   EXPECT_EQ(scene.search.mover_count(), 0u);
   scene.expect_exact_lists();
+  // Particles appended after the active ones (a nozzle's layer; none resting): movers, no search.
+  {
+    KeptListsScene fresh;
+    fresh.fluid.resize(KeptListsScene::kActive);  // no resting particles: the layer appends to the active range
+    fresh.ids.resize(KeptListsScene::kActive);
+    fresh.resting_subset.clear();
+    fresh.resting_grid.build(fresh.fluid, fresh.resting_subset, KeptListsScene::kRadius + KeptListsScene::kSkin);
+    auto update = [&](std::size_t active) {
+      fresh.moving_grid.build(fresh.boundary, fresh.moving_subset, KeptListsScene::kRadius + KeptListsScene::kSkin);
+      SkinnedNeighborSearch::Inputs inputs;
+      inputs.fluid_positions = fresh.fluid;
+      inputs.fluid_ids = fresh.ids;
+      inputs.active_count = active;
+      inputs.resting_grid = &fresh.resting_grid;
+      inputs.static_boundary_grid = &fresh.static_grid;
+      inputs.moving_boundary_grid = &fresh.moving_grid;
+      inputs.boundary_positions = fresh.boundary;
+      inputs.moving_boundary_indices = fresh.moving_subset;
+      return fresh.search.update(inputs, KeptListsScene::kRadius, KeptListsScene::kSkin, 50, fresh.fluid_lists, fresh.boundary_lists);
+    };
+    EXPECT_TRUE(update(fresh.fluid.size()));
+    std::uniform_real_distribution<float> coordinate(0.4f, 0.6f);
+    for (int n = 0; n < 25; ++n) {
+      fresh.fluid.push_back(Vec3(coordinate(scene.random), coordinate(scene.random), coordinate(scene.random)));
+      fresh.ids.push_back(100000 + n);
+    }
+    EXPECT_FALSE(update(fresh.fluid.size()));
+    EXPECT_EQ(fresh.search.mover_count(), 25u);
+    for (std::size_t i = 0; i < fresh.fluid.size(); ++i) {
+      auto span = fresh.fluid_lists.of(i);
+      std::vector<Index> got(span.begin(), span.end());
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, brute_force(fresh.fluid, fresh.fluid[i], KeptListsScene::kRadius, i)) << "particle " << i;
+      span = fresh.boundary_lists.of(i);
+      got.assign(span.begin(), span.end());
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, brute_force(fresh.boundary, fresh.fluid[i], KeptListsScene::kRadius, fresh.boundary.size())) << "particle " << i;
+    }
+    // More than the mover budget appended: a new search.
+    for (int n = 0; n < 40; ++n) {
+      fresh.fluid.push_back(Vec3(coordinate(scene.random), coordinate(scene.random), coordinate(scene.random)));
+      fresh.ids.push_back(200000 + n);
+    }
+    EXPECT_TRUE(update(fresh.fluid.size()));
+  }
   // Reordered particles (the ids moved): a new search.
   std::swap(scene.fluid[3], scene.fluid[7]);
   std::swap(scene.ids[3], scene.ids[7]);

@@ -322,9 +322,15 @@ bool SkinnedNeighborSearch::update(const Inputs& inputs, Real radius, Real skin,
   for (const SpatialHashGrid* grid : {inputs.resting_grid, inputs.static_boundary_grid, inputs.moving_boundary_grid})
     if (grid->point_count() > 0 && grid->cell_size() != cell_size)
       throw Error(fmt::format("SkinnedNeighborSearch: a grid's cells are {} m, not radius + skin = {} m", grid->cell_size(), cell_size));
-  bool search_anew = !valid_ || radius != radius_ || skin != skin_ || active != active_count_ ||
-                     inputs.fixed_grids_version != fixed_grids_version_ || ids_.size() != inputs.fluid_ids.size() ||
-                     !std::equal(ids_.begin(), ids_.end(), inputs.fluid_ids.begin());
+  const bool same_setup = valid_ && radius == radius_ && skin == skin_ && inputs.fixed_grids_version == fixed_grids_version_;
+  const bool same_particles = same_setup && active == active_count_ && ids_.size() == inputs.fluid_ids.size() &&
+                              std::equal(ids_.begin(), ids_.end(), inputs.fluid_ids.begin());
+  // Particles emitted since the search, appended after the others (none resting): movers until the
+  // next one, so that a nozzle's layers do not force searches.
+  const bool only_appended = same_setup && !same_particles && active > active_count_ && inputs.fluid_ids.size() == active &&
+                             ids_.size() == active_count_ && std::equal(ids_.begin(), ids_.end(), inputs.fluid_ids.begin());
+  bool search_anew = !same_particles && !only_appended;
+  query_count_ = active;
   is_mover_.resize(positions.size());
   movers_.clear();
   if (!search_anew) {
@@ -336,7 +342,7 @@ bool SkinnedNeighborSearch::update(const Inputs& inputs, Real radius, Real skin,
         tbb::blocked_range<std::size_t>(0, active, 2048), std::size_t(0),
         [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
           for (std::size_t i = range.begin(); i != range.end(); ++i) {
-            const bool moved = distance_squared(positions[i], reference_positions_[i]) > limit_squared;
+            const bool moved = i >= active_count_ || distance_squared(positions[i], reference_positions_[i]) > limit_squared;
             is_mover_[i] = moved;
             found += moved;
           }
@@ -473,7 +479,7 @@ void SkinnedNeighborSearch::filter_lists(const NeighborLists& superset, std::spa
   // front. The lists are back to back within a block, with the unused room after it; the sweeps read
   // lists by firsts and counts, and a gap every few hundred lists does not slow them.
   constexpr std::size_t kBlock = 512;
-  const std::size_t count = active_count_;
+  const std::size_t count = query_count_;
   out.counts.resize(count);
   out.firsts.resize(count);
   std::size_t room = 0;

@@ -128,7 +128,8 @@ void pack_staged_lists(NeighborLists& out, std::size_t count, bool sort_lists);
 /// search once in many steps.
 ///
 /// A few fast particles ("movers", farther than skin/2 from where they were at the search: a strand
-/// falling from the nozzle onto a settled print) do not force a new search. They search the kept grids
+/// falling from the nozzle onto a settled print; or appended since, where none rest) do not force a
+/// new search. They search the kept grids
 /// themselves, and their pairs join their neighbours' lists. Moving bodies' boundary particles never
 /// enter the supersets: each step they search the kept fluid grid the same way.
 ///
@@ -173,7 +174,8 @@ class SkinnedNeighborSearch {
   bool valid_ = false;
   Real radius_ = 0, skin_ = 0;
   std::uint64_t fixed_grids_version_ = 0;
-  std::size_t active_count_ = 0;
+  std::size_t active_count_ = 0;           // the active particles at the search
+  std::size_t query_count_ = 0;            // this update's: the search's and any appended since
   std::vector<std::uint64_t> ids_;
   std::vector<Vec3> reference_positions_;  // the active particles' at the search
   SpatialHashGrid active_grid_;            // the active particles at the search

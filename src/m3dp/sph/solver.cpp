@@ -1002,9 +1002,10 @@ void Solver::search_neighbors() {
   // step in the 47k dam break and made the solver's sweeps no faster.
   const std::span<const Vec3> active(fluid.position.data(), active_count);
   const std::size_t resting_count = fluid.size() - active_count;
+  // With none resting, the (empty) grid stays as it is when the active range grows (an emitted layer).
   const bool resting_changed =
-      state_.resting_grid_first != active_count || state_.resting_grid_ids.size() != resting_count ||
-      state_.resting_grid.cell_size() != cell_size ||
+      state_.resting_grid_ids.size() != resting_count || state_.resting_grid.cell_size() != cell_size ||
+      (resting_count > 0 && state_.resting_grid_first != active_count) ||
       !std::equal(state_.resting_grid_ids.begin(), state_.resting_grid_ids.end(), fluid.id.begin() + std::ptrdiff_t(active_count)) ||
       !std::equal(state_.resting_grid_positions.begin(), state_.resting_grid_positions.end(),
                   fluid.position.begin() + std::ptrdiff_t(active_count));
