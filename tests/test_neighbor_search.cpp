@@ -138,12 +138,13 @@ struct KeptListsScene {
     resting_grid.build(fluid, resting_subset, kRadius + kSkin);
     static_grid.build(boundary, static_subset, kRadius + kSkin);
   }
-  bool update(std::size_t max_movers) {
+  /// The first `active` fluid particles query (the rest, resting_subset, are in resting_grid).
+  bool update(std::size_t max_movers, std::size_t active = kActive) {
     moving_grid.build(boundary, moving_subset, kRadius + kSkin);
     SkinnedNeighborSearch::Inputs inputs;
     inputs.fluid_positions = fluid;
     inputs.fluid_ids = ids;
-    inputs.active_count = kActive;
+    inputs.active_count = active;
     inputs.resting_grid = &resting_grid;
     inputs.static_boundary_grid = &static_grid;
     inputs.moving_boundary_grid = &moving_grid;
@@ -153,14 +154,14 @@ struct KeptListsScene {
   }
   /// Every active particle's lists hold exactly its neighbours within the radius (any order), and
   /// the fluid pairs between active particles come from both ends.
-  void expect_exact_lists() const {
-    for (std::size_t i = 0; i < kActive; ++i) {
+  void expect_exact_lists(std::size_t active = kActive) const {
+    for (std::size_t i = 0; i < active; ++i) {
       auto fluid_span = fluid_lists.of(i);
       std::vector<Index> got(fluid_span.begin(), fluid_span.end());
       std::sort(got.begin(), got.end());
       ASSERT_EQ(got, brute_force(fluid, fluid[i], kRadius, i)) << "fluid list of particle " << i;
       for (const Index j : got)
-        if (j < kActive) {
+        if (j < active) {
           const auto back = fluid_lists.of(j);
           ASSERT_NE(std::find(back.begin(), back.end(), Index(i)), back.end()) << "pair " << i << "-" << j << " from one end only";
         }
@@ -205,43 +206,21 @@ TEST(SkinnedNeighborSearch, KeptListsStayExactWhileParticlesDriftAFewJumpAndBodi
     fresh.ids.resize(KeptListsScene::kActive);
     fresh.resting_subset.clear();
     fresh.resting_grid.build(fresh.fluid, fresh.resting_subset, KeptListsScene::kRadius + KeptListsScene::kSkin);
-    auto update = [&](std::size_t active) {
-      fresh.moving_grid.build(fresh.boundary, fresh.moving_subset, KeptListsScene::kRadius + KeptListsScene::kSkin);
-      SkinnedNeighborSearch::Inputs inputs;
-      inputs.fluid_positions = fresh.fluid;
-      inputs.fluid_ids = fresh.ids;
-      inputs.active_count = active;
-      inputs.resting_grid = &fresh.resting_grid;
-      inputs.static_boundary_grid = &fresh.static_grid;
-      inputs.moving_boundary_grid = &fresh.moving_grid;
-      inputs.boundary_positions = fresh.boundary;
-      inputs.moving_boundary_indices = fresh.moving_subset;
-      return fresh.search.update(inputs, KeptListsScene::kRadius, KeptListsScene::kSkin, 50, fresh.fluid_lists, fresh.boundary_lists);
-    };
-    EXPECT_TRUE(update(fresh.fluid.size()));
+    EXPECT_TRUE(fresh.update(50, fresh.fluid.size()));
     std::uniform_real_distribution<float> coordinate(0.4f, 0.6f);
     for (int n = 0; n < 25; ++n) {
       fresh.fluid.push_back(Vec3(coordinate(scene.random), coordinate(scene.random), coordinate(scene.random)));
       fresh.ids.push_back(100000 + n);
     }
-    EXPECT_FALSE(update(fresh.fluid.size()));
+    EXPECT_FALSE(fresh.update(50, fresh.fluid.size()));
     EXPECT_EQ(fresh.search.mover_count(), 25u);
-    for (std::size_t i = 0; i < fresh.fluid.size(); ++i) {
-      auto span = fresh.fluid_lists.of(i);
-      std::vector<Index> got(span.begin(), span.end());
-      std::sort(got.begin(), got.end());
-      ASSERT_EQ(got, brute_force(fresh.fluid, fresh.fluid[i], KeptListsScene::kRadius, i)) << "particle " << i;
-      span = fresh.boundary_lists.of(i);
-      got.assign(span.begin(), span.end());
-      std::sort(got.begin(), got.end());
-      ASSERT_EQ(got, brute_force(fresh.boundary, fresh.fluid[i], KeptListsScene::kRadius, fresh.boundary.size())) << "particle " << i;
-    }
+    fresh.expect_exact_lists(fresh.fluid.size());
     // More than the mover budget appended: a new search.
     for (int n = 0; n < 40; ++n) {
       fresh.fluid.push_back(Vec3(coordinate(scene.random), coordinate(scene.random), coordinate(scene.random)));
       fresh.ids.push_back(200000 + n);
     }
-    EXPECT_TRUE(update(fresh.fluid.size()));
+    EXPECT_TRUE(fresh.update(50, fresh.fluid.size()));
   }
   // Reordered particles (the ids moved): a new search.
   std::swap(scene.fluid[3], scene.fluid[7]);
