@@ -377,22 +377,25 @@ struct StrandSection {
 };
 
 /// A nozzle of diameter D at gap g over a floor extrudes at U while moving at V along x: the strand's
-/// section in the middle third of a 0.12 m line, once the nozzle has passed it.
+/// section in the middle third of a 0.24 m line, once the nozzle has passed it.
 StrandSection print_strand(double speed_ratio) {
   const Real diameter = Real(0.01), exit_speed = Real(0.1), gap = Real(0.01);
   const Real nozzle_speed = Real(speed_ratio) * exit_speed;
-  const Real length = Real(0.12);
+  // 0.24 m: at V/U = 2 the strand necks to half its section every few centimetres (d is a fifth of
+  // D), and a third of a 0.12 m line held a neck or not as rounding moved them (+2.9 or −9.9 %).
+  const Real length = Real(0.24);
   const Real d = Real(0.002);
   sph::Parameters parameters;
   parameters.settings.particle_radius = d / 2;
   parameters.settings.max_time_step = Real(2e-3);
   parameters.settings.bounds.min = Vec3(-0.1f, -0.1f, -0.05f);
-  parameters.settings.bounds.max = Vec3(0.25f, 0.1f, 0.1f);
+  parameters.settings.bounds.max = Vec3(length + Real(0.13), 0.1f, 0.1f);
   parameters.phases.push_back(sim::bingham_test_paste());  // holds a 1 cm bead, sticks to the bed
   parameters.nozzles.push_back(sph::NozzleSettings{"nozzle", diameter, exit_speed, 0});
   sph::Solver solver(parameters);
-  solver.add_body("bed", sph::sample_box_surface(BoxShape{Vec3(0.34f, 0.16f, 4 * d)}, d, -d / 2).points,
-                  Pose{Vec3(0.07f, 0, -2 * d), Quat::Identity()}, true);
+  // The bed reaches 0.1 m before the line's start and 0.12 m past its end.
+  solver.add_body("bed", sph::sample_box_surface(BoxShape{Vec3(length + Real(0.22), 0.16f, 4 * d)}, d, -d / 2).points,
+                  Pose{Vec3(length / 2 + Real(0.01), 0, -2 * d), Quat::Identity()}, true);
   solver.reserve(20000);
   const auto wall_start = std::chrono::steady_clock::now();
   const double print_time = length / nozzle_speed;
