@@ -55,15 +55,21 @@ __attribute__((target("avx2,fma"))) inline Vec4 difference_products(const Vec4* 
                                                                     const Vec4& b_i) {
   const __m256 a_ii = broadcast(a_i), b_ii = broadcast(b_i);
   __m256 sum = _mm256_setzero_ps();
+  if (count == 0) return Vec4::Zero();
   Index k = 0;
   for (; k + 1 < count; k += 2) {
     const Index j0 = neighbor[k], j1 = neighbor[k + 1];
     const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_ii, load_pair(a, j0, j1)), _mm256_sub_ps(b_ii, load_pair(b, j0, j1)));
     sum = _mm256_fmadd_ps(spread_pair(weight + k), product, sum);
   }
-  Vec4 result = halves_added(sum);
-  if (k < count) result += weight[k] * (a_i - a[neighbor[k]]).cwiseProduct(b_i - b[neighbor[k]]);
-  return result;
+  // The last neighbour once more, weighted where the count is odd and zero where it is even: a
+  // branch on the count's parity would be mispredicted for half of the particles.
+  const Index last = neighbor[count - 1];
+  const __m256 odd = _mm256_castsi256_ps(_mm256_set1_epi32(-static_cast<int>(count & 1)));
+  const __m256 last_weight = _mm256_and_ps(odd, _mm256_set_m128(_mm_setzero_ps(), _mm_set1_ps(weight[count - 1])));  // low half only
+  const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_ii, load_pair(a, last, last)), _mm256_sub_ps(b_ii, load_pair(b, last, last)));
+  sum = _mm256_fmadd_ps(last_weight, product, sum);
+  return halves_added(sum);
 }
 
 /// Σ_{i in [begin, end)} finish(i, Σ_k w_k (a_i − a_j) ⊙ (b_i − b_j)) over each particle's list: the
