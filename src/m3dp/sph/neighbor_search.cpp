@@ -141,7 +141,12 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
   const std::size_t bucket_count = std::bit_ceil(std::max<std::size_t>(2 * point_count, 64));
   bucket_mask_ = static_cast<std::uint32_t>(bucket_count - 1);
 
-  bucket_start_.assign(bucket_count + 1, 0);
+  // Only the buckets the last build filled need clearing (a tank's 2^17 buckets, 1 MB, each step otherwise).
+  if (bucket_range_.size() != bucket_count) {
+    bucket_range_.assign(bucket_count, BucketRange{});
+  } else {
+    for (const std::uint32_t bucket : filled_buckets_) bucket_range_[bucket] = BucketRange{};
+  }
   point_bucket_.resize(point_count);
   sorted_index_.resize(point_count);
   sorted_position_.resize(point_count);
@@ -150,17 +155,22 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
     const auto cell = cell_of(positions[source(k)]);
     point_bucket_[k] = bucket_of_cell(cell[0], cell[1], cell[2]);
   }, 1024);
-  // Counting sort: histogram, exclusive prefix sum, scatter. Sequential passes are memory-bound
-  // and cheap next to the neighbour queries.
-  for (std::size_t k = 0; k < point_count; ++k) ++bucket_start_[point_bucket_[k] + 1];
-  for (std::size_t b = 0; b < bucket_count; ++b) bucket_start_[b + 1] += bucket_start_[b];
-  // Scatter using bucket_start_ as cursors, then shift back.
+  // Counting sort with the buckets laid out in the order the points first touch them, not in hash
+  // order: points in Z-order (the solver's reordering) give cells in about Z-order, so consecutive
+  // cells' 27-cell gathers read mostly what the last one read (in hash order each gather's 27 buckets
+  // lay anywhere in the sorted arrays). Sequential passes: memory-bound and cheap next to the queries.
+  filled_buckets_.clear();
   for (std::size_t k = 0; k < point_count; ++k) {
-    const std::uint32_t slot = bucket_start_[point_bucket_[k]]++;
-    sorted_index_[slot] = source(k);
+    const std::uint32_t bucket = point_bucket_[k];
+    if (bucket_range_[bucket].end++ == 0) filled_buckets_.push_back(bucket);  // end counts for now
   }
-  for (std::size_t b = bucket_count; b > 0; --b) bucket_start_[b] = bucket_start_[b - 1];
-  bucket_start_[0] = 0;
+  std::uint32_t slot = 0;
+  for (const std::uint32_t bucket : filled_buckets_) {
+    const std::uint32_t points = bucket_range_[bucket].end;
+    bucket_range_[bucket] = BucketRange{slot, slot};  // end is the scatter's cursor
+    slot += points;
+  }
+  for (std::size_t k = 0; k < point_count; ++k) sorted_index_[bucket_range_[point_bucket_[k]].end++] = source(k);
   sorted_x_.resize(point_count);
   sorted_y_.resize(point_count);
   sorted_z_.resize(point_count);
@@ -178,7 +188,7 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
   std::uint32_t buckets[27];
   const int count = buckets_around_cell(cell, buckets);
   std::size_t total = 0;
-  for (int k = 0; k < count; ++k) total += bucket_start_[buckets[k] + 1] - bucket_start_[buckets[k]];
+  for (int k = 0; k < count; ++k) total += bucket_range_[buckets[k]].end - bucket_range_[buckets[k]].begin;
   std::size_t at = buffer.count;
   if (buffer.index.size() < at + total) {  // grow only; values past `count` are never read
     buffer.index.resize(at + total);
@@ -191,8 +201,8 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
   Index* index_out = buffer.index.data();
   Real *x_out = buffer.x.data(), *y_out = buffer.y.data(), *z_out = buffer.z.data();
   for (int k = 0; k < count; ++k) {
-    const std::uint32_t begin = bucket_start_[buckets[k]], end = bucket_start_[buckets[k] + 1];
-    for (std::uint32_t slot = begin; slot < end; ++slot, ++at) {
+    const BucketRange range = bucket_range_[buckets[k]];
+    for (std::uint32_t slot = range.begin; slot < range.end; ++slot, ++at) {
       index_out[at] = sorted_index_[slot];
       x_out[at] = sorted_x_[slot];
       y_out[at] = sorted_y_[slot];

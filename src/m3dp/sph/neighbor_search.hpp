@@ -92,9 +92,13 @@ class SpatialHashGrid {
   Real cell_size_ = 1;
   Real inverse_cell_size_ = 1;
   std::uint32_t bucket_mask_ = 0;
-  std::vector<std::uint32_t> bucket_start_;  // bucket_count + 1
+  struct BucketRange {
+    std::uint32_t begin = 0, end = 0;  // slots of the sorted arrays
+  };
+  std::vector<BucketRange> bucket_range_;    // (bucket_count)
+  std::vector<std::uint32_t> filled_buckets_;  // the non-empty buckets, in the order of their slots
   std::vector<std::uint32_t> point_bucket_;  // per input point
-  std::vector<Index> sorted_index_;          // input indices ordered by bucket
+  std::vector<Index> sorted_index_;          // input indices ordered by bucket, buckets in first-touch order
   std::vector<Vec3> sorted_position_;        // positions in the same order, for cache-friendly queries
   std::vector<Real> sorted_x_, sorted_y_, sorted_z_;  // the same, as separate arrays (candidate copies)
   /// The distinct buckets of the 27 cells around `cell`; returns how many.
@@ -222,8 +226,8 @@ void SpatialHashGrid::for_each_point_around_cell(const std::array<std::int32_t, 
   std::uint32_t buckets[27];
   const int count = buckets_around_cell(cell, buckets);
   for (int k = 0; k < count; ++k) {
-    const std::uint32_t end = bucket_start_[buckets[k] + 1];
-    for (std::uint32_t slot = bucket_start_[buckets[k]]; slot < end; ++slot) visit(sorted_index_[slot], sorted_position_[slot]);
+    const BucketRange range = bucket_range_[buckets[k]];
+    for (std::uint32_t slot = range.begin; slot < range.end; ++slot) visit(sorted_index_[slot], sorted_position_[slot]);
   }
 }
 
