@@ -18,9 +18,10 @@ std::vector<Index> brute_force(const std::vector<Vec3>& points, const Vec3& quer
   return found;
 }
 
-void expect_equal_to_brute_force(const std::vector<Vec3>& points, Real radius) {
+void expect_equal_to_brute_force(const std::vector<Vec3>& points, Real radius, bool dense_cells) {
   SpatialHashGrid grid;
   grid.build(points, radius);
+  EXPECT_EQ(grid.dense(), dense_cells);
   NeighborLists lists;
   lists.stride = 8;  // deliberately small: forces the grow-and-redo path
   find_neighbors(grid, points, radius, true, lists);
@@ -42,7 +43,7 @@ TEST(NeighborSearch, EqualsBruteForceOnUniformRandomPoints) {
   std::uniform_real_distribution<float> coordinate(-0.5f, 0.5f);
   std::vector<Vec3> points(3000);
   for (auto& p : points) p = Vec3(coordinate(random), coordinate(random), coordinate(random));
-  expect_equal_to_brute_force(points, Real(0.08));
+  expect_equal_to_brute_force(points, Real(0.08), true);  // 13³ cells for 3000 points
 }
 
 TEST(NeighborSearch, EqualsBruteForceOnClusteredPointsAndNegativeCoordinates) {
@@ -52,7 +53,43 @@ TEST(NeighborSearch, EqualsBruteForceOnClusteredPointsAndNegativeCoordinates) {
   const Vec3 centres[] = {Vec3(-3, -2, -1), Vec3(0, 0, 0), Vec3(5, 5, 5), Vec3(0.01f, 0.0f, 0.02f)};
   for (const auto& centre : centres)
     for (int n = 0; n < 700; ++n) points.push_back(centre + Vec3(spread(random), spread(random), spread(random)));
-  expect_equal_to_brute_force(points, Real(0.015));
+  expect_equal_to_brute_force(points, Real(0.015), false);  // a box of 533³ cells: hashed
+}
+
+TEST(NeighborSearch, QueriesOutsideADenseGridsBoxFindThePointsAtItsEdges) {
+  // Dense cells cover the points' box only; queries around and far outside it, on every side.
+  std::mt19937 random(5);
+  std::uniform_real_distribution<float> inside(0, 1), around(-0.35f, 1.35f);
+  std::vector<Vec3> grid_points(2000), queries(3000);
+  for (auto& p : grid_points) p = Vec3(inside(random), inside(random), inside(random));
+  for (auto& p : queries) p = Vec3(around(random), around(random), around(random));
+  queries.push_back(Vec3(-1e6f, 0.5f, 0.5f));
+  queries.push_back(Vec3(0.5f, 3e5f, -2e5f));
+  SpatialHashGrid grid;
+  grid.build(grid_points, Real(0.1));
+  ASSERT_TRUE(grid.dense());
+  NeighborLists lists;
+  find_neighbors(grid, queries, Real(0.1), false, lists);
+  std::size_t outside_with_neighbors = 0;
+  for (std::size_t i = 0; i < queries.size(); ++i) {
+    const auto span = lists.of(i);
+    const std::vector<Index> expected = brute_force(grid_points, queries[i], Real(0.1), grid_points.size());
+    EXPECT_EQ(std::vector<Index>(span.begin(), span.end()), expected) << "query " << i;
+    const bool outside = (queries[i].array() < 0).any() || (queries[i].array() > 1).any();
+    outside_with_neighbors += outside && !expected.empty();
+  }
+  EXPECT_GT(outside_with_neighbors, 100u);  // the edges were exercised
+  // The same grid rebuilt hashed (points spread over a large box) and dense again: both modes reuse
+  // the same buffers.
+  std::vector<Vec3> spread = grid_points;
+  spread.back() = Vec3(1000, 1000, 1000);
+  grid.build(spread, Real(0.1));
+  EXPECT_FALSE(grid.dense());
+  grid.build(grid_points, Real(0.1));
+  EXPECT_TRUE(grid.dense());
+  NeighborLists again;
+  find_neighbors(grid, queries, Real(0.1), false, again);
+  EXPECT_EQ(again.indices, lists.indices);
 }
 
 TEST(NeighborSearch, QueriesAgainstAnotherSet) {

@@ -137,40 +137,72 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
   cell_size_ = cell_size;
   inverse_cell_size_ = Real(1) / cell_size;
   auto source = [&](std::size_t k) { return subset ? subset[k] : static_cast<Index>(k); };
-  // About two buckets per point keeps collisions rare; power of two so the hash is a mask.
-  const std::size_t bucket_count = std::bit_ceil(std::max<std::size_t>(2 * point_count, 64));
-  bucket_mask_ = static_cast<std::uint32_t>(bucket_count - 1);
-
-  // Only the buckets the last build filled need clearing (a tank's 2^17 buckets, 1 MB, each step otherwise).
-  if (bucket_range_.size() != bucket_count) {
-    bucket_range_.assign(bucket_count, BucketRange{});
-  } else {
-    for (const std::uint32_t bucket : filled_buckets_) bucket_range_[bucket] = BucketRange{};
-  }
   point_bucket_.resize(point_count);
   sorted_index_.resize(point_count);
   sorted_position_.resize(point_count);
-
-  parallel_for_each_index(point_count, [&](std::size_t k) {
-    const auto cell = cell_of(positions[source(k)]);
-    point_bucket_[k] = bucket_of_cell(cell[0], cell[1], cell[2]);
-  }, 1024);
-  // Counting sort with the buckets laid out in the order the points first touch them, not in hash
-  // order: points in Z-order (the solver's reordering) give cells in about Z-order, so consecutive
-  // cells' 27-cell gathers read mostly what the last one read (in hash order each gather's 27 buckets
-  // lay anywhere in the sorted arrays). Sequential passes: memory-bound and cheap next to the queries.
-  filled_buckets_.clear();
-  for (std::size_t k = 0; k < point_count; ++k) {
-    const std::uint32_t bucket = point_bucket_[k];
-    if (bucket_range_[bucket].end++ == 0) filled_buckets_.push_back(bucket);  // end counts for now
+  const bool was_dense = dense_;
+  dense_ = point_count > 0 && choose_dense_cells(positions, subset, point_count);
+  if (dense_) {
+    // Dense cells: a counting sort in cell order. A point outside the box (not finite) sends the
+    // grid back to hashing.
+    const std::size_t cells = std::size_t(dense_extent_[0]) * dense_extent_[1] * dense_extent_[2];
+    empty_bucket_ = static_cast<std::uint32_t>(cells);
+    bucket_range_.assign(cells + 1, BucketRange{});
+    const std::size_t outside = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, point_count, 1024), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
+          for (std::size_t k = range.begin(); k != range.end(); ++k) {
+            const auto cell = cell_of(positions[source(k)]);
+            point_bucket_[k] = bucket_of_cell(cell[0], cell[1], cell[2]);
+            found += point_bucket_[k] == empty_bucket_;
+          }
+          return found;
+        },
+        std::plus<std::size_t>());
+    if (outside == 0) {
+      for (std::size_t k = 0; k < point_count; ++k) ++bucket_range_[point_bucket_[k]].end;  // counts for now
+      std::uint32_t slot = 0;
+      for (BucketRange& range : bucket_range_) {
+        const std::uint32_t points = range.end;
+        range = BucketRange{slot, slot};  // end is the scatter's cursor
+        slot += points;
+      }
+      for (std::size_t k = 0; k < point_count; ++k) sorted_index_[bucket_range_[point_bucket_[k]].end++] = source(k);
+    } else {
+      dense_ = false;
+    }
   }
-  std::uint32_t slot = 0;
-  for (const std::uint32_t bucket : filled_buckets_) {
-    const std::uint32_t points = bucket_range_[bucket].end;
-    bucket_range_[bucket] = BucketRange{slot, slot};  // end is the scatter's cursor
-    slot += points;
+  if (!dense_) {
+    // About two buckets per point keeps collisions rare; power of two so the hash is a mask.
+    const std::size_t bucket_count = std::bit_ceil(std::max<std::size_t>(2 * point_count, 64));
+    bucket_mask_ = static_cast<std::uint32_t>(bucket_count - 1);
+    // Only the buckets the last build filled need clearing (a tank's 2^17 buckets, 1 MB, each step otherwise).
+    if (was_dense || bucket_range_.size() != bucket_count) {
+      bucket_range_.assign(bucket_count, BucketRange{});
+    } else {
+      for (const std::uint32_t bucket : filled_buckets_) bucket_range_[bucket] = BucketRange{};
+    }
+    parallel_for_each_index(point_count, [&](std::size_t k) {
+      const auto cell = cell_of(positions[source(k)]);
+      point_bucket_[k] = bucket_of_cell(cell[0], cell[1], cell[2]);
+    }, 1024);
+    // Counting sort with the buckets laid out in the order the points first touch them, not in hash
+    // order: points in Z-order (the solver's reordering) give cells in about Z-order, so consecutive
+    // cells' 27-cell gathers read mostly what the last one read (in hash order each gather's 27 buckets
+    // lay anywhere in the sorted arrays). Sequential passes: memory-bound and cheap next to the queries.
+    filled_buckets_.clear();
+    for (std::size_t k = 0; k < point_count; ++k) {
+      const std::uint32_t bucket = point_bucket_[k];
+      if (bucket_range_[bucket].end++ == 0) filled_buckets_.push_back(bucket);  // end counts for now
+    }
+    std::uint32_t slot = 0;
+    for (const std::uint32_t bucket : filled_buckets_) {
+      const std::uint32_t points = bucket_range_[bucket].end;
+      bucket_range_[bucket] = BucketRange{slot, slot};  // end is the scatter's cursor
+      slot += points;
+    }
+    for (std::size_t k = 0; k < point_count; ++k) sorted_index_[bucket_range_[point_bucket_[k]].end++] = source(k);
   }
-  for (std::size_t k = 0; k < point_count; ++k) sorted_index_[bucket_range_[point_bucket_[k]].end++] = source(k);
   sorted_x_.resize(point_count);
   sorted_y_.resize(point_count);
   sorted_z_.resize(point_count);
@@ -183,8 +215,45 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
   }, 2048);
 }
 
+bool SpatialHashGrid::choose_dense_cells(std::span<const Vec3> positions, const Index* subset, std::size_t point_count) {
+  struct Box {
+    Vec3 low = Vec3::Constant(std::numeric_limits<Real>::max()), high = Vec3::Constant(std::numeric_limits<Real>::lowest());
+  };
+  const Box box = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, point_count, 4096), Box{},
+      [&](const tbb::blocked_range<std::size_t>& range, Box found) {
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
+          const Vec3& position = positions[subset ? subset[k] : k];
+          found.low = found.low.cwiseMin(position);
+          found.high = found.high.cwiseMax(position);
+        }
+        return found;
+      },
+      [](const Box& a, const Box& b) { return Box{a.low.cwiseMin(b.low), a.high.cwiseMax(b.high)}; });
+  if (!box.low.allFinite() || !box.high.allFinite()) return false;
+  // The box in cells (a query outside it still finds the cells inside: its runs are clipped to the box).
+  const Vec3 low = box.low * inverse_cell_size_, high = box.high * inverse_cell_size_;
+  constexpr Real kLargestCell = Real(1 << 30);
+  if (low.minCoeff() < -kLargestCell || high.maxCoeff() > kLargestCell) return false;
+  const std::size_t limit = std::max(kDenseCellsAlways, kDenseCellsPerPoint * point_count);
+  std::size_t cells = 1;
+  for (int axis = 0; axis < 3; ++axis) {
+    const auto first = static_cast<std::int64_t>(std::floor(low[axis])), last = static_cast<std::int64_t>(std::floor(high[axis]));
+    const auto extent = static_cast<std::size_t>(last - first + 1);
+    cells *= extent;
+    if (cells > limit) return false;
+    dense_origin_[axis] = static_cast<std::int32_t>(first);
+    dense_extent_[axis] = static_cast<std::uint32_t>(extent);
+  }
+  return true;
+}
+
 void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const {
   if (sorted_index_.empty()) return;
+  if (dense_) {
+    append_dense_runs_around_cell(cell, buffer);
+    return;
+  }
   std::uint32_t buckets[27];
   const int count = buckets_around_cell(cell, buckets);
   std::size_t total = 0;
@@ -209,6 +278,46 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
       z_out[at] = sorted_z_[slot];
     }
   }
+  buffer.count = at;
+}
+
+void SpatialHashGrid::append_dense_runs_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const {
+  // The three cells along x of each of the nine rows around `cell` are consecutive buckets, and their
+  // points one range of the sorted arrays: nine copies, not 27.
+  const std::int64_t first_x = std::max<std::int64_t>(std::int64_t(cell[0]) - dense_origin_[0] - 1, 0);
+  const std::int64_t last_x = std::min<std::int64_t>(std::int64_t(cell[0]) - dense_origin_[0] + 1, std::int64_t(dense_extent_[0]) - 1);
+  if (first_x > last_x) return;
+  BucketRange runs[9];
+  int run_count = 0;
+  std::size_t total = 0;
+  for (std::int64_t dz = -1; dz <= 1; ++dz) {
+    const std::int64_t z = std::int64_t(cell[2]) - dense_origin_[2] + dz;
+    if (z < 0 || z >= std::int64_t(dense_extent_[2])) continue;
+    for (std::int64_t dy = -1; dy <= 1; ++dy) {
+      const std::int64_t y = std::int64_t(cell[1]) - dense_origin_[1] + dy;
+      if (y < 0 || y >= std::int64_t(dense_extent_[1])) continue;
+      const std::size_t row = std::size_t(dense_extent_[0]) * std::size_t(y + std::int64_t(dense_extent_[1]) * z);
+      const BucketRange run{bucket_range_[row + std::size_t(first_x)].begin, bucket_range_[row + std::size_t(last_x)].end};
+      runs[run_count++] = run;
+      total += run.end - run.begin;
+    }
+  }
+  std::size_t at = buffer.count;
+  if (buffer.index.size() < at + total) {  // grow only; values past `count` are never read
+    buffer.index.resize(at + total);
+    buffer.x.resize(at + total);
+    buffer.y.resize(at + total);
+    buffer.z.resize(at + total);
+  }
+  Index* index_out = buffer.index.data();
+  Real *x_out = buffer.x.data(), *y_out = buffer.y.data(), *z_out = buffer.z.data();
+  for (int k = 0; k < run_count; ++k)
+    for (std::uint32_t slot = runs[k].begin; slot < runs[k].end; ++slot, ++at) {
+      index_out[at] = sorted_index_[slot];
+      x_out[at] = sorted_x_[slot];
+      y_out[at] = sorted_y_[slot];
+      z_out[at] = sorted_z_[slot];
+    }
   buffer.count = at;
 }
 

@@ -49,8 +49,16 @@ struct NeighborLists {
   [[nodiscard]] std::size_t total() const { return indices.size(); }
 };
 
+/// Points sorted into cubic cells. Where the points' bounding box holds few cells (at most
+/// kDenseCellsPerPoint per point, and any box up to kDenseCellsAlways cells) the cells are a dense
+/// array in x-fastest order: no collisions, and the 27 cells around one are nine runs of three
+/// consecutive cells, each run one contiguous range of points. Elsewhere (a few particles on a large
+/// bed) the cells are hashed into buckets.
 class SpatialHashGrid {
  public:
+  static constexpr std::size_t kDenseCellsPerPoint = 4;
+  static constexpr std::size_t kDenseCellsAlways = 1 << 12;
+
   /// Sorts `positions` into cells of size `cell_size` (m). Reuses its buffers between calls.
   void build(std::span<const Vec3> positions, Real cell_size);
   /// Same over the points positions[subset[k]] only; candidates report the index into `positions`.
@@ -71,6 +79,8 @@ class SpatialHashGrid {
   void append_points_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const;
 
   [[nodiscard]] Real cell_size() const { return cell_size_; }
+  /// Whether the last build chose dense cells (see the class comment) rather than hashed buckets.
+  [[nodiscard]] bool dense() const { return dense_; }
   [[nodiscard]] std::size_t point_count() const { return sorted_index_.size(); }
   /// The points' indices in grid order: the points of one cell come together.
   [[nodiscard]] std::span<const Index> points_in_grid_order() const { return sorted_index_; }
@@ -84,21 +94,37 @@ class SpatialHashGrid {
   /// Sorts positions[subset[k]] for k < point_count, or the first point_count positions if subset is null.
   void build_points(std::span<const Vec3> positions, const Index* subset, std::size_t point_count, Real cell_size);
   [[nodiscard]] std::uint32_t bucket_of_cell(std::int32_t x, std::int32_t y, std::int32_t z) const {
+    if (dense_) {
+      // Cells outside the box share the last bucket, which is always empty.
+      const auto ux = static_cast<std::uint32_t>(x - dense_origin_[0]), uy = static_cast<std::uint32_t>(y - dense_origin_[1]),
+                 uz = static_cast<std::uint32_t>(z - dense_origin_[2]);
+      const bool inside = (ux < dense_extent_[0]) & (uy < dense_extent_[1]) & (uz < dense_extent_[2]);
+      return inside ? ux + dense_extent_[0] * (uy + dense_extent_[1] * uz) : empty_bucket_;
+    }
     const auto hash = (static_cast<std::uint32_t>(x) * 73856093u) ^ (static_cast<std::uint32_t>(y) * 19349663u) ^
                       (static_cast<std::uint32_t>(z) * 83492791u);
     return hash & bucket_mask_;
   }
+  /// Whether the points' box (plus a cell each side) is small enough for dense cells; if so sets the
+  /// box's origin and extent.
+  bool choose_dense_cells(std::span<const Vec3> positions, const Index* subset, std::size_t point_count);
+  /// Dense cells only: appends the points of the nine runs of three cells around `cell`.
+  void append_dense_runs_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const;
 
   Real cell_size_ = 1;
   Real inverse_cell_size_ = 1;
   std::uint32_t bucket_mask_ = 0;
+  bool dense_ = false;
+  std::array<std::int32_t, 3> dense_origin_{};   // the box's first cell
+  std::array<std::uint32_t, 3> dense_extent_{};  // cells along x, y and z
+  std::uint32_t empty_bucket_ = 0;               // dense: the last bucket, for every cell outside the box
   struct BucketRange {
     std::uint32_t begin = 0, end = 0;  // slots of the sorted arrays
   };
-  std::vector<BucketRange> bucket_range_;    // (bucket_count)
-  std::vector<std::uint32_t> filled_buckets_;  // the non-empty buckets, in the order of their slots
+  std::vector<BucketRange> bucket_range_;    // (bucket_count, dense: cells + 1)
+  std::vector<std::uint32_t> filled_buckets_;  // hashed: the non-empty buckets, in the order of their slots
   std::vector<std::uint32_t> point_bucket_;  // per input point
-  std::vector<Index> sorted_index_;          // input indices ordered by bucket, buckets in first-touch order
+  std::vector<Index> sorted_index_;  // input indices ordered by bucket: dense in cell order, hashed in first-touch order
   std::vector<Vec3> sorted_position_;        // positions in the same order, for cache-friendly queries
   std::vector<Real> sorted_x_, sorted_y_, sorted_z_;  // the same, as separate arrays (candidate copies)
   /// The distinct buckets of the 27 cells around `cell`; returns how many.
