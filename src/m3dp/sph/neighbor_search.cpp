@@ -333,15 +333,20 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
   const std::size_t query_count = query_positions.size();
   const Real radius_squared = radius * radius;
   out.counts.resize(query_count);
+  out.staged_firsts.resize(query_count);
+  const std::size_t order_count = query_order.empty() ? query_count : query_order.size();
   for (;;) {
-    const std::size_t needed = query_count * out.stride;
+    const std::size_t needed = std::max(order_count, query_count) * out.stride;
     if (out.staging.size() < needed) out.staging.resize(needed);
     std::atomic<Index> most_needed{0};
     const Index stride = out.stride;
-    const std::size_t order_count = query_order.empty() ? query_count : query_order.size();
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_count, 64), [&](const tbb::blocked_range<std::size_t>& range) {
       NeighborLists::CandidateBuffer& buffer = out.candidate_buffers.local();
       buffer.valid = false;  // the grid may have changed since this thread's last search
+      // The range's lists go back to back, in query order, into its own stride per query: the stores
+      // run forward (by particle index, i · stride, they landed all over 9 MB, and waited for their
+      // cache lines); the packing reads them back in index order.
+      std::size_t cursor = range.begin() * stride;
       for (std::size_t at = range.begin(); at != range.end(); ++at) {
         const std::size_t i = query_order.empty() ? at : query_order[at];
         if (i >= query_count) continue;
@@ -358,7 +363,7 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
         const Index self = exclude_same_index ? static_cast<Index>(i) : std::numeric_limits<Index>::max();
         const Index count = keep_candidates_within(buffer, query, radius_squared, self);
         const Index* found = buffer.found.data();
-        Index* slots = out.staging.data() + i * stride;
+        Index* slots = out.staging.data() + cursor;
         if ((count + 7) / 8 * 8 <= stride) {
           // Whole groups of eight, past the list's end within its own slots (the found buffer has the
           // slack): no library call per query (a memmove each was 1.7 % of the dam break).
@@ -368,6 +373,8 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
           std::copy_n(found, std::min(count, stride), slots);
         }
         out.counts[i] = std::min(count, stride);
+        out.staged_firsts[i] = cursor;
+        cursor += out.counts[i];
         if (count > stride) {
           Index previous = most_needed.load(std::memory_order_relaxed);
           while (count > previous && !most_needed.compare_exchange_weak(previous, count)) {
@@ -395,7 +402,7 @@ void pack_staged_lists(NeighborLists& out, std::size_t query_count, bool sort_li
     // One copy loop over the range, not a memmove call per list (a few dozen indices each).
     Index* packed = out.indices.data() + out.firsts[range.begin()];
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const Index* staged = out.staging.data() + i * out.stride;
+      const Index* staged = out.staging.data() + out.staged_firsts[i];
       const Index count = out.counts[i];
       for (Index k = 0; k < count; ++k) packed[k] = staged[k];
       // Sorted by index, neighbours sit in memory order (after Z-order reordering).

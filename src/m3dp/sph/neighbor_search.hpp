@@ -26,7 +26,8 @@ struct NeighborLists {
   std::vector<Index> counts;
   std::vector<std::size_t> firsts;
   std::vector<Index> indices;
-  std::vector<Index> staging;  // the search's fixed-stride lists, before packing
+  std::vector<Index> staging;  // the search's lists before packing: at most `stride` slots per query
+  std::vector<std::size_t> staged_firsts;  // find_neighbors: where each query's list starts in staging
 
   /// Per-thread copy of the grid points around one cell: consecutive queries (Z-ordered) mostly
   /// share a cell, so the 27 hashed buckets are gathered once per cell, not once per query.
@@ -147,8 +148,9 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
                     bool exclude_same_index, NeighborLists& out, bool sort_lists = true,
                     std::span<const Index> query_order = {});
 
-/// Packs the fixed-stride lists in out.staging (out.counts of the first `count` particles) back to back
-/// in particle order into out.indices and out.firsts; with `sort_lists` each list in index order.
+/// Packs the lists in out.staging (out.counts[i] slots from out.staged_firsts[i], for the first `count`
+/// particles) back to back in particle order into out.indices and out.firsts; with `sort_lists` each
+/// list in index order.
 void pack_staged_lists(NeighborLists& out, std::size_t count, bool sort_lists);
 
 /// Neighbour lists kept across steps with a skin (Verlet lists): one search of radius r + skin gives
