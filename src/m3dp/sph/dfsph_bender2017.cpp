@@ -244,6 +244,9 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
   parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_position[i] = padded(fluid.position[i]); }, 4096);
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
   const bool use_avx2 = avx2::available();
+  // One rest density, so one mass (m = ρ0 V): the factor's mass ratios are all 1.
+  const bool one_mass = std::all_of(parameters.phases.begin(), parameters.phases.end(),
+                                    [&](const auto& phase) { return phase.density == parameters.phases.front().density; });
 #endif
   const Real boundary_neighbor_weight = parameters.settings.boundary_spacing_factor * parameters.settings.boundary_spacing_factor;
   return with_kernel(parameters.settings.kernel,
@@ -262,7 +265,9 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                Index k = 0;
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
                                if (use_avx2) {
-                                 const avx2::DensityPairSums sums = avx2::density_pair_sums(
+                                 const auto pair_sums = one_mass ? avx2::density_pair_sums<true, std::decay_t<decltype(kernel)>>
+                                                                 : avx2::density_pair_sums<false, std::decay_t<decltype(kernel)>>;
+                                 const avx2::DensityPairSums sums = pair_sums(
                                      kernel, state.solver_position.data(), fluid.mass.data(), fluid_lists.indices.data() + fluid_first,
                                      fluid_lists.counts[i], state.solver_position[i], mass_i, volume,
                                      state.fluid_pair_gradient.data() + fluid_first);

@@ -303,7 +303,9 @@ struct DensityPairSums {
   Real gradient_squares = 0;
   Index pairs_done = 0;
 };
-template <class Kernel>
+/// With kOneMass (every fluid particle of one mass: one rest density) the mass ratios are 1, without
+/// the masses' gather and the division.
+template <bool kOneMass, class Kernel>
 __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(const Kernel& kernel, const Vec4* position, const Real* mass,
                                                                             const Index* neighbor, Index count, const Vec4& position_i,
                                                                             Real mass_i, Real volume, Real* pair_gradient) {
@@ -326,9 +328,13 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
     gradient_x = _mm256_add_ps(gradient_x, gx);
     gradient_y = _mm256_add_ps(gradient_y, gy);
     gradient_z = _mm256_add_ps(gradient_z, gz);
-    const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(neighbor + k)), transpose_order);
-    const __m256 mass_ratio = _mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4));
-    squares = _mm256_fmadd_ps(mass_ratio, _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz))), squares);
+    const __m256 squared = _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz)));
+    if constexpr (kOneMass) {
+      squares = _mm256_add_ps(squares, squared);
+    } else {
+      const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(neighbor + k)), transpose_order);
+      squares = _mm256_fmadd_ps(_mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4)), squared, squares);
+    }
   }
   if (k < count) {
     // The last one to seven pairs as one masked group, not one by one in the caller's scalar loop,
@@ -352,9 +358,13 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
     gradient_x = _mm256_add_ps(gradient_x, gx);
     gradient_y = _mm256_add_ps(gradient_y, gy);
     gradient_z = _mm256_add_ps(gradient_z, gz);
-    const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(tail)), transpose_order);
-    const __m256 mass_ratio = _mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4));
-    squares = _mm256_fmadd_ps(mass_ratio, _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz))), squares);
+    const __m256 squared = _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz)));
+    if constexpr (kOneMass) {
+      squares = _mm256_add_ps(squares, squared);
+    } else {
+      const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(tail)), transpose_order);
+      squares = _mm256_fmadd_ps(_mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4)), squared, squares);
+    }
     k = count;
   }
   DensityPairSums sums;
