@@ -360,6 +360,12 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
           buffer.cell = cell;
           buffer.valid = true;
         }
+        if (buffer.count == 0) {
+          // No candidates around this cell (most cells, for the boundary lists): nothing to filter or copy.
+          out.counts[i] = 0;
+          out.staged_firsts[i] = cursor;
+          continue;
+        }
         const Index self = exclude_same_index ? static_cast<Index>(i) : std::numeric_limits<Index>::max();
         const Index count = keep_candidates_within(buffer, query, radius_squared, self);
         const Index* found = buffer.found.data();
