@@ -250,14 +250,31 @@ bool SpatialHashGrid::choose_dense_cells(std::span<const Vec3> positions, const 
 
 void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const {
   if (sorted_index_.empty()) return;
+  BucketRange ranges[27];
+  int range_count = 0;
   if (dense_) {
-    append_dense_runs_around_cell(cell, buffer);
-    return;
+    // The three cells along x of each of the nine rows around `cell` are consecutive buckets, and
+    // their points one range of the sorted arrays: nine copies, not 27.
+    const std::int64_t first_x = std::max<std::int64_t>(std::int64_t(cell[0]) - dense_origin_[0] - 1, 0);
+    const std::int64_t last_x = std::min<std::int64_t>(std::int64_t(cell[0]) - dense_origin_[0] + 1, std::int64_t(dense_extent_[0]) - 1);
+    if (first_x > last_x) return;
+    for (std::int64_t dz = -1; dz <= 1; ++dz) {
+      const std::int64_t z = std::int64_t(cell[2]) - dense_origin_[2] + dz;
+      if (z < 0 || z >= std::int64_t(dense_extent_[2])) continue;
+      for (std::int64_t dy = -1; dy <= 1; ++dy) {
+        const std::int64_t y = std::int64_t(cell[1]) - dense_origin_[1] + dy;
+        if (y < 0 || y >= std::int64_t(dense_extent_[1])) continue;
+        const std::size_t row = std::size_t(dense_extent_[0]) * std::size_t(y + std::int64_t(dense_extent_[1]) * z);
+        ranges[range_count++] = BucketRange{bucket_range_[row + std::size_t(first_x)].begin, bucket_range_[row + std::size_t(last_x)].end};
+      }
+    }
+  } else {
+    std::uint32_t buckets[27];
+    range_count = buckets_around_cell(cell, buckets);
+    for (int k = 0; k < range_count; ++k) ranges[k] = bucket_range_[buckets[k]];
   }
-  std::uint32_t buckets[27];
-  const int count = buckets_around_cell(cell, buckets);
   std::size_t total = 0;
-  for (int k = 0; k < count; ++k) total += bucket_range_[buckets[k]].end - bucket_range_[buckets[k]].begin;
+  for (int k = 0; k < range_count; ++k) total += ranges[k].end - ranges[k].begin;
   std::size_t at = buffer.count;
   if (buffer.index.size() < at + total) {  // grow only; values past `count` are never read
     buffer.index.resize(at + total);
@@ -269,50 +286,8 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
   // (their calls cost more than the copying: 5 % of the dam break).
   Index* index_out = buffer.index.data();
   Real *x_out = buffer.x.data(), *y_out = buffer.y.data(), *z_out = buffer.z.data();
-  for (int k = 0; k < count; ++k) {
-    const BucketRange range = bucket_range_[buckets[k]];
-    for (std::uint32_t slot = range.begin; slot < range.end; ++slot, ++at) {
-      index_out[at] = sorted_index_[slot];
-      x_out[at] = sorted_x_[slot];
-      y_out[at] = sorted_y_[slot];
-      z_out[at] = sorted_z_[slot];
-    }
-  }
-  buffer.count = at;
-}
-
-void SpatialHashGrid::append_dense_runs_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const {
-  // The three cells along x of each of the nine rows around `cell` are consecutive buckets, and their
-  // points one range of the sorted arrays: nine copies, not 27.
-  const std::int64_t first_x = std::max<std::int64_t>(std::int64_t(cell[0]) - dense_origin_[0] - 1, 0);
-  const std::int64_t last_x = std::min<std::int64_t>(std::int64_t(cell[0]) - dense_origin_[0] + 1, std::int64_t(dense_extent_[0]) - 1);
-  if (first_x > last_x) return;
-  BucketRange runs[9];
-  int run_count = 0;
-  std::size_t total = 0;
-  for (std::int64_t dz = -1; dz <= 1; ++dz) {
-    const std::int64_t z = std::int64_t(cell[2]) - dense_origin_[2] + dz;
-    if (z < 0 || z >= std::int64_t(dense_extent_[2])) continue;
-    for (std::int64_t dy = -1; dy <= 1; ++dy) {
-      const std::int64_t y = std::int64_t(cell[1]) - dense_origin_[1] + dy;
-      if (y < 0 || y >= std::int64_t(dense_extent_[1])) continue;
-      const std::size_t row = std::size_t(dense_extent_[0]) * std::size_t(y + std::int64_t(dense_extent_[1]) * z);
-      const BucketRange run{bucket_range_[row + std::size_t(first_x)].begin, bucket_range_[row + std::size_t(last_x)].end};
-      runs[run_count++] = run;
-      total += run.end - run.begin;
-    }
-  }
-  std::size_t at = buffer.count;
-  if (buffer.index.size() < at + total) {  // grow only; values past `count` are never read
-    buffer.index.resize(at + total);
-    buffer.x.resize(at + total);
-    buffer.y.resize(at + total);
-    buffer.z.resize(at + total);
-  }
-  Index* index_out = buffer.index.data();
-  Real *x_out = buffer.x.data(), *y_out = buffer.y.data(), *z_out = buffer.z.data();
-  for (int k = 0; k < run_count; ++k)
-    for (std::uint32_t slot = runs[k].begin; slot < runs[k].end; ++slot, ++at) {
+  for (int k = 0; k < range_count; ++k)
+    for (std::uint32_t slot = ranges[k].begin; slot < ranges[k].end; ++slot, ++at) {
       index_out[at] = sorted_index_[slot];
       x_out[at] = sorted_x_[slot];
       y_out[at] = sorted_y_[slot];

@@ -109,8 +109,6 @@ class SpatialHashGrid {
   /// Whether the points' box (plus a cell each side) is small enough for dense cells; if so sets the
   /// box's origin and extent.
   bool choose_dense_cells(std::span<const Vec3> positions, const Index* subset, std::size_t point_count);
-  /// Dense cells only: appends the points of the nine runs of three cells around `cell`.
-  void append_dense_runs_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const;
 
   Real cell_size_ = 1;
   Real inverse_cell_size_ = 1;
