@@ -53,9 +53,9 @@ __attribute__((target("avx2,fma"))) inline Vec4 halves_added(__m256 sum) {
 __attribute__((target("avx2,fma"))) inline Vec4 difference_products(const Vec4* a, const Vec4* b, const Index* neighbor,
                                                                     const Real* weight, Index count, const Vec4& a_i,
                                                                     const Vec4& b_i) {
+  if (count == 0) return Vec4::Zero();
   const __m256 a_ii = broadcast(a_i), b_ii = broadcast(b_i);
   __m256 sum = _mm256_setzero_ps();
-  if (count == 0) return Vec4::Zero();
   Index k = 0;
   for (; k + 1 < count; k += 2) {
     const Index j0 = neighbor[k], j1 = neighbor[k + 1];

@@ -369,7 +369,7 @@ void Solver::update_rest_clocks(Real time_step) {
     std::atomic_ref<int>(state_.resting_woken).store(1, std::memory_order_relaxed);
   };
   // With none resting there is nothing to wake: no pass over the fast particles' lists (in the 47k
-  // dam break, most of them: 0.3 ms a step).
+  // dam break, most of them: 0.5 ms a step).
   const bool any_resting = active < fluid.size();
   parallel_for_each_index(active, [&](std::size_t i) {
     const FluidPhase& phase = parameters_.phases[fluid.phase[i]];
