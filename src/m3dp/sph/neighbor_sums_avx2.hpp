@@ -312,8 +312,29 @@ struct DensityPairSums {
   Real gradient_squares = 0;
   Index pairs_done = 0;
 };
-/// With kOneMass (every fluid particle of one mass: one rest density) the mass ratios are 1, without
-/// the masses' gather and the division.
+/// The density pass's gradient sums, lane by lane: Σ g r (x, y and z) and Σ (m_i/m_j) |g r|².
+struct GradientGroupSums {
+  __m256 x, y, z, squares;  // no initialisers: the implicit constructor is not compiled for AVX
+};
+/// Adds one group of eight pairs (pair gradients g and differences r in transposed lanes; `group`, its
+/// neighbours in list order). With kOneMass (every fluid particle of one mass: one rest density) the
+/// mass ratios are 1, without the masses' gather and the division.
+template <bool kOneMass>
+__attribute__((target("avx2,fma"))) inline void add_gradient_group(__m256 pair, const EightDifferences& r, const Index* group,
+                                                                    const Real* mass, __m256 mass_i_lanes, GradientGroupSums& sums) {
+  const __m256 gx = _mm256_mul_ps(pair, r.x), gy = _mm256_mul_ps(pair, r.y), gz = _mm256_mul_ps(pair, r.z);
+  sums.x = _mm256_add_ps(sums.x, gx);
+  sums.y = _mm256_add_ps(sums.y, gy);
+  sums.z = _mm256_add_ps(sums.z, gz);
+  const __m256 squared = _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz)));
+  if constexpr (kOneMass) {
+    sums.squares = _mm256_add_ps(sums.squares, squared);
+  } else {
+    const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(group)),
+                                                        _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7));  // transposed order
+    sums.squares = _mm256_fmadd_ps(_mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4)), squared, sums.squares);
+  }
+}
 template <bool kOneMass, class Kernel>
 __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(const Kernel& kernel, const Vec4* position, const Real* mass,
                                                                             const Index* neighbor, Index count, const Vec4& position_i,
@@ -323,8 +344,8 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
   const __m256 mass_i_lanes = _mm256_set1_ps(mass_i);
   const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
   const __m256i neighbor_order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);  // lanes back to neighbour order
-  __m256 density = _mm256_setzero_ps(), gradient_x = _mm256_setzero_ps(), gradient_y = _mm256_setzero_ps(),
-         gradient_z = _mm256_setzero_ps(), squares = _mm256_setzero_ps();
+  __m256 density = _mm256_setzero_ps();
+  GradientGroupSums gradients{density, density, density, density};
   Index k = 0;
   for (; k + 8 <= count; k += 8) {
     const EightDifferences r = eight_differences(position, neighbor + k, center);
@@ -333,17 +354,7 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
     density = _mm256_fmadd_ps(volume_lanes, w.value, density);
     const __m256 pair = _mm256_mul_ps(volume_lanes, w.gradient_factor);
     _mm256_storeu_ps(pair_gradient + k, _mm256_permutevar8x32_ps(pair, neighbor_order));
-    const __m256 gx = _mm256_mul_ps(pair, r.x), gy = _mm256_mul_ps(pair, r.y), gz = _mm256_mul_ps(pair, r.z);
-    gradient_x = _mm256_add_ps(gradient_x, gx);
-    gradient_y = _mm256_add_ps(gradient_y, gy);
-    gradient_z = _mm256_add_ps(gradient_z, gz);
-    const __m256 squared = _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz)));
-    if constexpr (kOneMass) {
-      squares = _mm256_add_ps(squares, squared);
-    } else {
-      const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(neighbor + k)), transpose_order);
-      squares = _mm256_fmadd_ps(_mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4)), squared, squares);
-    }
+    add_gradient_group<kOneMass>(pair, r, neighbor + k, mass, mass_i_lanes, gradients);
   }
   if (k < count) {
     // The last one to seven pairs as one masked group, not one by one in the caller's scalar loop,
@@ -363,23 +374,13 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
     density = _mm256_fmadd_ps(volume_lanes, _mm256_and_ps(live, w.value), density);
     const __m256 pair = _mm256_and_ps(live, _mm256_mul_ps(volume_lanes, w.gradient_factor));
     _mm256_maskstore_ps(pair_gradient + k, stored, _mm256_permutevar8x32_ps(pair, neighbor_order));
-    const __m256 gx = _mm256_mul_ps(pair, r.x), gy = _mm256_mul_ps(pair, r.y), gz = _mm256_mul_ps(pair, r.z);
-    gradient_x = _mm256_add_ps(gradient_x, gx);
-    gradient_y = _mm256_add_ps(gradient_y, gy);
-    gradient_z = _mm256_add_ps(gradient_z, gz);
-    const __m256 squared = _mm256_fmadd_ps(gx, gx, _mm256_fmadd_ps(gy, gy, _mm256_mul_ps(gz, gz)));
-    if constexpr (kOneMass) {
-      squares = _mm256_add_ps(squares, squared);
-    } else {
-      const __m256i indices = _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(tail)), transpose_order);
-      squares = _mm256_fmadd_ps(_mm256_div_ps(mass_i_lanes, _mm256_i32gather_ps(mass, indices, 4)), squared, squares);
-    }
+    add_gradient_group<kOneMass>(pair, r, tail, mass, mass_i_lanes, gradients);
     k = count;
   }
   DensityPairSums sums;
   sums.density_ratio = lanes_added(density);
-  sums.gradient_sum = Vec3(lanes_added(gradient_x), lanes_added(gradient_y), lanes_added(gradient_z));
-  sums.gradient_squares = lanes_added(squares);
+  sums.gradient_sum = Vec3(lanes_added(gradients.x), lanes_added(gradients.y), lanes_added(gradients.z));
+  sums.gradient_squares = lanes_added(gradients.squares);
   sums.pairs_done = k;
   return sums;
 }
