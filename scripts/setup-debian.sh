@@ -1,36 +1,66 @@
 #!/usr/bin/env bash
-# Installs every Debian package M3DP needs to build, test and run its demos.
-# Idempotent: packages already present are skipped by apt. Needs root (or sudo).
+# Installs every Debian package M3DP needs to build, test and run its demos, and keeps the ones
+# whose updates change how our files are read at Debian's current version, so that every machine
+# (a developer's, CI's, a fresh one) reads files the same way. Needs root (or sudo). Idempotent:
+# with everything installed and current it changes nothing.
 set -euo pipefail
 
 packages=(
   build-essential cmake ninja-build ccache pkg-config
-  libeigen3-dev libtbb-dev libfmt-dev libspdlog-dev libpugixml-dev
+  libeigen3-dev libtbb-dev libfmt-dev libspdlog-dev libpugixml-dev zlib1g-dev libdeflate-dev
   libgtest-dev libgmock-dev libbenchmark-dev libcli11-dev nlohmann-json3-dev
   # Surface reconstruction: OpenVDB sparse grids (its CMake config also needs Boost.Iostreams).
   libopenvdb-dev libboost-iostreams-dev
   # The rigid world: DART with Bullet collision (meshes of printed material) and its URDF loader (robots).
   libdart-dev libdart-collision-bullet-dev libdart-external-ikfast-dev libdart-utils-urdf-dev
-  # ParaView's pvpython reads our .pvd/.vtu files back in the end-to-end test.
+  # ParaView's pvpython reads our .pvd/.vtu files back in the end-to-end tests.
   paraview python3-paraview python3
 )
-
-missing=()
-for package in "${packages[@]}"; do
-  if ! dpkg-query -W -f='${Status}' "$package" 2>/dev/null | grep -q 'install ok installed'; then
-    missing+=("$package")
-  fi
-done
-
-if [ ${#missing[@]} -eq 0 ]; then
-  echo "setup: all ${#packages[@]} Debian packages already installed"
-  exit 0
-fi
+# Kept at the candidate version: ParaView and the XML parser under its readers. Debian 12's expat
+# security update 2.5.0-1+deb12u5 made ParaView 5.11 unable to read raw appended VTK data; a machine
+# with an older expat would pass tests that fail on a fresh one.
+current=(libexpat1 paraview python3-paraview)
 
 sudo_cmd=()
 if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
-
-echo "setup: installing ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
-"${sudo_cmd[@]}" apt-get update -qq
-"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}"
+
+installed_version() { dpkg-query -W -f='${Status} ${Version}' "$1" 2>/dev/null | sed -n 's/^install ok installed //p'; }
+candidate_version() { apt-cache policy "$1" 2>/dev/null | sed -n 's/^ *Candidate: //p'; }
+
+# The package lists decide what "current" means: refresh them when they are over a day old.
+lists_age_days() {
+  local newest
+  newest=$(find /var/lib/apt/lists -maxdepth 1 -name '*Packages*' -printf '%T@\n' 2>/dev/null | sort -n | tail -n 1)
+  if [ -z "$newest" ]; then echo 999; else echo $(( ($(date +%s) - ${newest%.*}) / 86400 )); fi
+}
+lists_refreshed=false
+if [ "$(lists_age_days)" -ge 1 ]; then
+  if "${sudo_cmd[@]}" apt-get update -qq; then
+    lists_refreshed=true
+  else
+    echo "setup: warning: apt-get update failed; checking against the package lists this machine has" >&2
+  fi
+fi
+
+wanted=()
+for package in "${packages[@]}"; do
+  [ -n "$(installed_version "$package")" ] || wanted+=("$package")
+done
+for package in "${current[@]}"; do
+  have=$(installed_version "$package")
+  candidate=$(candidate_version "$package")
+  if [ -n "$have" ] && [ -n "$candidate" ] && [ "$candidate" != "(none)" ] && [ "$have" != "$candidate" ]; then
+    echo "setup: $package $have is older than Debian's current $candidate: upgrading it"
+    wanted+=("$package")
+  fi
+done
+
+if [ ${#wanted[@]} -eq 0 ]; then
+  echo "setup: all ${#packages[@]} Debian packages installed, ${current[*]} at Debian's current versions"
+  exit 0
+fi
+
+echo "setup: installing ${wanted[*]}"
+$lists_refreshed || "${sudo_cmd[@]}" apt-get update -qq
+"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${wanted[@]}"
