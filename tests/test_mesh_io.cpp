@@ -3,6 +3,7 @@
 
 #include <bit>
 #include <cstdint>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -11,6 +12,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/particle_reader.hpp"
+#include "m3dp/io/vtk_binary.hpp"
 #include "m3dp/io/vtk_writer.hpp"
 
 namespace {
@@ -189,17 +191,48 @@ TEST_F(MeshIo, UnknownExtensionAndMissingFile) {
   EXPECT_NE(missing_message.find("no such file"), std::string::npos) << missing_message;
 }
 
+/// A frame as m3dp wrote it before base64 (raw appended data, UInt64 headers): readers must
+/// still open the runs users already have.
+std::string raw_appended_frame(const std::vector<Vec3>& points, const std::vector<std::uint64_t>& ids) {
+  std::string text = R"(<?xml version="1.0"?>
+<VTKFile type="UnstructuredGrid" version="1.0" byte_order="LittleEndian" header_type="UInt64">
+  <UnstructuredGrid>
+    <FieldData><DataArray type="Float64" Name="particle_radius" NumberOfTuples="1" format="ascii">0.002</DataArray></FieldData>
+)";
+  const std::uint64_t id_bytes = ids.size() * 8, point_bytes = points.size() * sizeof(Vec3);
+  text += "    <Piece NumberOfPoints=\"" + std::to_string(points.size()) + "\" NumberOfCells=\"0\">\n";
+  text += "      <PointData><DataArray type=\"UInt64\" Name=\"id\" format=\"appended\" offset=\"0\"/></PointData>\n";
+  text += "      <Points><DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"appended\" offset=\"" +
+          std::to_string(8 + id_bytes) + "\"/></Points>\n";
+  text += "    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
+  text.append(reinterpret_cast<const char*>(&id_bytes), 8).append(reinterpret_cast<const char*>(ids.data()), id_bytes);
+  text.append(reinterpret_cast<const char*>(&point_bytes), 8).append(reinterpret_cast<const char*>(points.data()), point_bytes);
+  return text + "\n  </AppendedData>\n</VTKFile>\n";
+}
+
 TEST_F(MeshIo, ParticleFramesKeepTheirIds) {
-  // m3dp run's frames (raw appended, UInt64 ids beyond a float's 2^24) and a hand-written ASCII file.
+  // m3dp run's frames (base64, compressed or not; UInt64 ids beyond a float's 2^24), the raw frames
+  // it wrote before, and a hand-written ASCII file.
   const std::vector<Vec3> points{Vec3(0.1f, 0.2f, 0.3f), Vec3(-1, 2, 4), Vec3(5e-4f, 0, 1)};
   const std::vector<std::uint64_t> ids{7, (std::uint64_t{1} << 40) + 3, 16777217};
-  const fs::path written = folder_ / "frame.vtu";
-  m3dp::io::write_vtu(written, points, {m3dp::io::PointArray::of("id", ids)}, {{"particle_radius", 0.001}});
-  const auto frame = m3dp::io::read_particle_frame(written);
-  ASSERT_EQ(frame.positions.size(), 3u);
-  EXPECT_EQ(frame.positions[1], points[1]);
-  EXPECT_EQ(frame.ids, ids);
-  EXPECT_NEAR(*frame.particle_radius, 0.001, 1e-9);
+  for (const int level : {1, 9, -1}) {
+    const fs::path written = folder_ / "frame.vtu";
+    m3dp::io::write_vtu(written, points, {m3dp::io::PointArray::of("id", ids)}, {{"particle_radius", 0.001}}, {level});
+    std::ifstream stream(written, std::ios::binary);
+    const std::string text{std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+    EXPECT_EQ(text.find("<AppendedData"), std::string::npos);  // all XML: see vtk_writer.hpp
+    EXPECT_NE(text.find("format=\"binary\""), std::string::npos);
+    EXPECT_EQ(text.find("vtkZLibDataCompressor") != std::string::npos, level >= 0);
+    const auto frame = m3dp::io::read_particle_frame(written);
+    ASSERT_EQ(frame.positions.size(), 3u) << "zlib level " << level;
+    EXPECT_EQ(frame.positions[1], points[1]);
+    EXPECT_EQ(frame.ids, ids);
+    EXPECT_NEAR(*frame.particle_radius, 0.001, 1e-9);
+  }
+  const auto raw = m3dp::io::read_particle_frame(write("raw.vtu", raw_appended_frame(points, ids)));
+  EXPECT_EQ(raw.positions, points);
+  EXPECT_EQ(raw.ids, ids);
+  EXPECT_NEAR(*raw.particle_radius, 0.002, 1e-9);
 
   const fs::path ascii = write("ascii.vtu", R"(<?xml version="1.0"?>
 <VTKFile type="UnstructuredGrid" version="1.0">
@@ -227,6 +260,97 @@ TEST_F(MeshIo, ParticleFramesKeepTheirIds) {
   } catch (const InputError& error) {
     EXPECT_NE(std::string(error.what()).find("the id array ends after 1 of 2 values"), std::string::npos) << error.what();
   }
+}
+
+TEST_F(MeshIo, LargeFramesRoundTripInEveryEncoding) {
+  // Several zlib blocks (64 KiB each) with a partial last one, and ParaView's inline binary and
+  // UInt32 headers written by hand from the same bytes.
+  std::mt19937 random(5);
+  std::uniform_real_distribution<float> coordinate(-1, 1);
+  std::vector<Vec3> points(23456);
+  std::vector<std::uint64_t> ids(points.size());
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    points[i] = Vec3(coordinate(random), coordinate(random), coordinate(random));
+    ids[i] = i * 1000003u;
+  }
+  for (const int level : {1, 6, -1}) {
+    const fs::path file = folder_ / ("large_" + std::to_string(level) + ".vtu");
+    m3dp::io::write_vtu(file, points, {m3dp::io::PointArray::of("id", ids)}, {}, {level});
+    const auto frame = m3dp::io::read_particle_frame(file);
+    EXPECT_EQ(frame.positions, points) << "zlib level " << level;
+    EXPECT_EQ(frame.ids, ids) << "zlib level " << level;
+  }
+  // An empty frame (a print before its first layer) reads as no particles.
+  m3dp::io::write_vtu(folder_ / "empty.vtu", std::span<const Vec3>{}, {}, {});
+  EXPECT_TRUE(m3dp::io::read_particle_frame(folder_ / "empty.vtu").positions.empty());
+
+  // Inline binary: a UInt32 byte count and the bytes in one base64 stream.
+  const std::vector<Vec3> few(points.begin(), points.begin() + 5);
+  std::string payload(4, '\0');
+  const std::uint32_t bytes = few.size() * sizeof(Vec3);
+  std::memcpy(payload.data(), &bytes, 4);
+  payload.append(reinterpret_cast<const char*>(few.data()), bytes);
+  std::string encoded;
+  m3dp::io::append_base64(payload, encoded);
+  const fs::path inline_file = write("inline.vtu", R"(<?xml version="1.0"?>
+<VTKFile type="PolyData" version="0.1" byte_order="LittleEndian">
+  <PolyData><Piece NumberOfPoints="5">
+    <Points><DataArray type="Float32" NumberOfComponents="3" format="binary">
+      )" + encoded + R"(
+    </DataArray></Points>
+  </Piece></PolyData>
+</VTKFile>
+)");
+  EXPECT_EQ(m3dp::io::read_particle_frame(inline_file).positions, few);
+}
+
+TEST_F(MeshIo, DamagedFramesNameTheArray) {
+  const std::vector<Vec3> points(4000, Vec3(1, 2, 3));
+  const fs::path file = folder_ / "frame.vtu";
+  m3dp::io::write_vtu(file, points, {}, {});
+  std::ifstream stream(file, std::ios::binary);
+  const std::string text{std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+  auto error_of = [&](const std::string& contents) {
+    try {
+      (void)m3dp::io::read_particle_frame(write("damaged.vtu", contents));
+    } catch (const InputError& error) {
+      return std::string(error.what());
+    }
+    return std::string("no error");
+  };
+  // Cut inside the points' data.
+  const std::size_t points_at = text.find('\n', text.find("<Points>") + 20) + 1;
+  const std::string truncated = error_of(text.substr(0, points_at + 80) + "</DataArray></Points></Piece></UnstructuredGrid></VTKFile>");
+  EXPECT_NE(truncated.find("damaged.vtu"), std::string::npos) << truncated;
+  EXPECT_NE(truncated.find("array points: a compressed array's base64 data is cut short"), std::string::npos) << truncated;
+  // A character that is not base64 inside the data.
+  std::string garbled = text;
+  garbled[points_at + 50] = '%';
+  const std::string garbled_error = error_of(garbled);
+  EXPECT_NE(garbled_error.find("array points:"), std::string::npos) << garbled_error;
+  // A compressor the reader does not have.
+  std::string lz4 = text;
+  lz4.replace(lz4.find("vtkZLibDataCompressor"), 21, "vtkLZ4DataCompressor");
+  const std::string lz4_error = error_of(lz4);
+  EXPECT_NE(lz4_error.find("compressor 'vtkLZ4DataCompressor' is not supported"), std::string::npos) << lz4_error;
+}
+
+TEST(Base64, MatchesRfc4648Vectors) {
+  // RFC 4648 section 10.
+  const std::pair<const char*, const char*> vectors[] = {{"", ""},         {"f", "Zg=="},         {"fo", "Zm8="},
+                                                         {"foo", "Zm9v"}, {"foob", "Zm9vYg=="}, {"fooba", "Zm9vYmE="},
+                                                         {"foobar", "Zm9vYmFy"}};
+  for (const auto& [plain, encoded] : vectors) {
+    std::string text, decoded;
+    m3dp::io::append_base64(plain, text);
+    EXPECT_EQ(text, encoded);
+    EXPECT_TRUE(m3dp::io::decode_base64(std::string(" ") + encoded + "\n", decoded));
+    EXPECT_EQ(decoded, plain);
+  }
+  std::string decoded;
+  EXPECT_FALSE(m3dp::io::decode_base64("Zg==Zm8=", decoded));  // text after padding
+  EXPECT_FALSE(m3dp::io::decode_base64("Zm9", decoded));       // a partial group
+  EXPECT_FALSE(m3dp::io::decode_base64("Z===", decoded));
 }
 
 }  // namespace

@@ -4,6 +4,7 @@
 #include <pugixml.hpp>
 
 #include <bit>
+#include <cctype>
 #include <cstdint>
 #include <cstring>
 #include <fstream>
@@ -12,6 +13,7 @@
 #include <type_traits>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/io/vtk_binary.hpp"
 
 namespace m3dp::io {
 
@@ -60,14 +62,23 @@ T read_element(const char* bytes, const std::string& type) {
 
 Real read_scalar(const char* bytes, const std::string& type) { return read_element<Real>(bytes, type); }
 
-/// The `components` × `count` values of a DataArray, ascii or raw appended (`appended` is where
-/// <AppendedData> starts in `bytes`, npos if none).
+/// Where a file's binary arrays are and how they are stored.
+struct BinaryLayout {
+  const std::string* bytes = nullptr;   // the whole file
+  std::size_t appended = std::string::npos;  // first byte after <AppendedData>'s '_', npos if none
+  VtkPayloadFormat appended_format;     // base64 or raw; zlib and header size as the root says
+  VtkPayloadFormat inline_format;       // format="binary": always base64
+};
+
+/// The `components` × `count` values of a DataArray: ascii, inline binary (base64) or appended
+/// (raw or base64), each uncompressed or compressed by vtkZLibDataCompressor.
 template <class T>
 std::vector<T> read_data_array(const fs::path& file, const pugi::xml_node& array, std::size_t count, int components,
-                               const std::string& bytes, std::size_t appended, const std::string& header_type) {
+                               const BinaryLayout& layout) {
   const std::string name = array.attribute("Name").as_string("points");
   const std::string type = array.attribute("type").as_string();
-  if (vtk_type_bytes(type) == 0) fail(file, 0, fmt::format("array '{}' of unknown type '{}'", name, type));
+  const std::size_t element = vtk_type_bytes(type);
+  if (element == 0) fail(file, 0, fmt::format("array '{}' of unknown type '{}'", name, type));
   const std::size_t total = count * static_cast<std::size_t>(components);
   std::vector<T> values(total);
   const std::string format = array.attribute("format").as_string();
@@ -78,19 +89,26 @@ std::vector<T> read_data_array(const fs::path& file, const pugi::xml_node& array
       if (!(text >> value)) fail(file, 0, fmt::format("the {} array ends after {} of {} values", name, n, total));
       values[n] = static_cast<T>(value);
     }
-  } else if (format == "appended") {
-    if (appended == std::string::npos) fail(file, 0, fmt::format("appended {} but no <AppendedData>", name));
-    const std::size_t marker = bytes.find('_', appended);
-    if (marker == std::string::npos) fail(file, 0, "<AppendedData> without its '_' marker");
-    const std::size_t size_bytes = header_type == "UInt64" ? 8 : 4;
-    const std::size_t start = marker + 1 + array.attribute("offset").as_ullong() + size_bytes;
-    const std::size_t element = vtk_type_bytes(type);
-    if (start + total * element > bytes.size()) fail(file, 0, fmt::format("the file ends inside the {} data (truncated?)", name));
-    for (std::size_t n = 0; n < total; ++n) values[n] = read_element<T>(bytes.data() + start + n * element, type);
-  } else {
-    fail(file, 0, fmt::format("{} in '{}' format; expected ascii or raw appended (ParaView: Data Mode Ascii or Appended, "
-                              "Encode Appended Data off)", name, format));
+    return values;
   }
+  std::string decoded, error;
+  if (format == "appended") {
+    if (layout.appended == std::string::npos) fail(file, 0, fmt::format("appended {} but no <AppendedData>", name));
+    const std::size_t start = layout.appended + array.attribute("offset").as_ullong();
+    if (start > layout.bytes->size()) fail(file, 0, fmt::format("the {} array's offset is past the end of the file (truncated?)", name));
+    if (!decode_vtk_array(std::string_view(*layout.bytes).substr(start), layout.appended_format, decoded, error))
+      fail(file, 0, fmt::format("array {}: {}", name, error));
+  } else if (format == "binary") {
+    std::string text = array.text().as_string();
+    std::erase_if(text, [](char character) { return std::isspace(static_cast<unsigned char>(character)) != 0; });
+    if (!decode_vtk_array(text, layout.inline_format, decoded, error))
+      fail(file, 0, fmt::format("array {}: {}", name, error));
+  } else {
+    fail(file, 0, fmt::format("{} in '{}' format; expected ascii, binary or appended", name, format));
+  }
+  if (decoded.size() < total * element)
+    fail(file, 0, fmt::format("the {} array holds {} bytes, {} values of {} need {}", name, decoded.size(), total, type, total * element));
+  for (std::size_t n = 0; n < total; ++n) values[n] = read_element<T>(decoded.data() + n * element, type);
   return values;
 }
 
@@ -105,8 +123,27 @@ ParticleFrame read_vtk_xml(const fs::path& file) {
   if (!parsed) fail(file, 0, fmt::format("not a VTK XML file: {}", parsed.description()));
   const pugi::xml_node root = document.child("VTKFile");
   if (!root) fail(file, 0, "not a VTK XML file: no <VTKFile> element");
-  if (root.attribute("compressor")) fail(file, 0, "compressed VTK files are not supported; save without compression");
+  BinaryLayout layout;
+  layout.bytes = &bytes;
+  if (const std::string compressor = root.attribute("compressor").as_string(); !compressor.empty()) {
+    if (compressor != "vtkZLibDataCompressor")
+      fail(file, 0, fmt::format("compressor '{}' is not supported; expected vtkZLibDataCompressor or none", compressor));
+    layout.appended_format.zlib = layout.inline_format.zlib = true;
+  }
   const std::string header_type = root.attribute("header_type").as_string("UInt32");
+  if (header_type != "UInt32" && header_type != "UInt64") fail(file, 0, fmt::format("header_type '{}'; expected UInt32 or UInt64", header_type));
+  layout.appended_format.header_bytes = layout.inline_format.header_bytes = header_type == "UInt64" ? 8 : 4;
+  if (std::string(root.attribute("byte_order").as_string("LittleEndian")) != "LittleEndian")
+    fail(file, 0, "big-endian VTK files are not supported; expected byte_order=\"LittleEndian\"");
+  if (appended != std::string::npos) {
+    const std::size_t tag_end = bytes.find('>', appended);
+    const std::size_t marker = tag_end == std::string::npos ? tag_end : bytes.find('_', tag_end);
+    if (marker == std::string::npos) fail(file, 0, "<AppendedData> without its '_' marker");
+    layout.appended = marker + 1;
+    const std::string tag = bytes.substr(appended, tag_end - appended);
+    if (tag.find("encoding=\"raw\"") != std::string::npos) layout.appended_format.base64 = false;
+    else if (tag.find("encoding=\"base64\"") == std::string::npos) fail(file, 0, "<AppendedData> encoding must be raw or base64");
+  }
   const pugi::xml_node dataset = root.child("UnstructuredGrid") ? root.child("UnstructuredGrid") : root.child("PolyData");
   if (!dataset) fail(file, 0, "expected an UnstructuredGrid or PolyData dataset");
   const pugi::xml_node piece = dataset.child("Piece");
@@ -119,13 +156,13 @@ ParticleFrame read_vtk_xml(const fs::path& file) {
   if (points.attribute("NumberOfComponents").as_int(3) != 3) fail(file, 0, "points must have 3 components");
 
   ParticleFrame frame;
-  const std::vector<Real> coordinates = read_data_array<Real>(file, points, count, 3, bytes, appended, header_type);
+  const std::vector<Real> coordinates = read_data_array<Real>(file, points, count, 3, layout);
   frame.positions.resize(count);
   for (std::size_t i = 0; i < count; ++i) frame.positions[i] = Vec3(coordinates[3 * i], coordinates[3 * i + 1], coordinates[3 * i + 2]);
   // Stable particle ids (m3dp run writes them): let a sequence be meshed incrementally.
   for (const pugi::xml_node array : piece.child("PointData").children("DataArray"))
     if (std::string(array.attribute("Name").as_string()) == "id" && array.attribute("NumberOfComponents").as_int(1) == 1)
-      frame.ids = read_data_array<std::uint64_t>(file, array, count, 1, bytes, appended, header_type);
+      frame.ids = read_data_array<std::uint64_t>(file, array, count, 1, layout);
   for (const pugi::xml_node array : dataset.child("FieldData").children("DataArray"))
     if (std::string(array.attribute("Name").as_string()) == "particle_radius")
       frame.particle_radius = static_cast<Real>(array.text().as_double());

@@ -1,6 +1,7 @@
 #pragma once
 // Reading particle frames back for offline work (m3dp mesh): VTK XML UnstructuredGrid / PolyData
-// (.vtu/.vtp, ASCII or raw appended, uncompressed), PLY point sets (ASCII or binary little-endian)
+// (.vtu/.vtp: ascii, inline binary, appended raw or base64, uncompressed or zlib-compressed, as
+// m3dp, ParaView and VTK write them), PLY point sets (ASCII or binary little-endian)
 // and ParaView collections (.pvd) of such files.
 #include <cstdint>
 #include <filesystem>

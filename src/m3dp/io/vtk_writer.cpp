@@ -6,6 +6,7 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/vtk_binary.hpp"
 
 namespace m3dp::io {
 
@@ -28,21 +29,23 @@ PointArray PointArray::of(std::string name, std::span<const std::uint64_t> value
 }
 
 void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays,
-               const std::vector<FieldValue>& field_data) {
+               const std::vector<FieldValue>& field_data, const VtuEncoding& encoding) {
   const std::uint64_t count = points.size();
-  // Appended blocks: each is a UInt64 byte count followed by the bytes.
-  struct Block {
-    const void* data;
-    std::uint64_t bytes;
+  // Every array inline (format="binary"): the file is XML from start to end, which every expat
+  // parses; appended data is not (see docs/architecture.md). The arrays are encoded together.
+  std::vector<std::string> attributes;
+  std::vector<std::string_view> payloads;
+  auto add_array = [&](std::string attribute, const void* data, std::uint64_t bytes) {
+    attributes.push_back(std::move(attribute));
+    payloads.emplace_back(static_cast<const char*>(data), bytes);
   };
-  std::vector<Block> blocks;
-  std::string header;
-  std::uint64_t offset = 0;
-  auto add_block = [&](const void* data, std::uint64_t bytes) {
-    blocks.push_back({data, bytes});
-    const std::uint64_t this_offset = offset;
-    offset += sizeof(std::uint64_t) + bytes;
-    return this_offset;
+  std::size_t next_array = 0;
+  std::vector<std::string> encoded;
+  std::string text;
+  auto write_array = [&] {
+    text += fmt::format("        <DataArray {} format=\"binary\">\n", attributes[next_array]);
+    text += encoded[next_array++];
+    text += "\n        </DataArray>\n";
   };
 
   // Cells: one VTK_VERTEX per particle, so ParaView shows points without a filter.
@@ -52,47 +55,35 @@ void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, 
   std::iota(cell_offsets.begin(), cell_offsets.end(), std::int64_t(1));
   const std::vector<std::uint8_t> cell_types(count, 1);
 
-  header += "<?xml version=\"1.0\"?>\n";
-  header += "<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n";
-  header += "  <UnstructuredGrid>\n";
-  if (!field_data.empty()) {
-    header += "    <FieldData>\n";
-    for (const auto& field : field_data)
-      header += fmt::format("      <DataArray type=\"Float64\" Name=\"{}\" NumberOfTuples=\"1\" format=\"ascii\">{:.17g}</DataArray>\n",
-                            field.name, field.value);
-    header += "    </FieldData>\n";
-  }
-  header += fmt::format("    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n", count, count);
-  header += "      <PointData>\n";
-  for (const auto& array : arrays) {
-    const std::uint64_t bytes = count * array.components * array.element_bytes;
-    header += fmt::format(
-        "        <DataArray type=\"{}\" Name=\"{}\" NumberOfComponents=\"{}\" format=\"appended\" offset=\"{}\"/>\n",
-        array.vtk_type, array.name, array.components, add_block(array.data, bytes));
-  }
-  header += "      </PointData>\n      <Points>\n";
-  header += fmt::format("        <DataArray type=\"{}\" NumberOfComponents=\"3\" format=\"appended\" offset=\"{}\"/>\n",
-                        kRealType, add_block(points.data(), count * sizeof(Vec3)));
-  header += "      </Points>\n      <Cells>\n";
-  header += fmt::format("        <DataArray type=\"Int64\" Name=\"connectivity\" format=\"appended\" offset=\"{}\"/>\n",
-                        add_block(connectivity.data(), count * sizeof(std::int64_t)));
-  header += fmt::format("        <DataArray type=\"Int64\" Name=\"offsets\" format=\"appended\" offset=\"{}\"/>\n",
-                        add_block(cell_offsets.data(), count * sizeof(std::int64_t)));
-  header += fmt::format("        <DataArray type=\"UInt8\" Name=\"types\" format=\"appended\" offset=\"{}\"/>\n",
-                        add_block(cell_types.data(), count * sizeof(std::uint8_t)));
-  header += "      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
+  for (const auto& array : arrays)
+    add_array(fmt::format("type=\"{}\" Name=\"{}\" NumberOfComponents=\"{}\"", array.vtk_type, array.name, array.components),
+              array.data, count * array.components * array.element_bytes);
+  add_array(fmt::format("type=\"{}\" NumberOfComponents=\"3\"", kRealType), points.data(), count * sizeof(Vec3));
+  add_array("type=\"Int64\" Name=\"connectivity\"", connectivity.data(), count * sizeof(std::int64_t));
+  add_array("type=\"Int64\" Name=\"offsets\"", cell_offsets.data(), count * sizeof(std::int64_t));
+  add_array("type=\"UInt8\" Name=\"types\"", cell_types.data(), count * sizeof(std::uint8_t));
+  encoded = encode_vtk_arrays(payloads, encoding.zlib_level);
 
-  write_file_atomically(
-      file,
-      [&](std::ostream& stream) {
-        stream.write(header.data(), static_cast<std::streamsize>(header.size()));
-        for (const Block& block : blocks) {
-          stream.write(reinterpret_cast<const char*>(&block.bytes), sizeof(block.bytes));
-          if (block.bytes > 0) stream.write(static_cast<const char*>(block.data), static_cast<std::streamsize>(block.bytes));
-        }
-        stream << "\n  </AppendedData>\n</VTKFile>\n";
-      },
-      true);
+  text += "<?xml version=\"1.0\"?>\n";
+  text += fmt::format("<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\"{}>\n",
+                      encoding.zlib_level >= 0 ? " compressor=\"vtkZLibDataCompressor\"" : "");
+  text += "  <UnstructuredGrid>\n";
+  if (!field_data.empty()) {
+    text += "    <FieldData>\n";
+    for (const auto& field : field_data)
+      text += fmt::format("      <DataArray type=\"Float64\" Name=\"{}\" NumberOfTuples=\"1\" format=\"ascii\">{:.17g}</DataArray>\n",
+                          field.name, field.value);
+    text += "    </FieldData>\n";
+  }
+  text += fmt::format("    <Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">\n", count, count);
+  text += "      <PointData>\n";
+  for (std::size_t a = 0; a < arrays.size(); ++a) write_array();
+  text += "      </PointData>\n      <Points>\n";
+  write_array();
+  text += "      </Points>\n      <Cells>\n";
+  for (int cell_array = 0; cell_array < 3; ++cell_array) write_array();
+  text += "      </Cells>\n    </Piece>\n  </UnstructuredGrid>\n</VTKFile>\n";
+  write_text_atomically(file, text);
 }
 
 void PvdCollection::add(double time, const std::filesystem::path& dataset_file) {

@@ -1,6 +1,7 @@
 #pragma once
-// Particle frames as VTK XML UnstructuredGrid (.vtu, raw appended binary, one vertex cell per
-// particle) and a ParaView time-series collection (.pvd). Both open in ParaView as a time series.
+// Particle frames as VTK XML UnstructuredGrid (.vtu, one vertex cell per particle; every array
+// inline as base64, zlib-compressed by default) and a ParaView time-series collection (.pvd). Both
+// open in ParaView as a time series. Inline base64, not appended data: see docs/architecture.md.
 #include <cstdint>
 #include <filesystem>
 #include <span>
@@ -31,9 +32,15 @@ struct FieldValue {
   double value = 0;
 };
 
+/// How the arrays' bytes are stored: base64 text, deflated by zlib at `zlib_level` (1 fastest,
+/// 9 smallest) in blocks VTK's vtkZLibDataCompressor reads; a negative level writes base64 alone.
+struct VtuEncoding {
+  int zlib_level = 1;
+};
+
 /// Writes `points` and `arrays` (each with points.size() tuples) to `file`, atomically.
 void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays,
-               const std::vector<FieldValue>& field_data = {});
+               const std::vector<FieldValue>& field_data = {}, const VtuEncoding& encoding = {});
 
 /// A .pvd collection that is rewritten (atomically) each time a frame is added.
 class PvdCollection {
