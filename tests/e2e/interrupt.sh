@@ -2,6 +2,7 @@
 # Ctrl-C (SIGINT) stops a run cleanly: summary.json says "interrupted", every file is complete
 # (ParaView reads every frame listed) and no temporary file is left.
 set -euo pipefail
+source "$(dirname "$0")/pvpython_errors.sh"
 m3dp=$1 scene=$2 out=$3
 rm -rf "$out"
 "$m3dp" run "$scene" -o "$out" --quiet &
@@ -20,7 +21,7 @@ set -e
 grep -q '"status": "interrupted"' "$out/summary.json" || { echo "FAIL: summary.json does not say interrupted"; exit 1; }
 leftovers=$(find "$out" -name '*.tmp*' -o -name '*.partial' | wc -l)
 [ "$leftovers" -eq 0 ] || { echo "FAIL: $leftovers temporary files left"; exit 1; }
-pvpython --force-offscreen-rendering - "$out/particles.pvd" <<'PY' 2>/dev/null
+pvpython --force-offscreen-rendering - "$out/particles.pvd" <<'PY' 2>"$out/pvpython.err" || pvpython_failed "$out/pvpython.err"
 import sys
 from paraview.simple import PVDReader, UpdatePipeline, servermanager
 reader = PVDReader(FileName=sys.argv[1])
@@ -29,4 +30,5 @@ for t in reader.TimestepValues:
     assert servermanager.Fetch(reader).GetNumberOfPoints() > 0, t
 print("all", len(reader.TimestepValues), "frames readable")
 PY
+check_pvpython_errors "$out/pvpython.err"
 echo "PASS"

@@ -4,6 +4,7 @@
 # and count the same triangles and a closed surface (no boundary edges). The whole .pvd sequence is
 # meshed too, with the resting material's field kept from frame to frame.
 set -euo pipefail
+source "$(dirname "$0")/pvpython_errors.sh"
 m3dp=$1 scene=$2 out=$3
 rm -rf "$out"
 "$m3dp" run "$scene" -o "$out/run" --until 1.5 --quiet > /dev/null
@@ -12,7 +13,7 @@ for format in obj ply stl; do
   line=$("$m3dp" mesh "$frame" -o "$out/surface.$format" --method anisotropic)
   echo "$line"
   triangles=$(echo "$line" | sed -E 's/.* ([0-9]+) triangles.*/\1/')
-  read_back=$(pvpython --force-offscreen-rendering - "$out/surface.$format" <<'PY' 2>/dev/null | tail -n 1
+  read_back=$(pvpython --force-offscreen-rendering - "$out/surface.$format" <<'PY' 2>"$out/pvpython.err" | tail -n 1
 import sys
 from paraview.simple import OpenDataFile, FeatureEdges, UpdatePipeline, servermanager
 reader = OpenDataFile(sys.argv[1])
@@ -22,7 +23,8 @@ edges = FeatureEdges(Input=reader, BoundaryEdges=1, FeatureEdges=0, NonManifoldE
 UpdatePipeline(proxy=edges)
 print(data.GetNumberOfCells(), servermanager.Fetch(edges).GetNumberOfCells())
 PY
-)
+) || pvpython_failed "$out/pvpython.err"
+check_pvpython_errors "$out/pvpython.err"
   echo "pvpython read $out/surface.$format: $read_back (triangles, open or non-manifold edges)"
   [ "$read_back" = "$triangles 0" ] || { echo "FAIL: expected '$triangles 0'"; exit 1; }
 done
