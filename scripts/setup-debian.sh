@@ -25,13 +25,14 @@ sudo_cmd=()
 if [ "$(id -u)" -ne 0 ]; then sudo_cmd=(sudo); fi
 export DEBIAN_FRONTEND=noninteractive
 
-installed_version() { dpkg-query -W -f='${Status} ${Version}' "$1" 2>/dev/null | sed -n 's/^install ok installed //p'; }
-candidate_version() { apt-cache policy "$1" 2>/dev/null | sed -n 's/^ *Candidate: //p'; }
+# Empty when not installed or unknown (never a failure: the script runs under set -e and pipefail).
+installed_version() { { dpkg-query -W -f='${Status} ${Version}' "$1" 2>/dev/null || true; } | sed -n 's/^install ok installed //p'; }
+candidate_version() { { apt-cache policy "$1" 2>/dev/null || true; } | sed -n 's/^ *Candidate: //p'; }
 
 # The package lists decide what "current" means: refresh them when they are over a day old.
 lists_age_days() {
   local newest
-  newest=$(find /var/lib/apt/lists -maxdepth 1 -name '*Packages*' -printf '%T@\n' 2>/dev/null | sort -n | tail -n 1)
+  newest=$({ find /var/lib/apt/lists -maxdepth 1 -name '*Packages*' -printf '%T@\n' 2>/dev/null || true; } | sort -n | tail -n 1)
   if [ -z "$newest" ]; then echo 999; else echo $(( ($(date +%s) - ${newest%.*}) / 86400 )); fi
 }
 lists_refreshed=false
