@@ -42,10 +42,11 @@ BENCHMARK(BM_NeighborSearch)->Arg(10000)->Arg(100000)->Unit(benchmark::kMillisec
 static void BM_DfsphStep(benchmark::State& state) {
   auto simulation = settled_dam_break(static_cast<std::size_t>(state.range(0)));
   const sph::State saved = simulation->solver().state();
+  const sph::Workspace saved_workspace = simulation->solver().workspace();
   double iterations = 0;
   for (auto _ : state) {
     state.PauseTiming();
-    simulation->solver().restore(saved);
+    simulation->solver().restore(saved, saved_workspace);
     state.ResumeTiming();
     iterations += simulation->step().density_iterations;
   }

@@ -3,7 +3,7 @@
 #include <cmath>
 
 #include "m3dp/sph/boundary_sampling.hpp"
-#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
 
 using namespace m3dp;
 using namespace m3dp::sph;

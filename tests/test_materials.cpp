@@ -148,11 +148,11 @@ TEST(ImplicitViscosity, TheCoarseLevelSolvesTheSameSystemInFewerIterations) {
   // Jacobi, with rounding), not on the preconditioner.
   parameters.settings.warm_start = false;
   sph::Solver cold(parameters);
-  saved.viscosity_system.previous_iterations = 0;  // block Jacobi alone
+  saved.previous_viscosity_iterations = 0;  // block Jacobi alone
   cold.restore(saved);
   const int jacobi_iterations = cold.step().viscosity_iterations;
   const std::vector<Vec3> jacobi_velocity = cold.fluid().velocity;
-  saved.viscosity_system.previous_iterations = 1000;  // with the coarse level
+  saved.previous_viscosity_iterations = 1000;  // with the coarse level
   cold.restore(saved);
   const int two_level_iterations = cold.step().viscosity_iterations;
   double largest_speed = 0, largest_difference = 0;

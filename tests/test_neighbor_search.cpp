@@ -5,7 +5,7 @@
 #include <random>
 
 #include "m3dp/core/error.hpp"
-#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
 
 using namespace m3dp;
 using namespace m3dp::sph;

@@ -94,10 +94,7 @@ void time_steps(sim::Simulation& simulation, const BenchOptions& options) {
   const auto start = std::chrono::steady_clock::now();
   for (int i = 0; i < options.steps; ++i) {
     const auto& stats = simulation.step();
-    const auto& ms = stats.stage_ms;
-    sum.bodies += ms.bodies; sum.remove += ms.remove; sum.emit += ms.emit; sum.reorder += ms.reorder;
-    sum.neighbors += ms.neighbors; sum.density += ms.density; sum.divergence += ms.divergence;
-    sum.forces += ms.forces; sum.pressure += ms.pressure; sum.viscosity += ms.viscosity; sum.advect += ms.advect;
+    sum += stats.stage_ms;
     particle_steps += static_cast<double>(solver.fluid().size());
     density_iterations += stats.density_iterations;
     divergence_iterations += stats.divergence_iterations;
@@ -113,11 +110,7 @@ void time_steps(sim::Simulation& simulation, const BenchOptions& options) {
   fmt::print("neighbour searches: {} in {} steps (the others kept the lists, skin {} support radii)\n",
              solver.state().neighbor_searches - searches_before, options.steps, solver.parameters().settings.neighbor_skin);
   fmt::print("stage,ms_per_step\n");
-  const std::pair<const char*, double> stages[] = {
-      {"bodies", sum.bodies},   {"remove", sum.remove},   {"emit", sum.emit},         {"reorder", sum.reorder},
-      {"neighbors", sum.neighbors}, {"density", sum.density}, {"divergence", sum.divergence}, {"forces", sum.forces},
-      {"pressure", sum.pressure}, {"viscosity", sum.viscosity}, {"advect", sum.advect}};
-  for (const auto& [name, total] : stages) fmt::print("{},{:.3f}\n", name, total / n);
+  for (std::size_t s = 0; s < sph::kStageCount; ++s) fmt::print("{},{:.3f}\n", sph::kStageNames[s], sum.ms[s] / n);
 }
 
 int bench_clay_print(const BenchOptions& options) {
@@ -166,11 +159,7 @@ int bench_wall_layers(const BenchOptions& options) {
     const auto layer = static_cast<std::size_t>(simulation.time() / layer_time);
     if (layer >= milliseconds.size()) continue;
     milliseconds[layer] += stats.stage_ms.total();
-    auto& sum = stage_sums[layer];
-    const auto& ms = stats.stage_ms;
-    sum.bodies += ms.bodies; sum.remove += ms.remove; sum.emit += ms.emit; sum.reorder += ms.reorder;
-    sum.neighbors += ms.neighbors; sum.density += ms.density; sum.divergence += ms.divergence;
-    sum.forces += ms.forces; sum.pressure += ms.pressure; sum.viscosity += ms.viscosity; sum.advect += ms.advect;
+    stage_sums[layer] += stats.stage_ms;
     steps[layer] += 1;
     active[layer] += double(solver.state().active_count);
     resting[layer] += double(stats.particles_at_rest);
@@ -190,14 +179,8 @@ int bench_wall_layers(const BenchOptions& options) {
     const auto& first = stage_sums[1];
     const auto& last = stage_sums.back();
     const double n_first = steps[1], n_last = steps.back();
-    const std::tuple<const char*, double, double> rows[] = {
-        {"bodies", first.bodies, last.bodies},          {"remove", first.remove, last.remove},
-        {"emit", first.emit, last.emit},                {"reorder", first.reorder, last.reorder},
-        {"neighbors", first.neighbors, last.neighbors}, {"density", first.density, last.density},
-        {"divergence", first.divergence, last.divergence}, {"forces", first.forces, last.forces},
-        {"pressure", first.pressure, last.pressure},    {"viscosity", first.viscosity, last.viscosity},
-        {"advect", first.advect, last.advect}};
-    for (const auto& [name, a, b] : rows) fmt::print("{},{:.3f},{:.3f}\n", name, a / n_first, b / n_last);
+    for (std::size_t s = 0; s < sph::kStageCount; ++s)
+      fmt::print("{},{:.3f},{:.3f}\n", sph::kStageNames[s], first.ms[s] / n_first, last.ms[s] / n_last);
   }
   return 0;
 }

@@ -9,7 +9,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/geometry.hpp"
 #include "m3dp/material/material.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/settings.hpp"
 #include "m3dp/surface/surface.hpp"
 #include "m3dp/toolpath/parametric.hpp"
 

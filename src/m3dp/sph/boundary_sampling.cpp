@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
 
 namespace m3dp::sph {
 

@@ -5,7 +5,7 @@
 #include <cmath>
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
 
 namespace m3dp::surface {
 

@@ -26,7 +26,7 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/sph/kernels.hpp"
-#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
 #include "m3dp/surface/anisotropic_yu_turk2013.hpp"
 #include "m3dp/surface/mesh_tools.hpp"
 #include "m3dp/surface/surface.hpp"

@@ -30,7 +30,7 @@
 #include <vector>
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph {
 
@@ -100,19 +100,20 @@ namespace stages {
 namespace {
 
 /// Akinci 2013 eq. 7: each particle of an adhering phase is drawn to the wall particles near it.
-void add_wall_adhesion(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
-  const bool any = std::any_of(parameters.phases.begin(), parameters.phases.end(),
+void add_wall_adhesion(const Model& model, State& state, Workspace& workspace) {
+  const auto& calibration = model.surface_tension_calibration;
+  const bool any = std::any_of(model.phases.begin(), model.phases.end(),
                                [](const FluidPhase& phase) { return phase.adhesion > 0; });
   if (!any) return;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
-  const Real h = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
-  const Real inverse_volume = 1 / particle_rest_volume(parameters.settings.particle_radius);
-  const auto& boundary_lists = state.boundary_neighbors;
+  const Real h = model.support_radius;
+  const Real inverse_volume = 1 / model.particle_volume;
+  const auto& boundary_lists = workspace.boundary_neighbors;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
+      const FluidPhase& phase_i = model.phases[fluid.phase[i]];
       if (phase_i.adhesion <= 0) continue;
       const Real rest_density_i = fluid.mass[i] * inverse_volume;
       const Real beta = calibration.adhesion_per_work * phase_i.adhesion / (rest_density_i * rest_density_i);
@@ -136,25 +137,26 @@ void add_wall_adhesion(const Parameters& parameters, State& state, const Surface
 }
 
 /// Akinci 2013 eqs. 1, 4, 5: cohesion and curvature between particles of phases with surface tension.
-void add_akinci_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
-  const auto& settings = parameters.settings;
+void add_akinci_surface_tension(const Model& model, State& state, Workspace& workspace) {
+  const auto& calibration = model.surface_tension_calibration;
+  const auto& settings = model.settings;
   auto& fluid = state.fluid;
   const std::size_t count = state.active_count;
-  const Real h = settings.support_radius_factor * settings.particle_radius;
-  const Real volume = particle_rest_volume(settings.particle_radius);  // every particle's m/ρ0
+  const Real h = model.support_radius;
+  const Real volume = model.particle_volume;  // every particle's m/ρ0
   const Real inverse_volume = 1 / volume;
-  const auto& fluid_lists = state.fluid_neighbors;
+  const auto& fluid_lists = workspace.fluid_neighbors;
 
   // Normals n_i = h (Σ_j (m_j/ρ_j) ∇W_ij + Σ_b V_b ∇W_ib). Walls count as material here: a face resting
   // on a wall is no free surface, and the curvature term would push it into the wall (a drop without
   // adhesion would be kicked off a ceiling).
-  auto& normal = state.surface_normal;
+  auto& normal = workspace.surface_normal;
   normal.resize(fluid.size());
   std::fill(normal.begin() + static_cast<std::ptrdiff_t>(count), normal.end(), Vec3::Zero());
-  parallel_for_each_index(count, [&](std::size_t i) { normal[i] = h * colour_gradient(state, i, volume); }, 512);
+  parallel_for_each_index(count, [&](std::size_t i) { normal[i] = h * colour_gradient(state, workspace, i, volume); }, 512);
 
   parallel_for_each_index(count, [&](std::size_t i) {
-    const FluidPhase& phase_i = parameters.phases[fluid.phase[i]];
+    const FluidPhase& phase_i = model.phases[fluid.phase[i]];
     const Vec3 position_i = fluid.position[i];
     const Real density_ratio_i = fluid.density[i] * volume / fluid.mass[i];  // ρ_i/ρ0_i
     const Real rest_density_i = fluid.mass[i] * inverse_volume;
@@ -162,7 +164,7 @@ void add_akinci_surface_tension(const Parameters& parameters, State& state, cons
     const std::size_t fluid_first = fluid_lists.first(i);
     for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
       const Index j = fluid_lists.indices[fluid_first + k];
-      const Real tension = Real(0.5) * (phase_i.surface_tension + parameters.phases[fluid.phase[j]].surface_tension);
+      const Real tension = Real(0.5) * (phase_i.surface_tension + model.phases[fluid.phase[j]].surface_tension);
       if (tension <= 0) continue;
       const Real rest_density_j = fluid.mass[j] * inverse_volume;
       const Real gamma = calibration.cohesion_per_tension * tension / (rest_density_i * rest_density_j);
@@ -180,10 +182,10 @@ void add_akinci_surface_tension(const Parameters& parameters, State& state, cons
 
 }  // namespace
 
-Vec3 colour_gradient(const State& state, std::size_t i, Real rest_volume) {
+Vec3 colour_gradient(const State& state, const Workspace& workspace, std::size_t i, Real rest_volume) {
   const auto& fluid = state.fluid;
-  const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
+  const auto& fluid_lists = workspace.fluid_neighbors;
+  const auto& boundary_lists = workspace.boundary_neighbors;
   // The pair factor holds V (dW/dr)/r with V the rest volume; m_j/ρ_j = (m_j/(V ρ_j)) V.
   const Real inverse_volume = rest_volume > 0 ? 1 / rest_volume : Real(0);
   Vec3 sum = Vec3::Zero();
@@ -191,27 +193,28 @@ Vec3 colour_gradient(const State& state, std::size_t i, Real rest_volume) {
   for (Index k = 0; k < fluid_lists.counts[i]; ++k) {
     const Index j = fluid_lists.indices[first + k];
     const Real scale = rest_volume > 0 ? fluid.mass[j] * inverse_volume / fluid.density[j] : Real(1);
-    sum += (scale * state.fluid_pair_gradient[first + k]) * (fluid.position[i] - fluid.position[j]);
+    sum += (scale * workspace.fluid_pair_gradient[first + k]) * (fluid.position[i] - fluid.position[j]);
   }
   const std::size_t boundary_first = boundary_lists.first(i);
   for (Index k = 0; k < boundary_lists.counts[i]; ++k)
-    sum += state.boundary_pair_gradient[boundary_first + k] *
+    sum += workspace.boundary_pair_gradient[boundary_first + k] *
            (fluid.position[i] - state.boundary.position[boundary_lists.indices[boundary_first + k]]);
   return sum;
 }
 
-void add_surface_tension(const Parameters& parameters, State& state, const SurfaceTensionCalibration& calibration) {
-  const bool any_tension = std::any_of(parameters.phases.begin(), parameters.phases.end(),
+void add_surface_tension(const Model& model, State& state, Workspace& workspace) {
+  const bool any_tension = std::any_of(model.phases.begin(), model.phases.end(),
                                        [](const FluidPhase& phase) { return phase.surface_tension > 0; });
-  if (parameters.settings.surface_tension_model == SurfaceTensionModel::csf_brackbill1992) {
+  if (model.settings.surface_tension_model == SurfaceTensionModel::csf_brackbill1992) {
     // No adhesion: the Solver refuses it with this model (walls are wetted at 90°).
-    if (any_tension) add_csf_surface_tension(parameters, state, calibration.layer_kernel_sum);
+    if (any_tension) add_csf_surface_tension(model, state, workspace);
     return;
   }
-  if (any_tension) add_akinci_surface_tension(parameters, state, calibration);
-  add_wall_adhesion(parameters, state, calibration);
+  if (any_tension) add_akinci_surface_tension(model, state, workspace);
+  add_wall_adhesion(model, state, workspace);
 }
 
 }  // namespace stages
 
 }  // namespace m3dp::sph
+

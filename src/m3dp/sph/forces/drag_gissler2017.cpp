@@ -11,7 +11,7 @@
 #include <cmath>
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph {
 
@@ -35,8 +35,9 @@ int full_neighbourhood_count(Real support_radius, Real spacing) {
 
 namespace stages {
 
-void add_air_drag(const Parameters& parameters, State& state, int full_neighbourhood) {
-  const auto& settings = parameters.settings;
+void add_air_drag(const Model& model, State& state, Workspace& workspace) {
+  const int full_neighbourhood = model.full_neighbourhood;
+  const auto& settings = model.settings;
   if (!settings.air_drag) return;
   auto& fluid = state.fluid;
   const Real spacing = 2 * settings.particle_radius;
@@ -57,3 +58,4 @@ void add_air_drag(const Parameters& parameters, State& state, int full_neighbour
 
 }  // namespace stages
 }  // namespace m3dp::sph
+

@@ -30,7 +30,7 @@
 #include <limits>
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph {
 
@@ -72,10 +72,10 @@ struct LayerFit {
 
 /// The height function fitted around particle i over the outermost-layer particles `layer` (within
 /// fit_kernel's support). `colour_outward` (−∇c/|∇c|) orients the fit.
-LayerFit fit_layer(const State& state, std::size_t i, const Vec3& colour_outward, std::span<const Index> layer,
+LayerFit fit_layer(const State& state, const Workspace& workspace, std::size_t i, const Vec3& colour_outward, std::span<const Index> layer,
                    Real fit_radius, const auto& fit_kernel) {
   const auto& fluid = state.fluid;
-  const auto& walls = state.surface_layer;
+  const auto& walls = workspace.surface_layer;
   LayerFit fit;
   fit.outward = colour_outward;
   fit.kernel_sum = fit_kernel.W_zero();
@@ -107,7 +107,7 @@ LayerFit fit_layer(const State& state, std::size_t i, const Vec3& colour_outward
   for (const Index j : layer) {
     // Only the same side of the material: across a sheet or a filament thinner than the fit radius,
     // the far face would be fitted as part of the near one.
-    if (j == i || state.surface_normal[j].dot(state.surface_normal[i]) <= 0) continue;
+    if (j == i || workspace.surface_normal[j].dot(workspace.surface_normal[i]) <= 0) continue;
     fit.kernel_sum += add(fluid.position[j] - fluid.position[i]);
     add_mirror(j);
   }
@@ -160,27 +160,28 @@ LayerFit fit_layer(const State& state, std::size_t i, const Vec3& colour_outward
 
 }  // namespace
 
-void add_csf_surface_tension(const Parameters& parameters, State& state, Real layer_kernel_sum) {
-  const auto& settings = parameters.settings;
+void add_csf_surface_tension(const Model& model, State& state, Workspace& workspace) {
+  const Real layer_kernel_sum = model.surface_tension_calibration.layer_kernel_sum;
+  const auto& settings = model.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const std::size_t count = state.active_count;
-  const Real h = settings.support_radius_factor * settings.particle_radius;
+  const Real h = model.support_radius;
   const Real diameter = 2 * settings.particle_radius;
-  const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
+  const auto& fluid_lists = workspace.fluid_neighbors;
+  const auto& boundary_lists = workspace.boundary_neighbors;
 
   // ∇c_i with rest volumes (as the calibration); walls count as material.
-  auto& colour_gradient = state.surface_normal;
+  auto& colour_gradient = workspace.surface_normal;
   colour_gradient.resize(fluid.size());
   std::fill(colour_gradient.begin() + static_cast<std::ptrdiff_t>(count), colour_gradient.end(), Vec3::Zero());
-  parallel_for_each_index(count, [&](std::size_t i) { colour_gradient[i] = stages::colour_gradient(state, i); }, 512);
+  parallel_for_each_index(count, [&](std::size_t i) { colour_gradient[i] = stages::colour_gradient(state, workspace, i); }, 512);
 
   // The outermost layer.
-  auto& outermost = state.surface_flag;
+  auto& outermost = workspace.surface_flag;
   outermost.assign(fluid.size(), 0);
-  state.surface_layer.wall_normal.assign(fluid.size(), Vec3::Zero());
-  state.surface_layer.wall_point.resize(fluid.size());
+  workspace.surface_layer.wall_normal.assign(fluid.size(), Vec3::Zero());
+  workspace.surface_layer.wall_point.resize(fluid.size());
   const Real threshold = Real(0.2) / h;
   const Real cone_cosine = Real(std::sqrt(0.5));
   parallel_for_each_index(count, [&](std::size_t i) {
@@ -201,7 +202,7 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
     // geometric surface, a radius in front of the nearest wall particle along it.
     Vec3 towards_wall = Vec3::Zero();
     for (Index k = 0; k < boundary_lists.counts[i]; ++k)
-      towards_wall += state.boundary_pair_gradient[boundary_first + k] *
+      towards_wall += workspace.boundary_pair_gradient[boundary_first + k] *
                       (fluid.position[i] - boundary.position[boundary_lists.indices[boundary_first + k]]);
     if (towards_wall.squaredNorm() == 0) return;
     const Vec3 wall_normal = towards_wall.normalized();
@@ -211,12 +212,12 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
       if (along > 0) nearest = std::min(nearest, along);
     }
     if (nearest == std::numeric_limits<Real>::max()) return;
-    state.surface_layer.wall_normal[i] = wall_normal;
-    state.surface_layer.wall_point[i] = fluid.position[i] + (nearest - settings.particle_radius) * wall_normal;
+    workspace.surface_layer.wall_normal[i] = wall_normal;
+    workspace.surface_layer.wall_point[i] = fluid.position[i] + (nearest - settings.particle_radius) * wall_normal;
   }, 512);
 
   // The layer's neighbours within the fit radius: a grid of the layer alone.
-  auto& layer = state.surface_layer;
+  auto& layer = workspace.surface_layer;
   layer.indices.clear();
   for (std::size_t i = 0; i < count; ++i)
     if (outermost[i]) layer.indices.push_back(static_cast<Index>(i));
@@ -228,15 +229,15 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
   layer.grid.build(fluid.position, layer.indices, fit_radius);
   find_neighbors(layer.grid, layer.positions, fit_radius, false, layer.neighbors, false);
 
-  auto& layer_curvature = state.scratch_real;
+  auto& layer_curvature = workspace.scratch_real;
   layer_curvature.assign(fluid.size(), 0);
-  auto& curvature = state.surface_curvature;
+  auto& curvature = workspace.surface_curvature;
   curvature.assign(fluid.size(), 0);
   with_kernel(settings.kernel, fit_radius, [&](const auto& fit_kernel) {
     parallel_for_each_index(layer.indices.size(), [&](std::size_t k) {
       const std::size_t i = layer.indices[k];
       const Vec3 outward = -colour_gradient[i].normalized();
-      LayerFit fit = fit_layer(state, i, outward, layer.neighbors.of(k), fit_radius, fit_kernel);
+      LayerFit fit = fit_layer(state, workspace, i, outward, layer.neighbors.of(k), fit_radius, fit_kernel);
       // No surface of the material is rounder than a sphere of one spacing's radius.
       fit.curvature = std::clamp(fit.curvature, -2 / diameter, 2 / diameter);
       // From the centres' surface out to the material's, half a spacing further (exact on a sphere):
@@ -280,7 +281,7 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
   // at rest.
   parallel_for_each_index(layer.indices.size(), [&](std::size_t k) {
     const std::size_t i = layer.indices[k];
-    const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+    const FluidPhase& phase = model.phases[fluid.phase[i]];
     if (phase.surface_tension <= 0) return;
     fluid.acceleration[i] -= (phase.surface_tension * curvature[i] * layer.area[k] / fluid.mass[i]) * layer.outward[k];
   }, 256);
@@ -289,3 +290,4 @@ void add_csf_surface_tension(const Parameters& parameters, State& state, Real la
 }  // namespace stages
 
 }  // namespace m3dp::sph
+

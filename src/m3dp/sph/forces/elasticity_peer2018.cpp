@@ -23,7 +23,7 @@
 #include <cmath>
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph::stages {
 
@@ -40,22 +40,22 @@ Mat3 rotation_of(const Mat3& deformation) {
 
 }  // namespace
 
-void add_elastic_forces(const Parameters& parameters, State& state) {
-  const bool any = std::any_of(parameters.phases.begin(), parameters.phases.end(),
+void add_elastic_forces(const Model& model, State& state, Workspace& workspace) {
+  const bool any = std::any_of(model.phases.begin(), model.phases.end(),
                                [](const FluidPhase& phase) { return phase.elasticity.enabled; });
   if (!any) return;
   auto& fluid = state.fluid;
   const std::size_t count = state.active_count;
-  const Real volume = particle_rest_volume(parameters.settings.particle_radius);  // m/ρ0 of every particle
-  const auto& lists = state.fluid_neighbors;
-  const Real support_radius = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
-  auto& stress = state.elastic_stress;  // R σ L per particle
+  const Real volume = model.particle_volume;  // m/ρ0 of every particle
+  const auto& lists = workspace.fluid_neighbors;
+  const Real support_radius = model.support_radius;
+  auto& stress = workspace.elastic_stress;  // R σ L per particle
   stress.resize(fluid.size());
   std::fill(stress.begin() + static_cast<std::ptrdiff_t>(count), stress.end(), Mat3::Zero());
   auto same_material = [&](std::size_t i, Index j) { return fluid.phase[j] == fluid.phase[i]; };
-  with_kernel(parameters.settings.kernel, support_radius, [&](const auto& kernel) {
+  with_kernel(model.settings.kernel, support_radius, [&](const auto& kernel) {
     parallel_for_each_index(count, [&](std::size_t i) {
-      const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+      const FluidPhase& phase = model.phases[fluid.phase[i]];
       if (!phase.elasticity.enabled) {
         stress[i].setZero();
         return;
@@ -88,7 +88,7 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
       stress[i] = rotation * (2 * shear_modulus * strain + phase.elasticity.bulk_modulus() * volumetric * Mat3::Identity()) * correction;
     }, 256);
     parallel_for_each_index(count, [&](std::size_t i) {
-      if (!parameters.phases[fluid.phase[i]].elasticity.enabled) return;
+      if (!model.phases[fluid.phase[i]].elasticity.enabled) return;
       const Vec3 reference_i = fluid.reference_position[i];
             Vec3 force = Vec3::Zero();
       const std::size_t first = lists.first(i);
@@ -103,10 +103,23 @@ void add_elastic_forces(const Parameters& parameters, State& state) {
   });
 }
 
-void relax_reference_shape(const Parameters& parameters, State& state, Real time_step) {
+void add_elastic_stiffness(const Model& model, State& state, Workspace& /*workspace*/) {
+  if (!model.any_elastic) return;
+  // Elastic materials: their shear stiffness enters the implicit velocity solve as a viscosity G·Δt
+  // (see the top of this file); the stress of the current shape was added with the other forces.
+  const Real time_step = state.time_step;
+  parallel_for_each_index(state.active_count, [&](std::size_t i) {
+    const auto& elasticity = model.phases[state.fluid.phase[i]].elasticity;
+    if (elasticity.enabled) state.fluid.viscosity[i] += elasticity.shear_modulus * time_step;
+  }, 1024);
+}
+
+void relax_reference_shape(const Model& model, State& state, Workspace& /*workspace*/) {
+  if (!model.any_elastic) return;
+  const Real time_step = state.time_step;
   auto& fluid = state.fluid;
   parallel_for_each_index(state.active_count, [&](std::size_t i) {
-    const auto& elasticity = parameters.phases[fluid.phase[i]].elasticity;
+    const auto& elasticity = model.phases[fluid.phase[i]].elasticity;
     if (!elasticity.enabled || elasticity.relaxation_time <= 0) return;
     // The strain decays as e^(−t/τ) where the shape is held.
     const Real share = 1 - std::exp(-time_step / elasticity.relaxation_time);
@@ -115,3 +128,4 @@ void relax_reference_shape(const Parameters& parameters, State& state, Real time
 }
 
 }  // namespace m3dp::sph::stages
+

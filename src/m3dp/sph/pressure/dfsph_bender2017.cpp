@@ -23,8 +23,8 @@
 #endif
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/neighbor_sums_avx2.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/simd/neighbor_sums_avx2.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph::stages {
 
@@ -59,7 +59,7 @@ struct SolverView {
   const Real* factor;
   Real* density_advected;
   Real* kappa;  // m_i κ_i of the current iteration (mass-weighted: see the update)
-  const State::WallSums* wall_sums;
+  const Workspace::WallSums* wall_sums;
   const std::uint16_t* neighbor_count;
   const Index* fluid_neighbor;           // fluid lists, particle i's from fluid_first[i]
   const Index* fluid_neighbor_count;
@@ -74,37 +74,35 @@ struct SolverView {
 /// Copies the velocities into the padded array and returns the view of the solve (the padded positions
 /// and the walls' sums are the density pass's: positions do not change until the step's advection).
 /// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
-SolverView pack_for_solve(State& state) {
+SolverView pack_for_solve(State& state, Workspace& workspace) {
   auto& fluid = state.fluid;
-  state.solver_velocity.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_velocity[i] = padded(fluid.velocity[i]); }, 4096);
-  return SolverView{state.solver_position.data(),
-                    state.solver_velocity.data(),
+  workspace.solver_velocity.resize(fluid.size());
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) { workspace.solver_velocity[i] = padded(fluid.velocity[i]); }, 4096);
+  return SolverView{workspace.solver_position.data(),
+                    workspace.solver_velocity.data(),
                     fluid.density.data(),
                     fluid.mass.data(),
                     fluid.dfsph_factor.data(),
                     fluid.density_advected.data(),
-                    state.kappa.data(),
-                    state.solver_wall_sums.data(),
+                    workspace.kappa.data(),
+                    workspace.solver_wall_sums.data(),
                     fluid.neighbor_count.data(),
-                    state.fluid_neighbors.indices.data(),
-                    state.fluid_neighbors.counts.data(),
-                    state.fluid_pair_gradient.data(),
-                    state.fluid_neighbors.firsts.data(),
-                    state.boundary_neighbors.indices.data(),
-                    state.boundary_neighbors.counts.data(),
-                    state.boundary_pair_gradient.data(),
-                    state.boundary_neighbors.firsts.data()};
+                    workspace.fluid_neighbors.indices.data(),
+                    workspace.fluid_neighbors.counts.data(),
+                    workspace.fluid_pair_gradient.data(),
+                    workspace.fluid_neighbors.firsts.data(),
+                    workspace.boundary_neighbors.indices.data(),
+                    workspace.boundary_neighbors.counts.data(),
+                    workspace.boundary_pair_gradient.data(),
+                    workspace.boundary_neighbors.firsts.data()};
 }
 
 /// The solve's velocities back into the particles (only the active ones changed).
-void unpack_velocities(State& state) {
+void unpack_velocities(State& state, Workspace& workspace) {
   parallel_for_each_index(state.active_count, [&](std::size_t i) {
-    state.fluid.velocity[i] = state.solver_velocity[i].head<3>();
+    state.fluid.velocity[i] = workspace.solver_velocity[i].head<3>();
   }, 4096);
 }
-
-Real rest_volume_of(const Parameters& parameters) { return particle_rest_volume(parameters.settings.particle_radius); }
 
 template <class Body>
 void for_each_particle_range(std::size_t count, Body&& body) {
@@ -131,7 +129,7 @@ Real rate_with_walls(const SolverView& view, std::size_t i, const Vec4& fluid_la
   // Only where there are walls: the sums are zero elsewhere, and reading them cost a 48-byte record a
   // particle. Whether a particle touches a wall follows its place, which the branch predictor learns.
   if (view.boundary_neighbor_count[i] == 0) return fluid_lanes.sum();
-  const State::WallSums& walls = view.wall_sums[i];
+  const Workspace::WallSums& walls = view.wall_sums[i];
   return fluid_lanes.sum() + view.velocity[i].dot(walls.gradient) - walls.velocity_flux;
 }
 
@@ -160,9 +158,9 @@ Real sum_over_rates(const SolverView& view, const tbb::blocked_range<std::size_t
 }
 
 /// One pressure velocity update with the m κ in view.kappa; adds the reaction on the bodies.
-void apply_pressure_velocity_update(const SolverView& view, State& state, Real time_step) {
+void apply_pressure_velocity_update(const SolverView& view, State& state, Workspace& workspace, Real time_step) {
   for_each_particle_range(state.active_count, [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Real weighted_kappa_i = view.kappa[i];  // m_i κ_i
       const Vec4 position_i = view.position[i];
@@ -186,13 +184,13 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
         odd_change -= ((weighted_kappa_i + view.kappa[j]) * weight) * (position_i - view.position[j]);
       }
       momentum_change += odd_change;
-      const State::WallSums& walls = view.wall_sums[i];
+      const Workspace::WallSums& walls = view.wall_sums[i];
       // Not also skipped where κ_i = 0 (it would add zeros): whether a particle touches a wall follows
       // its place, which the branch predictor learns; whether it is compressed does not.
       if (view.boundary_neighbor_count[i] > 0) {
         // The walls' share, −m_i κ_i Σ_b g_b r_b, and its reaction on the bodies, +m_i κ_i g_b r_b each.
         momentum_change -= weighted_kappa_i * walls.gradient;
-        if (walls.body != State::kSeveralBodies) {
+        if (walls.body != Workspace::kSeveralBodies) {
           Wrench& wrench = wrenches[walls.body];
           wrench.force += weighted_kappa_i * walls.gradient.head<3>();
           wrench.torque += weighted_kappa_i * walls.torque;
@@ -217,44 +215,29 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Real t
 
 }  // namespace
 
-void reset_body_wrenches(State& state) {
-  for (auto& wrenches : state.body_wrench_per_thread) wrenches.assign(state.bodies.size(), Wrench{});
-}
-
-void collect_body_wrenches(State& state) {
-  for (auto& body : state.bodies) {
-    body.fluid_force.setZero();
-    body.fluid_torque.setZero();
-  }
-  for (const auto& wrenches : state.body_wrench_per_thread)
-    for (std::size_t b = 0; b < wrenches.size() && b < state.bodies.size(); ++b) {
-      state.bodies[b].fluid_force += wrenches[b].force;
-      state.bodies[b].fluid_torque += wrenches[b].torque;
-    }
-}
-
-Real compute_density_and_factor(const Parameters& parameters, State& state) {
-  const Real volume = rest_volume_of(parameters);  // every fluid particle's V = m/ρ0
+void compute_density_and_factor(const Model& model, State& state, Workspace& workspace) {
+  const Real volume = model.particle_volume;  // every fluid particle's V = m/ρ0
   auto& fluid = state.fluid;
+  // The solves' κ per iteration: zero for the resting particles, which every sweep reads as neighbours.
+  workspace.kappa.resize(fluid.size());
+  std::fill(workspace.kappa.begin() + static_cast<std::ptrdiff_t>(state.active_count), workspace.kappa.end(), Real(0));
   const auto& boundary = state.boundary;
-  const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
-  state.fluid_pair_gradient.resize(fluid_lists.indices.size());
-  state.boundary_pair_gradient.resize(boundary_lists.indices.size());
-  state.solver_wall_sums.resize(fluid.size());
+  const auto& fluid_lists = workspace.fluid_neighbors;
+  const auto& boundary_lists = workspace.boundary_neighbors;
+  workspace.fluid_pair_gradient.resize(fluid_lists.indices.size());
+  workspace.boundary_pair_gradient.resize(boundary_lists.indices.size());
+  workspace.solver_wall_sums.resize(fluid.size());
   // Padded positions, for this pass's AVX2 sums and the solves' sweeps.
-  state.solver_position.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) { state.solver_position[i] = padded(fluid.position[i]); }, 4096);
+  workspace.solver_position.resize(fluid.size());
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) { workspace.solver_position[i] = padded(fluid.position[i]); }, 4096);
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
   const bool use_avx2 = avx2::available();
   // One rest density, so one mass (m = ρ0 V): the factor's mass ratios are all 1.
-  const bool one_mass = std::all_of(parameters.phases.begin(), parameters.phases.end(),
-                                    [&](const auto& phase) { return phase.density == parameters.phases.front().density; });
+  const bool one_mass = std::all_of(model.phases.begin(), model.phases.end(),
+                                    [&](const auto& phase) { return phase.density == model.phases.front().density; });
 #endif
-  const Real boundary_neighbor_weight = parameters.settings.boundary_spacing_factor * parameters.settings.boundary_spacing_factor;
-  return with_kernel(parameters.settings.kernel,
-                     parameters.settings.support_radius_factor * parameters.settings.particle_radius,
-                     [&](const auto& kernel) {
+  const Real boundary_neighbor_weight = model.settings.boundary_spacing_factor * model.settings.boundary_spacing_factor;
+  state.last_step.max_density_error = with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
                        return tbb::parallel_reduce(
                            tbb::blocked_range<std::size_t>(0, state.active_count, 128), Real(0),
                            [&](const tbb::blocked_range<std::size_t>& range, Real max_error) {
@@ -271,9 +254,9 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  const auto pair_sums = one_mass ? avx2::density_pair_sums<true, std::decay_t<decltype(kernel)>>
                                                                  : avx2::density_pair_sums<false, std::decay_t<decltype(kernel)>>;
                                  const avx2::DensityPairSums sums = pair_sums(
-                                     kernel, state.solver_position.data(), fluid.mass.data(), fluid_lists.indices.data() + fluid_first,
-                                     fluid_lists.counts[i], state.solver_position[i], mass_i, volume,
-                                     state.fluid_pair_gradient.data() + fluid_first);
+                                     kernel, workspace.solver_position.data(), fluid.mass.data(), fluid_lists.indices.data() + fluid_first,
+                                     fluid_lists.counts[i], workspace.solver_position[i], mass_i, volume,
+                                     workspace.fluid_pair_gradient.data() + fluid_first);
                                  density_ratio += sums.density_ratio;
                                  gradient_sum += sums.gradient_sum;
                                  gradient_squares += sums.gradient_squares;
@@ -286,30 +269,30 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                                  const auto [value, gradient_factor] = kernel.value_and_gradient_factor(r.norm());
                                  density_ratio += volume * value;
                                  const Real pair_gradient = volume * gradient_factor;
-                                 state.fluid_pair_gradient[fluid_first + k] = pair_gradient;
+                                 workspace.fluid_pair_gradient[fluid_first + k] = pair_gradient;
                                  const Vec3 gradient = pair_gradient * r;
                                  gradient_sum += gradient;
                                  gradient_squares += (mass_i / fluid.mass[j]) * gradient.squaredNorm();
                                }
                                const std::size_t boundary_first = boundary_lists.first(i);
-                               // The walls' sums for the solves' sweeps (State::WallSums).
-                               State::WallSums walls{Vec4::Zero(), Vec3::Zero(), Real(0), State::kSeveralBodies};
+                               // The walls' sums for the solves' sweeps (Workspace::WallSums).
+                               Workspace::WallSums walls{Vec4::Zero(), Vec3::Zero(), Real(0), Workspace::kSeveralBodies};
                                for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
                                  const Index b = boundary_lists.indices[boundary_first + k];
                                  const Vec3 r = position_i - boundary.position[b];
                                  const auto [value, gradient_factor] = kernel.value_and_gradient_factor(r.norm());
                                  density_ratio += boundary.volume[b] * value;
                                  const Real pair_gradient = boundary.volume[b] * gradient_factor;
-                                 state.boundary_pair_gradient[boundary_first + k] = pair_gradient;
+                                 workspace.boundary_pair_gradient[boundary_first + k] = pair_gradient;
                                  const Vec3 gradient = pair_gradient * r;
                                  gradient_sum += gradient;
                                  const Index body = boundary.body[b];
                                  walls.gradient.head<3>() += gradient;
                                  walls.velocity_flux += boundary.velocity[b].dot(gradient);
                                  walls.torque += (boundary.position[b] - state.bodies[body].pose.position).cross(gradient);
-                                 walls.body = (k == 0 || walls.body == body) ? body : State::kSeveralBodies;
+                                 walls.body = (k == 0 || walls.body == body) ? body : Workspace::kSeveralBodies;
                                }
-                               state.solver_wall_sums[i] = walls;
+                               workspace.solver_wall_sums[i] = walls;
                                fluid.density[i] = density_ratio * (mass_i / volume);
                                const Real denominator = gradient_sum.squaredNorm() + gradient_squares;
                                fluid.dfsph_factor[i] = denominator > kFactorEpsilon ? Real(1) / denominator : Real(0);
@@ -326,11 +309,12 @@ Real compute_density_and_factor(const Parameters& parameters, State& state) {
                      });
 }
 
-int solve_divergence(const Parameters& parameters, State& state, Real time_step) {
-  const auto& settings = parameters.settings;
+void solve_divergence(const Model& model, State& state, Workspace& workspace) {
+  const auto& settings = model.settings;
   const std::size_t count = state.active_count;
-  if (count == 0) return 0;
-  const SolverView view = pack_for_solve(state);
+  if (!settings.divergence_solver || count == 0) return;
+  const Real time_step = state.time_step;  // the last step's: this one's is chosen after the forces
+  const SolverView view = pack_for_solve(state, workspace);
   const Real inverse_time_step = Real(1) / time_step;
   // Σ κ over this step's updates: a pressure (κ = ρ0 p / ρ²), so it carries over when Δt changes.
   auto& kappa_total = state.fluid.kappa_divergence;
@@ -359,7 +343,7 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
         kappa_total[i] = view.density_advected[i] > Real(0) ? Real(0.5) * kappa_total[i] : Real(0);
         view.kappa[i] = view.mass[i] * kappa_total[i];
       });
-      apply_pressure_velocity_update(view, state, time_step);
+      apply_pressure_velocity_update(view, state, workspace, time_step);
       mean_error = update_divergence() / Real(count) * time_step;
     } else {
       parallel_for_each_index(count, [&](std::size_t i) { kappa_total[i] = 0; });
@@ -373,24 +357,26 @@ int solve_divergence(const Parameters& parameters, State& state, Real time_step)
         kappa_total[i] += kappa;
         view.kappa[i] = view.mass[i] * kappa;
       });
-      apply_pressure_velocity_update(view, state, time_step);
+      apply_pressure_velocity_update(view, state, workspace, time_step);
       mean_error = update_divergence() / Real(count) * time_step;
       ++iterations;
     }
-    unpack_velocities(state);
-    return iterations;
+    unpack_velocities(state, workspace);
+    state.last_step.divergence_iterations = iterations;
   }
 }
 
-int solve_density(const Parameters& parameters, State& state, Real time_step, Real& mean_density_error) {
-  const auto& settings = parameters.settings;
+void solve_density(const Model& model, State& state, Workspace& workspace) {
+  const auto& settings = model.settings;
   const std::size_t count = state.active_count;
+  const Real time_step = state.time_step;
+  Real& mean_density_error = state.last_step.density_error;
   mean_density_error = 0;
-  if (count == 0) return 0;
-  const SolverView view = pack_for_solve(state);
+  if (count == 0) return;
+  const SolverView view = pack_for_solve(state, workspace);
   const Real inverse_time_step_squared = Real(1) / (time_step * time_step);
   auto& kappa_total = state.fluid.kappa_density;  // Σ κ over this step's updates (a pressure, see above)
-  const Real volume = rest_volume_of(parameters);
+  const Real volume = model.particle_volume;
 
   {
     // ρ*/ρ0 = ρ/ρ0 + Δt · (rate of change), clamped at 1: the solver only pushes, never pulls (free surface).
@@ -417,7 +403,7 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
         kappa_total[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
         view.kappa[i] = view.mass[i] * kappa_total[i];
       });
-      apply_pressure_velocity_update(view, state, time_step);
+      apply_pressure_velocity_update(view, state, workspace, time_step);
     } else {
       parallel_for_each_index(count, [&](std::size_t i) { kappa_total[i] = 0; });
     }
@@ -431,13 +417,14 @@ int solve_density(const Parameters& parameters, State& state, Real time_step, Re
         kappa_total[i] += kappa;
         view.kappa[i] = view.mass[i] * kappa;
       });
-      apply_pressure_velocity_update(view, state, time_step);
+      apply_pressure_velocity_update(view, state, workspace, time_step);
       mean_density_error = update_predicted_density() / Real(count);
       ++iterations;
     }
-    unpack_velocities(state);
-    return iterations;
+    unpack_velocities(state, workspace);
+    state.last_step.density_iterations = iterations;
   }
 }
 
 }  // namespace m3dp::sph::stages
+

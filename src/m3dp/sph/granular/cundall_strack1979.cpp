@@ -14,7 +14,7 @@
 #include <algorithm>
 #include <cmath>
 
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph::stages {
 
@@ -55,15 +55,16 @@ Vec3 contact_force(const Vec3& r, const Vec3& v, Real diameter, const ContactLaw
 
 }  // namespace
 
-void compute_granular_contacts(const Parameters& parameters, State& state, std::span<const GranularContact> phases) {
-  const auto& settings = parameters.settings;
+void compute_granular_contacts(const Model& model, State& state, Workspace& workspace) {
+  const auto& phases = model.granular_contacts;
+  const auto& settings = model.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const Real diameter = 2 * settings.particle_radius;
-  const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
+  const auto& fluid_lists = workspace.fluid_neighbors;
+  const auto& boundary_lists = workspace.boundary_neighbors;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const GranularContact& contact_i = phases[fluid.phase[i]];
       const Real mass_i = fluid.mass[i];
@@ -97,3 +98,4 @@ void compute_granular_contacts(const Parameters& parameters, State& state, std::
 }
 
 }  // namespace m3dp::sph::stages
+

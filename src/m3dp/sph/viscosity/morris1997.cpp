@@ -9,19 +9,20 @@
 #include <tbb/parallel_for.h>
 
 #include "m3dp/core/parallel.hpp"
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph::stages {
 
-void compute_non_pressure_accelerations(const Parameters& parameters, State& state, const ViscosityCalibration& calibration) {
-  const bool explicit_viscosity = parameters.settings.viscosity_solver == ViscositySolver::explicit_morris1997;
-  const auto& settings = parameters.settings;
+void add_gravity_and_explicit_viscosity(const Model& model, State& state, Workspace& workspace) {
+  const auto& calibration = model.viscosity_calibration;
+  const bool explicit_viscosity = model.settings.viscosity_solver == ViscositySolver::explicit_morris1997;
+  const auto& settings = model.settings;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
-  const Real support_radius = settings.support_radius_factor * settings.particle_radius;
+  const Real support_radius = model.support_radius;
   const Real regularisation = Real(0.01) * support_radius * support_radius;
   constexpr Real kDimensionFactor = 2 * (3 + 2);
-  const Real inverse_volume = 1 / particle_rest_volume(settings.particle_radius);  // ρ0_j = m_j / V
+  const Real inverse_volume = 1 / model.particle_volume;  // ρ0_j = m_j / V
   if (!explicit_viscosity) {
     parallel_for_each_index(state.active_count, [&](std::size_t i) { fluid.acceleration[i] = settings.gravity; }, 1024);
     return;
@@ -29,12 +30,12 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
 
   // V_j ∇W_ij = pair_gradient · x_ij (filled with the densities this step), so
   // (m_j/ρ_j) ∇W_ij = (ρ0/ρ_j) · pair_gradient · x_ij.
-  const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
+  const auto& fluid_lists = workspace.fluid_neighbors;
+  const auto& boundary_lists = workspace.boundary_neighbors;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+      const FluidPhase& phase = model.phases[fluid.phase[i]];
       const Vec3 position_i = fluid.position[i];
       const Vec3 velocity_i = fluid.velocity[i];
       Vec3 acceleration = settings.gravity;
@@ -47,7 +48,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
           const Index j = fluid_lists.indices[first + k];
           const Vec3 r = position_i - fluid.position[j];
           const Real mu_ij = pair_viscosity(mu_i, fluid.viscosity[j]);
-          viscous += mu_ij * (fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[first + k] *
+          viscous += mu_ij * (fluid.mass[j] * inverse_volume / fluid.density[j]) * workspace.fluid_pair_gradient[first + k] *
                      (velocity_i - fluid.velocity[j]).dot(r) / (r.squaredNorm() + regularisation) * r;
         }
         acceleration += kDimensionFactor * calibration.fluid * inverse_density_i * viscous;
@@ -59,7 +60,7 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[first + k];
           const Vec3 r = position_i - boundary.position[b];
-          const Vec3 a = kDimensionFactor * calibration.boundary * wall_viscosity * inverse_density_i * state.boundary_pair_gradient[first + k] *
+          const Vec3 a = kDimensionFactor * calibration.boundary * wall_viscosity * inverse_density_i * workspace.boundary_pair_gradient[first + k] *
                          (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * r;
           acceleration += a;
           const Vec3 force = -mass_i * a;
@@ -74,3 +75,4 @@ void compute_non_pressure_accelerations(const Parameters& parameters, State& sta
 }
 
 }  // namespace m3dp::sph::stages
+

@@ -11,29 +11,31 @@
 
 #include <algorithm>
 
-#include "m3dp/sph/solver.hpp"
+#include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph::stages {
 
-void apply_micropolar(const Parameters& parameters, State& state, Real time_step, std::span<const Real> microinertia) {
-  const bool any = std::any_of(parameters.phases.begin(), parameters.phases.end(),
+void apply_micropolar(const Model& model, State& state, Workspace& workspace) {
+  const Real time_step = state.time_step;
+  const auto& microinertia = model.microinertia;
+  const bool any = std::any_of(model.phases.begin(), model.phases.end(),
                                [](const FluidPhase& phase) { return phase.micropolar.enabled; });
   if (!any) return;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const std::size_t count = state.active_count;
-  const Real inverse_volume = 1 / particle_rest_volume(parameters.settings.particle_radius);  // ρ0_j = m_j / V
-  const auto& fluid_lists = state.fluid_neighbors;
-  const auto& boundary_lists = state.boundary_neighbors;
-  const Real support_radius = parameters.settings.support_radius_factor * parameters.settings.particle_radius;
+  const Real inverse_volume = 1 / model.particle_volume;  // ρ0_j = m_j / V
+  const auto& fluid_lists = workspace.fluid_neighbors;
+  const auto& boundary_lists = workspace.boundary_neighbors;
+  const Real support_radius = model.support_radius;
   // New ω into scratch first: every particle reads its neighbours' old ω.
-  auto& next = state.scratch_vec3;
+  auto& next = workspace.scratch_vec3;
   next.resize(count);
-  with_kernel(parameters.settings.kernel, support_radius, [&](const auto& kernel) {
+  with_kernel(model.settings.kernel, support_radius, [&](const auto& kernel) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-      std::vector<Wrench>& wrenches = thread_body_wrenches(state);
+      std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
-        const FluidPhase& phase = parameters.phases[fluid.phase[i]];
+        const FluidPhase& phase = model.phases[fluid.phase[i]];
         if (!phase.micropolar.enabled) {
           next[i] = Vec3::Zero();
           continue;
@@ -50,7 +52,7 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
           const Index j = fluid_lists.indices[fluid_first + k];
           const Vec3 r = position_i - fluid.position[j];
           // V_j ∇W_ij with V_j = m_j/ρ_j: the stored pair gradient holds V = m_j/ρ0_j.
-          const Vec3 gradient = ((fluid.mass[j] * inverse_volume / fluid.density[j]) * state.fluid_pair_gradient[fluid_first + k]) * r;
+          const Vec3 gradient = ((fluid.mass[j] * inverse_volume / fluid.density[j]) * workspace.fluid_pair_gradient[fluid_first + k]) * r;
           curl_omega += (omega_i - fluid.angular_velocity[j]).cross(gradient);
           curl_velocity += (velocity_i - fluid.velocity[j]).cross(gradient);
           const Real weight = fluid.mass[j] / fluid.density[j] * kernel.W(r.norm());
@@ -61,7 +63,7 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[boundary_first + k];
           const Vec3 r = position_i - boundary.position[b];
-          const Vec3 gradient = state.boundary_pair_gradient[boundary_first + k] * r;
+          const Vec3 gradient = workspace.boundary_pair_gradient[boundary_first + k] * r;
           curl_omega += omega_i.cross(gradient);
           curl_velocity += (velocity_i - boundary.velocity[b]).cross(gradient);
           const Vec3 force = -fluid.mass[i] * (coupling * omega_i.cross(gradient));
@@ -80,3 +82,4 @@ void apply_micropolar(const Parameters& parameters, State& state, Real time_step
 }
 
 }  // namespace m3dp::sph::stages
+

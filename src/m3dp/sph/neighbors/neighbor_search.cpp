@@ -1,4 +1,4 @@
-#include "m3dp/sph/neighbor_search.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -15,7 +15,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 
-#include "m3dp/sph/neighbor_sums_avx2.hpp"  // avx2::available() and the intrinsics
+#include "m3dp/sph/simd/neighbor_sums_avx2.hpp"  // avx2::available() and the intrinsics
 
 namespace m3dp::sph {
 

@@ -1,0 +1,97 @@
+// Stage "bodies": the boundary particles of moving bodies follow their poses, and the grids the
+// neighbour search reads them from; the fluid's force and torque on each body, summed per thread.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+
+#include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/stages.hpp"
+
+namespace m3dp::sph::stages {
+
+void move_bodies(const Model& model, State& state, Workspace& workspace) {
+  auto& boundary = state.boundary;
+  const Real support = model.support_radius;
+  const Real cell_size = workspace.search_cell_size;
+  if (workspace.static_boundary_dirty) {
+    ++workspace.fixed_grids_version;
+    workspace.static_boundary_indices.clear();
+    for (const auto& body : state.bodies)
+      if (body.is_static)
+        for (Index k = 0; k < body.particle_count; ++k) workspace.static_boundary_indices.push_back(body.first_particle + k);
+    workspace.static_boundary_grid.build(boundary.position, workspace.static_boundary_indices, cell_size);
+    workspace.static_boundary_dirty = false;
+  }
+  workspace.moving_boundary_indices.clear();
+  const bool any_moving = std::any_of(state.bodies.begin(), state.bodies.end(), [](const BoundaryBody& body) { return !body.is_static; });
+  if (!any_moving) {
+    workspace.moving_boundary_grid.build(boundary.position, workspace.moving_boundary_indices, cell_size);
+    return;
+  }
+  // Where fluid can be this step: around the particles and every nozzle that is extruding. A
+  // moving body outside it cannot have fluid neighbours, so its particles are neither moved nor sorted.
+  Aabb region = tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, state.fluid.size(), 4096), Aabb{},
+      [&](const tbb::blocked_range<std::size_t>& range, Aabb box) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) box.extend(state.fluid.position[i]);
+        return box;
+      },
+      [](Aabb a, const Aabb& b) {
+        if (!b.empty()) {
+          a.extend(b.min);
+          a.extend(b.max);
+        }
+        return a;
+      });
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n)
+    if (state.nozzles[n].extruding) region.extend(state.nozzles[n].pose.position);
+  // A body within a support radius of that region may have fluid neighbours; a nozzle's disc reaches
+  // its radius further, and a particle moves less than a diameter in a step.
+    const Vec3 reach = Vec3::Constant(support + model.widest_nozzle / 2 + model.particle_diameter);
+
+  for (auto& body : state.bodies) {
+    if (body.is_static) continue;
+    Aabb box;
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3 local((corner & 1) ? body.local_bounds.max.x() : body.local_bounds.min.x(),
+                       (corner & 2) ? body.local_bounds.max.y() : body.local_bounds.min.y(),
+                       (corner & 4) ? body.local_bounds.max.z() : body.local_bounds.min.z());
+      box.extend(body.pose.apply(local));
+    }
+    body.near_fluid = !region.empty() && (box.min.array() <= (region.max + reach).array()).all() &&
+                      (box.max.array() >= (region.min - reach).array()).all();
+    if (!body.near_fluid) continue;
+    parallel_for_each_index(body.particle_count, [&](std::size_t k) {
+      const Index b = body.first_particle + static_cast<Index>(k);
+      boundary.position[b] = body.pose.apply(boundary.local_position[b]);
+      boundary.velocity[b] = body.linear_velocity + body.angular_velocity.cross(boundary.position[b] - body.pose.position);
+    }, 1024);
+    // Only its particles within reach join the grid: a robot's base beside a strand is mostly far from it.
+    const Vec3 low = region.min - reach, high = region.max + reach;
+    for (Index k = 0; k < body.particle_count; ++k) {
+      const Vec3& position = boundary.position[body.first_particle + k];
+      if ((position.array() >= low.array()).all() && (position.array() <= high.array()).all())
+        workspace.moving_boundary_indices.push_back(body.first_particle + k);
+    }
+  }
+  workspace.moving_boundary_grid.build(boundary.position, workspace.moving_boundary_indices, cell_size);
+}
+
+void reset_body_wrenches(const Model& /*model*/, State& state, Workspace& workspace) {
+  for (auto& wrenches : workspace.body_wrench_per_thread) wrenches.assign(state.bodies.size(), Wrench{});
+}
+
+void collect_body_wrenches(const Model& /*model*/, State& state, Workspace& workspace) {
+  for (auto& body : state.bodies) {
+    body.fluid_force.setZero();
+    body.fluid_torque.setZero();
+  }
+  for (const auto& wrenches : workspace.body_wrench_per_thread)
+    for (std::size_t b = 0; b < wrenches.size() && b < state.bodies.size(); ++b) {
+      state.bodies[b].fluid_force += wrenches[b].force;
+      state.bodies[b].fluid_torque += wrenches[b].torque;
+    }
+}
+
+}  // namespace m3dp::sph::stages

@@ -1,0 +1,130 @@
+// Stages "bodies" (the choice) and "neighbors": each step either keeps the neighbour lists of earlier
+// steps (SkinnedNeighborSearch, for slow material) or searches the grids for every active particle.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <bit>
+#include <functional>
+#include <numeric>
+
+#include "m3dp/sph/stages.hpp"
+
+namespace m3dp::sph::stages {
+
+namespace {
+/// Fast particles that kept neighbour lists tolerate (SkinnedNeighborSearch): each searches the grids
+/// itself and all of them pairwise, so a few hundred cost less than a new search of every particle.
+std::size_t most_movers(std::size_t active_count) {
+  return std::clamp<std::size_t>(active_count / 64, 32, 1024);
+}
+}  // namespace
+
+void choose_neighbor_search(const Model& model, State& state, Workspace& workspace) {
+  const auto& settings = model.settings;
+  const Real support = model.support_radius;
+  const Real skin = settings.neighbor_skin * support;
+  const std::size_t active = state.active_count;
+  bool use_skin = state.skin_in_use;
+  if (!(skin > 0)) {
+    use_skin = false;
+  } else if (use_skin) {
+    // Kept lists searched anew in half of the last eight steps cost more than a search every step.
+    if (std::popcount(state.recent_searches & 0xffu) >= 4) {
+      use_skin = false;
+      // Each switch rebuilds the fixed grids for the other cell size: where kept lists keep failing
+      // soon (a print whose resting set changes every few steps), they are tried ever more rarely.
+      const bool failed_soon = state.step - state.skin_since_step < 64;
+      state.skin_backoff = failed_soon ? std::min(2 * state.skin_backoff, 4096) : 64;
+      state.skin_cooldown = state.skin_backoff;
+    }
+  } else if (state.skin_cooldown > 0) {
+    --state.skin_cooldown;
+  } else {
+    // Would kept lists last? A particle that moves more than skin/8 a step leaves its skin/2 within
+    // four steps; a few of them (a falling strand) search for themselves, many force new searches.
+    const Real step_limit = skin / 8 / state.time_step;
+    const Real speed_limit_squared = step_limit * step_limit;
+    const std::size_t fast = tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(0, active, 4096), std::size_t(0),
+        [&](const tbb::blocked_range<std::size_t>& range, std::size_t found) {
+          for (std::size_t i = range.begin(); i != range.end(); ++i) found += state.fluid.velocity[i].squaredNorm() > speed_limit_squared;
+          return found;
+        },
+        std::plus<std::size_t>());
+    state.calm_steps = fast <= most_movers(active) ? state.calm_steps + 1 : 0;
+    if (state.calm_steps >= 8) use_skin = true;
+  }
+  if (use_skin != state.skin_in_use) {
+    state.skin_in_use = use_skin;
+    state.skin_since_step = state.step;
+    state.calm_steps = 0;
+    state.recent_searches = 0;
+    workspace.skinned_search.invalidate();
+  }
+  // Lists of radius support + skin need cells as large in every grid.
+  const Real cell_size = use_skin ? support + skin : support;
+  if (cell_size != workspace.search_cell_size) {
+    workspace.search_cell_size = cell_size;
+    workspace.static_boundary_dirty = true;
+  }
+}
+
+void search_neighbors(const Model& model, State& state, Workspace& workspace) {
+  const Real support = model.support_radius;
+  const Real cell_size = workspace.search_cell_size;
+  const auto& fluid = state.fluid;
+  const std::size_t active_count = state.active_count;
+  // The active particles in one grid, every step; the resting ones (neighbours too) in another, built
+  // again only when they changed (in a 20-layer wall print, 24.6k resting particles against 185
+  // active ones, their grid had been most of the neighbour stage). Only the active ones query.
+  // Lists stay in grid order, which is as deterministic: sorting them by index cost 12 of 43 ms per
+  // step in the 47k dam break and made the solver's sweeps no faster.
+  const std::span<const Vec3> active(fluid.position.data(), active_count);
+  const std::size_t resting_count = fluid.size() - active_count;
+  // With none resting, the (empty) grid stays as it is when the active range grows (an emitted layer).
+  const bool resting_changed =
+      workspace.resting_grid_dirty || workspace.resting_grid_ids.size() != resting_count || workspace.resting_grid.cell_size() != cell_size ||
+      (resting_count > 0 && workspace.resting_grid_first != active_count) ||
+      !std::equal(workspace.resting_grid_ids.begin(), workspace.resting_grid_ids.end(), fluid.id.begin() + std::ptrdiff_t(active_count)) ||
+      !std::equal(workspace.resting_grid_positions.begin(), workspace.resting_grid_positions.end(),
+                  fluid.position.begin() + std::ptrdiff_t(active_count));
+  if (resting_changed) {
+    ++workspace.fixed_grids_version;
+    workspace.resting_grid_dirty = false;
+    workspace.resting_grid_first = active_count;  // the grid holds indices, not ids
+    workspace.resting_grid_ids.assign(fluid.id.begin() + std::ptrdiff_t(active_count), fluid.id.end());
+    workspace.resting_grid_positions.assign(fluid.position.begin() + std::ptrdiff_t(active_count), fluid.position.end());
+    workspace.resting_grid_subset.resize(resting_count);
+    std::iota(workspace.resting_grid_subset.begin(), workspace.resting_grid_subset.end(), static_cast<Index>(active_count));
+    workspace.resting_grid.build(fluid.position, workspace.resting_grid_subset, cell_size);
+  }
+  if (state.skin_in_use) {
+    SkinnedNeighborSearch::Inputs inputs;
+    inputs.fluid_positions = fluid.position;
+    inputs.fluid_ids = fluid.id;
+    inputs.active_count = active_count;
+    inputs.resting_grid = &workspace.resting_grid;
+    inputs.static_boundary_grid = &workspace.static_boundary_grid;
+    inputs.moving_boundary_grid = &workspace.moving_boundary_grid;
+    inputs.boundary_positions = state.boundary.position;
+    inputs.moving_boundary_indices = workspace.moving_boundary_indices;
+    inputs.fixed_grids_version = workspace.fixed_grids_version;
+    const bool searched = workspace.skinned_search.update(inputs, support, cell_size - support, most_movers(active_count),
+                                                       workspace.fluid_neighbors, workspace.boundary_neighbors);
+    state.recent_searches = (state.recent_searches << 1) | (searched ? 1u : 0u);
+    state.neighbor_searches += searched;
+    return;
+  }
+  ++state.neighbor_searches;
+  workspace.fluid_grid.build(active, cell_size);
+  // Queries in the active grid's order: a cell's particles come together and share one candidate
+  // gather (in index order they drift apart between reorderings).
+  const std::span<const Index> query_order = workspace.fluid_grid.points_in_grid_order();
+  const SpatialHashGrid* fluid_grids[] = {&workspace.fluid_grid, &workspace.resting_grid};
+  find_neighbors(fluid_grids, active, support, true, workspace.fluid_neighbors, false, query_order);
+  const SpatialHashGrid* boundary_grids[] = {&workspace.static_boundary_grid, &workspace.moving_boundary_grid};
+  find_neighbors(boundary_grids, active, support, false, workspace.boundary_neighbors, false, query_order);
+}
+
+}  // namespace m3dp::sph::stages

@@ -1,0 +1,134 @@
+#pragma once
+// Every stage of a step: a free function over (model, state, workspace), run in the order of
+// Solver::step. Each lives in a file named after its stage or its method's paper.
+#include <span>
+
+#include "m3dp/sph/model.hpp"
+#include "m3dp/sph/state.hpp"
+
+namespace m3dp::sph::stages {
+
+/// One stage: reads the model, advances the state, uses the workspace.
+using StageFunction = void (*)(const Model& model, State& state, Workspace& workspace);
+
+// ---- bodies (bodies.cpp, neighbors/search_stage.cpp) ----
+/// Kept neighbour lists or a search every step (slow or fast material), and the grids' cell size.
+void choose_neighbor_search(const Model& model, State& state, Workspace& workspace);
+/// Moving bodies' boundary particles to their poses; the static and moving boundary grids.
+void move_bodies(const Model& model, State& state, Workspace& workspace);
+
+// ---- remove (removal.cpp) ----
+/// Deletes the particles outside SolverSettings::bounds.
+void remove_out_of_bounds(const Model& model, State& state, Workspace& workspace);
+
+// ---- emit (emission.cpp) ----
+/// Nozzle disc layers, where there is room in front of the nozzle.
+void emit_layers(const Model& model, State& state, Workspace& workspace);
+
+// ---- reorder (rest_detection.cpp, reorder.cpp) ----
+/// Particles that rested long enough leave the active range; woken ones re-enter it.
+void update_rest_partition(const Model& model, State& state, Workspace& workspace);
+/// Every SolverSettings::reorder_interval steps, the active particles in Z-order (Morton) of their cells.
+void reorder_particles(const Model& model, State& state, Workspace& workspace);
+
+// ---- neighbors (neighbors/search_stage.cpp) ----
+/// Fluid and boundary neighbour lists of the active particles (kept or searched).
+void search_neighbors(const Model& model, State& state, Workspace& workspace);
+
+// ---- density, divergence, pressure (pressure/dfsph_bender2017.cpp) ----
+/// ρ_i and the DFSPH factor α_i (Bender & Koschier 2017, eq. 11); the wall sums and pair gradients.
+void compute_density_and_factor(const Model& model, State& state, Workspace& workspace);
+/// Divergence-free solver (Bender & Koschier 2017, Algorithm 2), over the last step's time step.
+void solve_divergence(const Model& model, State& state, Workspace& workspace);
+/// Constant-density solver (Bender & Koschier 2017, Algorithm 3), over this step's time step.
+void solve_density(const Model& model, State& state, Workspace& workspace);
+
+// ---- forces ----
+/// Each particle's shear rate (1/s) and effective viscosity (Pa·s) from its rheology and age
+/// (viscosity/effective_viscosity.cpp).
+void update_effective_viscosity(const Model& model, State& state, Workspace& workspace);
+/// Gravity, plus the Morris et al. 1997 viscosity when it is the chosen solver (viscosity/morris1997.cpp).
+void add_gravity_and_explicit_viscosity(const Model& model, State& state, Workspace& workspace);
+/// Surface tension (the settings' model) and Akinci's wall adhesion (surface_tension/akinci2013.cpp).
+void add_surface_tension(const Model& model, State& state, Workspace& workspace);
+/// The continuum surface force of surface_tension/brackbill1992.cpp (add_surface_tension's other model).
+void add_csf_surface_tension(const Model& model, State& state, Workspace& workspace);
+/// Air drag on the exposed particles (forces/drag_gissler2017.cpp).
+void add_air_drag(const Model& model, State& state, Workspace& workspace);
+/// Elastic stress of each particle's deformation (forces/elasticity_peer2018.cpp).
+void add_elastic_forces(const Model& model, State& state, Workspace& workspace);
+/// This step's time step: CFL, explicit viscosity, capillary waves and body force (time_step.cpp).
+void choose_time_step(const Model& model, State& state, Workspace& workspace);
+/// Micro-rotation and its vortex force (forces/micropolar_bender2017.cpp).
+void apply_micropolar(const Model& model, State& state, Workspace& workspace);
+/// v += Δt a: the non-pressure forces act (time_step.cpp).
+void integrate_accelerations(const Model& model, State& state, Workspace& workspace);
+
+// ---- viscosity ----
+/// Elastic materials' shear stiffness as a viscosity G·Δt for the implicit solve (forces/elasticity_peer2018.cpp).
+void add_elastic_stiffness(const Model& model, State& state, Workspace& workspace);
+/// Implicit viscosity (Weiler et al. 2018), with the wall friction's reaction on the bodies (viscosity/weiler2018.cpp).
+void solve_implicit_viscosity(const Model& model, State& state, Workspace& workspace);
+/// XSPH velocity smoothing (Monaghan 1989) where SolverSettings::xsph_factor > 0 (forces/xsph_monaghan1989.cpp).
+void apply_xsph(const Model& model, State& state, Workspace& workspace);
+
+// ---- advect (emission.cpp, advection.cpp, rest_detection.cpp, boundary_push_out.cpp) ----
+/// The extruder pushes: material in a nozzle's exit leaves at least at the exit speed.
+void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace);
+/// x += Δt v.
+void advect_positions(const Model& model, State& state, Workspace& workspace);
+/// Elastic materials with a relaxation time: the reference shape creeps towards the current one.
+void relax_reference_shape(const Model& model, State& state, Workspace& workspace);
+/// Rest clocks of the active particles, and wake-up marks on resting ones near motion.
+void update_rest_clocks(const Model& model, State& state, Workspace& workspace);
+/// With wake_on_load: resting material whose load has grown towards its yield stress wakes.
+void wake_loaded_rest(const Model& model, State& state, Workspace& workspace);
+/// Particles whose centre crossed a wall's geometric surface go back onto it.
+void keep_out_of_boundaries(const Model& model, State& state, Workspace& workspace);
+/// The clock, the step count and the step's statistics; then the state check (throws SimulationError).
+void finish_step(const Model& model, State& state, Workspace& workspace);
+
+// ---- granular mode (granular/cundall_strack1979.cpp, time_step.cpp, advection.cpp) ----
+/// Gravity and the contact forces (Cundall & Strack 1979); the walls' share to the body wrenches.
+void compute_granular_contacts(const Model& model, State& state, Workspace& workspace);
+/// The contacts' time step, within the CFL limit.
+void choose_granular_time_step(const Model& model, State& state, Workspace& workspace);
+/// v += Δt a, x += Δt v.
+void integrate_granular(const Model& model, State& state, Workspace& workspace);
+
+// ---- body wrenches (bodies.cpp) ----
+/// Clears the per-thread wrench accumulators (sized to the bodies).
+void reset_body_wrenches(const Model& model, State& state, Workspace& workspace);
+/// Sums the per-thread wrenches into each body's fluid_force / fluid_torque.
+void collect_body_wrenches(const Model& model, State& state, Workspace& workspace);
+
+// ---- helpers the stages share ----
+/// This thread's wrench accumulator, one entry per body (sized on a thread's first use only).
+inline std::vector<Wrench>& thread_body_wrenches(const State& state, Workspace& workspace) {
+  std::vector<Wrench>& wrenches = workspace.body_wrench_per_thread.local();
+  if (wrenches.size() != state.bodies.size()) wrenches.assign(state.bodies.size(), Wrench{});
+  return wrenches;
+}
+/// Appends one particle of `phase` at rest density with every field initialised (emission.cpp), after
+/// the resting particles: call activate_appended once a batch is placed. Returns its index.
+std::size_t append_particle(const Model& model, State& state, const Vec3& position, const Vec3& velocity, std::uint16_t phase);
+/// Moves the particles appended from `first` on into the active range (before the resting ones).
+void activate_appended(State& state, std::size_t first);
+/// A new particle's least distance to the boundary layer (m): its centre at least a radius in front
+/// of a surface, the layer being a radius behind it (boundary_sampling.hpp).
+inline Real boundary_clearance(const Model& model) { return Real(0.999) * model.particle_diameter; }
+/// The largest |v + Δt a|² of the active particles (m²/s²; Δt = 0: |v|²).
+Real max_speed_squared(const State& state, Real time_step);
+/// The colour gradient ∇c_i = Σ_j V_j ∇W_ij + Σ_b V_b ∇W_ib of particle i (pointing into the material;
+/// walls count as material), from this step's pair gradients, which hold the rest volume. With
+/// `rest_volume` (m³) > 0 each neighbour counts with its current volume m_j/ρ_j instead.
+Vec3 colour_gradient(const State& state, const Workspace& workspace, std::size_t i, Real rest_volume = 0);
+/// Viscosity of a particle pair (Pa·s): the harmonic mean, as for fluxes across layers in series. Where a
+/// yielded particle meets an unyielded one (10³× more viscous) the arithmetic mean would make the pair as
+/// stiff as the plug and drag the sheared layer along (Bingham Poiseuille flow then runs 40 % slow).
+inline Real pair_viscosity(Real mu_i, Real mu_j) {
+  const Real sum = mu_i + mu_j;
+  return sum > 0 ? 2 * mu_i * mu_j / sum : Real(0);
+}
+
+}  // namespace m3dp::sph::stages

@@ -1,0 +1,221 @@
+#pragma once
+// The engine's mutable data, in two parts (MuJoCo's mjData, Box2D's hot and cold data):
+//  State      what a checkpoint needs to continue a run: particles, bodies, nozzles, clocks, warm
+//             starts and the decisions that carry over from step to step.
+//  Workspace  what every step rebuilds or only caches: grids, neighbour lists, per-pair arrays,
+//             solver vectors and scratch. A state restored without its workspace steps on after
+//             rebuilding the caches (see Workspace::invalidate).
+#include <tbb/enumerable_thread_specific.h>
+
+#include <array>
+#include <cstdint>
+#include <memory>
+#include <string_view>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
+#include "m3dp/sph/particles.hpp"
+
+namespace m3dp::sph {
+
+struct NozzleState {
+  Pose pose;                          // emission axis = pose · (0, 0, −1): pointing down by default
+  Vec3 velocity = Vec3::Zero();       // m/s of the nozzle itself (added to the exit velocity)
+  bool extruding = false;
+  Real flow_scale = 1;                // flow / nominal flow π D²/4 · U (a G-code move's E rate); 1 = nominal
+  double pending_time = 0;            // s of nominal extrusion not yet emitted as a layer
+  std::uint64_t layers_emitted = 0;
+  std::uint64_t particles_emitted = 0;
+  std::uint64_t blocked_layers = 0;   // steps in which a due layer was delayed: the space in front was occupied
+};
+
+/// The timed stages of a step, in the order they run (Solver::step). One table: the stage times,
+/// the timing.csv columns and the benchmarks' rows all come from it.
+enum class Stage : std::uint8_t { bodies, remove, emit, reorder, neighbors, density, divergence, forces, pressure, viscosity, advect };
+inline constexpr std::array<std::string_view, 11> kStageNames{"bodies",  "remove",     "emit",   "reorder",  "neighbors", "density",
+                                                              "divergence", "forces", "pressure", "viscosity", "advect"};
+inline constexpr std::size_t kStageCount = kStageNames.size();
+
+/// Wall-clock time per stage of a step (ms).
+struct StageTimes {
+  std::array<double, kStageCount> ms{};
+  [[nodiscard]] double& operator[](Stage stage) { return ms[static_cast<std::size_t>(stage)]; }
+  [[nodiscard]] double operator[](Stage stage) const { return ms[static_cast<std::size_t>(stage)]; }
+  [[nodiscard]] double total() const;
+  StageTimes& operator+=(const StageTimes& other);
+};
+
+struct StepStats {
+  double time_step = 0;                 // s
+  int density_iterations = 0;
+  int divergence_iterations = 0;
+  int viscosity_iterations = 0;         // conjugate-gradient iterations of the implicit viscosity solve
+  Real density_error = 0;               // mean relative density error after the density solve
+  Real max_density_error = 0;           // max over particles of (ρ/ρ0 − 1) at the start of the step
+  std::size_t particles_emitted = 0;
+  std::size_t particles_removed = 0;
+  std::size_t particles_at_rest = 0;    // at the end of the step (not simulated)
+  StageTimes stage_ms;
+};
+
+struct Wrench {
+  Vec3 force = Vec3::Zero();
+  Vec3 torque = Vec3::Zero();
+};
+
+/// Everything a checkpoint needs.
+struct State {
+  FluidParticles fluid;
+  // The first active_count particles are simulated; the rest have come to rest (rest_detection) and
+  // only stand as fixed neighbours: zero velocity and κ, not in any solver sweep.
+  std::size_t active_count = 0;
+  int resting_woken = 0;             // 1 when update_rest_clocks woke a resting particle this step
+  double next_load_check_time = 0;   // s, when the weight on resting material is checked next
+  BoundaryParticles boundary;
+  std::vector<BoundaryBody> bodies;
+  std::vector<NozzleState> nozzles;
+
+  double time = 0;                   // s
+  std::int64_t step = 0;
+  Real time_step = 0;                // s, the last step's (the next step's divergence solve and emission use it)
+  std::uint64_t next_particle_id = 0;
+  std::uint64_t particles_removed_total = 0;
+  double mass_removed_total = 0;     // kg
+  double mass_emitted_total = 0;     // kg
+  StepStats last_step;               // the step in progress, then the last one
+
+  // Decisions carried from step to step: whether neighbour lists are kept across steps
+  // (SolverSettings::neighbor_skin) and whether the viscosity solve uses its coarse level.
+  bool skin_in_use = false;
+  int calm_steps = 0;                 // consecutive steps the speeds predicted kept lists to last
+  int skin_cooldown = 0;              // steps before kept lists may be tried again
+  int skin_backoff = 64;              // the next cooldown: doubles each time kept lists fail soon
+  std::int64_t skin_since_step = 0;   // the step the last switch happened
+  std::uint32_t recent_searches = 0;  // bit k: the kept lists were searched anew k steps ago
+  std::uint64_t neighbor_searches = 0;  // steps that searched the grids for every particle
+  int previous_viscosity_iterations = 0;  // CG iterations of the last implicit viscosity solve
+};
+
+namespace stages {
+class CoarseViscosityLevel;  // the implicit viscosity's coarse level (viscosity/coarse_level.hpp)
+
+/// Owns the coarse level between solves (its buffers, and the factorisation's analysis, reused while
+/// A_c keeps its pattern). A copy starts with an empty one: every solve builds the level again.
+class CoarseViscosityLevelHolder {
+ public:
+  CoarseViscosityLevelHolder();
+  CoarseViscosityLevelHolder(const CoarseViscosityLevelHolder& other);
+  CoarseViscosityLevelHolder(CoarseViscosityLevelHolder&& other) noexcept;
+  CoarseViscosityLevelHolder& operator=(const CoarseViscosityLevelHolder& other);
+  CoarseViscosityLevelHolder& operator=(CoarseViscosityLevelHolder&& other) noexcept;
+  ~CoarseViscosityLevelHolder();
+  CoarseViscosityLevel& get();  // made on first use
+
+ private:
+  std::unique_ptr<CoarseViscosityLevel> level_;
+};
+}  // namespace stages
+
+/// What the stages rebuild or cache; nothing here is needed to continue a run.
+struct Workspace {
+  SpatialHashGrid fluid_grid;    // the active particles, every step
+  // The resting particles (neighbours too, but fixed): rebuilt only when the resting range, its
+  // particles or their positions changed (first index, ids and positions as built).
+  SpatialHashGrid resting_grid;
+  bool resting_grid_dirty = true;                // built from another state, or never
+  std::size_t resting_grid_first = 0;            // the first resting index when it was built
+  std::vector<Index> resting_grid_subset;
+  std::vector<std::uint64_t> resting_grid_ids;
+  std::vector<Vec3> resting_grid_positions;
+  // Boundary particles in two grids: static bodies' sorted once (a large floor costs nothing per
+  // step), moving bodies' every step, and only those bodies near the fluid or a nozzle (a robot
+  // arm's upper links usually are not).
+  SpatialHashGrid static_boundary_grid;
+  SpatialHashGrid moving_boundary_grid;
+  bool static_boundary_dirty = true;
+  std::vector<Index> static_boundary_indices;
+  std::vector<Index> moving_boundary_indices;  // this step's: particles of the moving bodies near the fluid
+  // Every grid's cell: the support radius, or support + skin while lists are kept across steps.
+  Real search_cell_size = 0;
+  std::uint64_t fixed_grids_version = 0;  // counts rebuilds of the resting and static boundary grids
+  SkinnedNeighborSearch skinned_search;   // lists kept across steps for slow material
+  NeighborLists fluid_neighbors;     // fluid → fluid
+  NeighborLists boundary_neighbors;  // fluid → boundary
+  // Per neighbour pair (same slots as the lists), filled with the densities each step:
+  // V_j · (dW/dr)/r, so that V_j ∇W_ij = factor · (x_i − x_j). Positions do not move between the
+  // density pass and advection, so every solver sweep rebuilds V_j ∇W_ij from these without a
+  // square root or a branch. V_j = m_j/ρ0 for fluid, the Akinci volume for boundary particles.
+  std::vector<Real> fluid_pair_gradient;
+  std::vector<Real> boundary_pair_gradient;
+
+  std::vector<Real> kappa;           // (n) m κ of the current solver iteration
+  // Positions and velocities padded to Vec4 (w = 0) for the solvers' sweeps: one aligned load and one
+  // SIMD operation per neighbour. The positions are packed once a step, in the density pass, and read
+  // until advection by the pressure solves, the shear rates and the implicit viscosity; the velocities
+  // are packed by each user and go back after each solve. (n) each.
+  std::vector<Vec4> solver_position, solver_velocity;
+  // Each particle's sums over its wall neighbours, taken in the density pass: they do not change until
+  // advection (the walls' positions and velocities are fixed for the step), so the solves' sweeps
+  // need no wall loop. With g_b = V_b (dW/dr)/r and r_b = x_i − x_b,
+  struct WallSums {
+    Vec4 gradient;        // Σ_b g_b r_b (1/m), w = 0
+    Vec3 torque;          // Σ_b (x_b − c) × g_b r_b about the body's origin c (1), if one body
+    Real velocity_flux;   // Σ_b g_b v_b·r_b (1/s)
+    Index body;           // the one body of all its wall neighbours, or kSeveralBodies
+  };
+  static constexpr Index kSeveralBodies = ~Index(0);
+  std::vector<WallSums> solver_wall_sums;  // (n)
+  tbb::enumerable_thread_specific<std::vector<Wrench>> body_wrench_per_thread;
+  Real largest_kinematic_viscosity = 0;  // m²/s, this step's largest μ/ρ (the explicit viscosity's time-step limit)
+  std::vector<std::uint64_t> sort_keys;
+  std::vector<Index> permutation;
+  std::vector<Vec3> scratch_vec3;
+  std::vector<Real> scratch_real;
+  std::vector<std::uint16_t> scratch_u16;
+  std::vector<std::uint64_t> scratch_u64;
+  std::vector<Real> height;          // (n) m, against gravity (load check)
+  // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.
+  struct ViscositySystem {
+    std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)
+    std::vector<Real> boundary_pair_coefficient;  // per boundary neighbour slot, the same
+    std::vector<Mat3> inverse_diagonal;           // (n) block-Jacobi preconditioner
+    std::vector<Mat3> own_block;                  // (n) m_i I + the walls' Σ_b c_ib r rᵀ: A's part that acts on x_i alone (kg)
+    std::vector<Vec3> rhs, residual, preconditioned, product, start_velocity;  // (n) each
+    // The vector that A multiplies (the start velocity, then each CG direction), padded to Vec4 for the
+    // product's sweep as the pressure solves' copies (solver_position holds the positions). The CG
+    // direction lives only here.
+    std::vector<Vec4> padded_operand;
+    // The preconditioner's coarse level: aggregates of particles (cells of a coarse grid) that move
+    // as one (see viscosity/coarse_level.hpp).
+    std::vector<std::uint64_t> aggregate_key;     // (n) coarse cell of each active particle
+    std::vector<Index> aggregate_order;           // (n) active particles grouped by aggregate
+    std::vector<Index> aggregate_start;           // (aggregates + 1) into aggregate_order
+    std::vector<Index> aggregate_of;              // (n) aggregate of each active particle
+    std::vector<Vec3> aggregate_offset;           // (n) x_i − its aggregate's centroid (m)
+    std::vector<double> coarse_residual, coarse_correction;  // (6 × aggregates: translation, rotation)
+    std::vector<Real> coarse_motion;              // coarse_correction in single precision, for the per-particle sweep
+    stages::CoarseViscosityLevelHolder coarse_level;
+  } viscosity_system;
+  std::vector<Mat3> elastic_stress;  // (n) R σ L of elastic particles this step (Peer et al. 2018)
+  std::vector<Vec3> surface_normal;  // (n) Akinci 2013 normals h Σ V_j ∇W_ij, or the colour gradient ∇c of the CSF
+  std::vector<std::uint8_t> surface_flag;  // (n) CSF: 1 on the outermost layer of the material
+  std::vector<Real> surface_curvature;     // (n) CSF: κ (1/m) of the surface at or above the particle
+  struct SurfaceLayer {                    // CSF: the outermost layer and its neighbours within the fit radius
+    std::vector<Index> indices;            // fluid indices of the layer's particles
+    std::vector<Vec3> positions;           // their positions, in the same order
+    std::vector<Real> area;                // m², the surface each carries
+    std::vector<Vec3> outward;             // unit outward normal of the surface fitted around each
+    std::vector<Vec3> wall_normal;         // (n) towards the wall next to a layer particle, zero if none
+    std::vector<Vec3> wall_point;          // (n) a point of that wall's geometric surface
+    SpatialHashGrid grid;
+    NeighborLists neighbors;               // per layer particle, fluid indices of layer particles
+  } surface_layer;
+
+  /// Drops what was cached from another state: the fixed grids are rebuilt and lists searched anew.
+  void invalidate();
+  /// Pre-sizes the per-particle arrays for `capacity` fluid particles, so steps do not allocate.
+  void reserve(std::size_t capacity);
+};
+
+}  // namespace m3dp::sph

@@ -1,0 +1,112 @@
+#pragma once
+// Internal to the implicit viscosity (viscosity/weiler2018*.cpp): the linear system's operator and
+// the deterministic sums its conjugate gradients take. See weiler2018.cpp for the method.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <array>
+
+#include "m3dp/sph/simd/neighbor_sums_avx2.hpp"
+#include "m3dp/sph/stages.hpp"
+
+namespace m3dp::sph::stages::weiler2018 {
+
+inline constexpr Real kDimensionFactor = 2 * (3 + 2);  // 2(d+2), d = 3
+
+/// Runs range_body(range, sums) over ranges of the particles and returns the N sums (double), added in a
+/// fixed order: the same on every run, so two identical simulations stay identical.
+template <std::size_t N, class RangeBody>
+std::array<double, N> deterministic_range_sums(std::size_t count, RangeBody&& range_body) {
+  using Sums = std::array<double, N>;
+  return tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
+      [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
+        range_body(range, sums);
+        return sums;
+      },
+      [](Sums a, const Sums& b) {
+        for (std::size_t n = 0; n < N; ++n) a[n] += b[n];
+        return a;
+      });
+}
+
+/// body(i, sums) for every particle.
+template <std::size_t N, class Body>
+std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
+  return deterministic_range_sums<N>(count, [&](const tbb::blocked_range<std::size_t>& range, std::array<double, N>& sums) {
+    for (std::size_t i = range.begin(); i != range.end(); ++i) body(i, sums);
+  });
+}
+
+/// y = A x, x in the system's padded_operand (padded: one SIMD operation per neighbour; the positions
+/// are the density pass's padded copies, unchanged until advection).
+class ViscousOperator {
+ public:
+  explicit ViscousOperator(const Workspace& workspace)
+      : position_(workspace.solver_position.data()),
+        operand_(workspace.viscosity_system.padded_operand.data()),
+        lists_(workspace.fluid_neighbors),
+        coefficient_(workspace.viscosity_system.fluid_pair_coefficient.data()),
+        own_block_(workspace.viscosity_system.own_block.data()) {}
+
+  /// (A x)_i.
+  [[nodiscard]] Vec3 row(std::size_t i) const {
+    const Vec4 position_i = position_[i];
+    const Vec4 x_i = operand_[i];
+    Vec4 result = Vec4::Zero();
+    const std::size_t first = lists_.first(i);
+    const Index* neighbor = lists_.indices.data() + first;
+    const Real* coefficient = coefficient_ + first;
+    for (Index k = 0; k < lists_.counts[i]; ++k) {
+      const Index j = neighbor[k];
+      const Vec4 r = position_i - position_[j];
+      result += (coefficient[k] * r.dot(x_i - operand_[j])) * r;
+    }
+    // The walls' pairs (fixed velocities, on the right-hand side) leave c r rᵀ x_i, summed in own_block.
+    return Vec3(result.head<3>() + own_block_[i] * x_i.head<3>());
+  }
+
+  /// visit(i, (A x)_i) for the particles of a range, in order: the AVX2 sweep where there is one.
+  template <class Visit>
+  void rows(const tbb::blocked_range<std::size_t>& range, Visit&& visit) const {
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+    if (avx2::available()) {
+      avx2::viscous_product_rows(range.begin(), range.end(), position_, operand_, lists_.indices.data(), lists_.counts.data(),
+                                 lists_.firsts.data(), coefficient_, own_block_, visit);
+      return;
+    }
+#endif
+    for (std::size_t i = range.begin(); i != range.end(); ++i) visit(i, row(i));
+  }
+
+  /// The N sums of body(i, (A x)_i, sums) over the particles, in a fixed order.
+  template <std::size_t N, class Body>
+  std::array<double, N> row_sums(std::size_t count, Body&& body) const {
+    return deterministic_range_sums<N>(count, [&](const tbb::blocked_range<std::size_t>& range, std::array<double, N>& sums) {
+      rows(range, [&](std::size_t i, const Vec3& row) { body(i, row, sums); });
+    });
+  }
+
+ private:
+  const Vec4* position_;
+  const Vec4* operand_;
+  const NeighborLists& lists_;
+  const Real* coefficient_;
+  const Mat3* own_block_;
+};
+
+/// The system A v = b of this step: pair coefficients, block-Jacobi preconditioner, right-hand side,
+/// and the warm start v* + last step's viscous change in state.fluid.velocity (weiler2018_system.cpp).
+void build_system(const Model& model, State& state, Workspace& workspace);
+/// The first residual, and the blended start where v* is far off (weiler2018_start.cpp). Returns
+/// ‖r‖ and ‖b‖.
+struct StartResidual {
+  double residual_norm = 0, rhs_norm = 0;
+};
+StartResidual start_solve(const Model& model, State& state, Workspace& workspace);
+/// Preconditioned conjugate gradients from the start to the tolerance (weiler2018_cg.cpp). Returns iterations.
+int run_conjugate_gradients(const Model& model, State& state, Workspace& workspace, const StartResidual& start);
+/// Wall friction as a reaction on the bodies (weiler2018_wall_reaction.cpp).
+void add_wall_reaction(const Model& model, State& state, Workspace& workspace);
+
+}  // namespace m3dp::sph::stages::weiler2018
