@@ -618,7 +618,7 @@ TEST(SceneMaterials, TheContinuumSurfaceForceIsChosenInTheSolverAndHasNoAdhesion
     FAIL() << "no error";
   } catch (const InputError& error) {
     EXPECT_CONTAINS(error.what(), "wetting.sdf:");
-    EXPECT_CONTAINS(error.what(), "<adhesion> needs <surface_tension_model>akinci2013</surface_tension_model>");
+    EXPECT_CONTAINS(error.what(), "<adhesion> needs the akinci2013 surface tension model");
   }
   try {
     load_scene_from_string(replaced(valid_scene(), "<kernel>wendland_c2</kernel>",
@@ -855,5 +855,31 @@ TEST(SceneMaterials, AnElasticMaterialNeedsTheImplicitSolver) {
         <viscosity unit="mPa*s">1</viscosity>
         <elasticity><shear_modulus>1000</shear_modulus></elasticity>
       </material>)");
-  expect_error_at(text, "<elasticity>", "an elastic material needs the implicit viscosity solver");
+  expect_error_at(text, "<elasticity>", "<elasticity> needs the implicit viscosity solver");
+}
+
+TEST(SceneMaterials, TheEngineChecksAreReportedAtTheirLines) {
+  // sph::check_parameters is the one check of engine rules; the scene names the line of each field.
+  const std::string poisson = with_material(R"(<material name="water" preset="clay_paste">
+        <elasticity>
+          <poisson_ratio>0.6</poisson_ratio>
+        </elasticity>
+      </material>)");
+  expect_error_at(poisson, "<poisson_ratio>", "<poisson_ratio> must be in [0, 0.49], got 0.6");
+  // Fluids and discrete spheres in one scene: at the material that differs from the first one.
+  std::string mixed = replaced(valid_scene(), R"(<material name="water">)", R"(<material name="pellets">
+        <density>1500</density>
+        <viscosity>0</viscosity>
+        <granular/>
+      </material>
+      <material name="water">)");
+  mixed = replaced(mixed, R"(<fluid_block name="column" material="water">)", R"(<fluid_block name="pile" material="pellets">
+        <min>0.3 0.3 0.3</min><max>0.4 0.4 0.4</max>
+      </fluid_block>
+      <fluid_block name="column" material="water">)");
+  expect_error_at(mixed, R"(<material name="water">)",
+                  "material 'water' is a fluid but material 'pellets' is granular; one scene's materials are all fluids or "
+                  "all granular for now");
+  const InputError error = load_error(mixed);
+  EXPECT_EQ(error.diagnostics().size(), 1u) << error.what();  // said once, not also by the scene reader
 }

@@ -17,6 +17,7 @@
 
 #include "m3dp/core/text.hpp"
 #include "m3dp/io/mesh_io.hpp"
+#include "m3dp/sph/model.hpp"
 #include "m3dp/toolpath/gcode.hpp"
 #include "m3dp/toolpath/waypoints.hpp"
 
@@ -223,7 +224,6 @@ class SceneReader {
     std::string name;
     SourceLocation where;
     bool used = false;
-    bool granular = false;
   };
   struct MaterialUse {
     std::string material;
@@ -304,13 +304,14 @@ class SceneReader {
   void read_material(const pugi::xml_node& material);
   /// A material's values over `base` (a preset) or, without one, from scratch (then density and a
   /// viscosity or rheology are required).
-  std::optional<material::Material> read_material_values(const pugi::xml_node& element, const material::Material* base);
+  std::optional<material::Material> read_material_values(const pugi::xml_node& element, const material::Material* base,
+                                                         FieldLocations& fields);
   std::optional<material::Rheology> read_rheology(const pugi::xml_node& element, const material::Rheology* base);
   void read_ageing(const pugi::xml_node& element, material::Ageing& ageing);
-  void read_granular(const pugi::xml_node& element, material::Granular& granular);
+  void read_granular(const pugi::xml_node& element, material::Granular& granular, FieldLocations& fields);
   void read_air(const pugi::xml_node& air);
   void read_micropolar(const pugi::xml_node& element, material::Micropolar& micropolar);
-  void read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity);
+  void read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity, FieldLocations& fields);
   /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
   const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
@@ -326,6 +327,15 @@ class SceneReader {
   void read_output(const pugi::xml_node& output);
   void read_meshing(const pugi::xml_node& meshing);
   void check_materials();
+  /// The engine's own check of what was read (sph::check_parameters), each problem at its field's line.
+  void check_engine_parameters();
+  /// Records where `parent`'s child `name` was written as `field` (nothing if it is not there).
+  void record_field(FieldLocations& fields, std::string field, const pugi::xml_node& parent, const char* name) {
+    if (const pugi::xml_node child = parent.child(name)) fields.emplace_back(std::move(field), where(child));
+  }
+  /// Reports `problems` of `parameters`: `phase_entries` (one per phase) and the scene's solver fields say where.
+  void report_parameter_problems(const std::vector<sph::ParameterProblem>& problems, const sph::Parameters& parameters,
+                                 std::span<const MaterialEntry> phase_entries);
 
   const std::string& text_;
   fs::path file_;
@@ -1106,6 +1116,7 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
     report(plugin, "the scene has no fluid: add a <fluid_block> or a <print_head>");
   }
   check_materials();
+  check_engine_parameters();
 }
 
 void SceneReader::read_air(const pugi::xml_node& air) {
@@ -1115,10 +1126,12 @@ void SceneReader::read_air(const pugi::xml_node& air) {
   check_children(air, {"drag", "density", "viscosity", "velocity"});
   sph::SolverSettings& settings = scene_.solver;
   settings.air_drag = read_bool(air, "drag").value_or(true);
-  if (const auto density = read_scalar(air, "density", Quantity::density, Limits::positive(), Presence::optional))
+  if (const auto density = read_scalar(air, "density", Quantity::density, Limits::any(), Presence::optional))
     settings.air_density = Real(*density);
-  if (const auto viscosity = read_scalar(air, "viscosity", Quantity::dynamic_viscosity, Limits::positive(), Presence::optional))
+  if (const auto viscosity = read_scalar(air, "viscosity", Quantity::dynamic_viscosity, Limits::any(), Presence::optional))
     settings.air_viscosity = Real(*viscosity);
+  record_field(scene_.solver_fields, "air.density", air, "density");
+  record_field(scene_.solver_fields, "air.viscosity", air, "viscosity");
   if (const auto velocity = read_vector(air, "velocity", Quantity::speed, Presence::optional)) settings.air_velocity = *velocity;
 }
 
@@ -1130,12 +1143,14 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
                           "max_viscosity_iterations", "xsph", "rest_detection", "rest_speed", "rest_duration",
                           "wake_speed", "wake_on_load", "load_wake_duration", "surface_tension_model"});
   sph::SolverSettings& settings = scene_.solver;
+  scene_.solver_fields.emplace_back("", where(solver));  // for settings the file does not name
 
-  if (const auto radius =
-          read_scalar(solver, "particle_radius", Quantity::length, Limits::positive(), Presence::required)) {
+  // Its range, like every engine parameter's, is checked by sph::check_parameters (check_engine_parameters).
+  if (const auto radius = read_scalar(solver, "particle_radius", Quantity::length, Limits::any(), Presence::required)) {
     settings.particle_radius = Real(*radius);
-    particle_radius_ = settings.particle_radius;
+    if (settings.particle_radius > 0) particle_radius_ = settings.particle_radius;
   }
+  record_field(scene_.solver_fields, "particle_radius", solver, "particle_radius");
   if (const auto kernel = read_keyword<sph::KernelType>(
           solver, "kernel", {{"cubic_spline", sph::KernelType::cubic_spline}, {"wendland_c2", sph::KernelType::wendland_c2}}))
     settings.kernel = *kernel;
@@ -1230,7 +1245,10 @@ void SceneReader::read_material(const pugi::xml_node& element) {
     }
     preset = &*found;
   }
-  auto material = read_material_values(element, preset ? &preset->material : nullptr);
+  // A preset's fields where the material does not set them again (its own are found first).
+  FieldLocations fields;
+  auto material = read_material_values(element, preset ? &preset->material : nullptr, fields);
+  if (preset) fields.insert(fields.end(), preset->fields.begin(), preset->fields.end());
   if (!name) return;
 
   const auto earlier = std::find_if(defined_materials_.begin(), defined_materials_.end(),
@@ -1239,27 +1257,26 @@ void SceneReader::read_material(const pugi::xml_node& element) {
     report(element, fmt::format("material '{}' is defined twice; the first is at line {}", *name, earlier->where.line));
     return;
   }
-  defined_materials_.push_back(
-      DefinedMaterial{*name, where(element), false,
-                      material && material->granular.enabled});
+  defined_materials_.push_back(DefinedMaterial{*name, where(element)});
   if (!material) return;
   material->name = *name;
   if (preset) material->preset = preset->material.name;
-  scene_.materials.push_back(MaterialEntry{std::move(*material), where(element)});
+  scene_.materials.push_back(MaterialEntry{std::move(*material), where(element), std::move(fields)});
 }
 
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
-                                                                   const material::Material* base) {
+                                                                   const material::Material* base, FieldLocations& fields) {
   check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
                            "granular", "micropolar", "elasticity", "source"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
-  if (const auto density = read_scalar(element, "density", Quantity::density, Limits::positive(), required)) {
+  if (const auto density = read_scalar(element, "density", Quantity::density, Limits::any(), required)) {
     material.density = Real(*density);
   } else if (!base) {
     valid = false;
   }
+  record_field(fields, "density", element, "density");
   const pugi::xml_node viscosity = element.child("viscosity");
   const pugi::xml_node rheology = element.child("rheology");
   if (viscosity && rheology) {
@@ -1300,20 +1317,12 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
                                        Presence::optional))
     material.surface_tension = Real(*tension);
   if (const auto adhesion = read_scalar(element, "adhesion", Quantity::surface_tension, Limits::non_negative(),
-                                        Presence::optional)) {
+                                        Presence::optional))
     material.adhesion = Real(*adhesion);
-    if (material.adhesion > 0 && scene_.solver.surface_tension_model == sph::SurfaceTensionModel::csf_brackbill1992)
-      report(element.child("adhesion"), "<adhesion> needs <surface_tension_model>akinci2013</surface_tension_model>: the "
-                                        "brackbill1992 model wets walls at 90° and has no adhesion");
-  }
-  if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular);
+  record_field(fields, "adhesion", element, "adhesion");
+  if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular, fields);
   if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material.micropolar);
-  if (const pugi::xml_node elasticity = element.child("elasticity")) {
-    read_elasticity(elasticity, material.elasticity);
-    if (scene_.solver.viscosity_solver != sph::ViscositySolver::implicit_weiler2018)
-      report(elasticity, "an elastic material needs the implicit viscosity solver (its stiffness is solved with the "
-                         "viscosity); remove <viscosity_solver>explicit</viscosity_solver>");
-  }
+  if (const pugi::xml_node elasticity = element.child("elasticity")) read_elasticity(elasticity, material.elasticity, fields);
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;
@@ -1411,16 +1420,17 @@ void SceneReader::read_ageing(const pugi::xml_node& element, material::Ageing& a
     ageing.viscosity_growth = Real(*growth);
 }
 
-void SceneReader::read_granular(const pugi::xml_node& element, material::Granular& granular) {
+void SceneReader::read_granular(const pugi::xml_node& element, material::Granular& granular, FieldLocations& fields) {
   // <granular/> on its own switches the material to discrete spheres with the default contact law.
   check_attributes(element, {});
   check_children(element, {"stiffness", "restitution", "friction"});
   granular.enabled = true;
   if (const auto stiffness = read_scalar(element, "stiffness", Quantity::stiffness, Limits::positive(), Presence::optional))
     granular.stiffness = Real(*stiffness);
-  if (const auto restitution = read_scalar(element, "restitution", Quantity::plain_number, Limits::positive_up_to(1),
-                                           Presence::optional))
+  if (const auto restitution = read_scalar(element, "restitution", Quantity::plain_number, Limits::any(), Presence::optional))
     granular.restitution = Real(*restitution);
+  fields.emplace_back("granular", where(element));
+  record_field(fields, "granular.restitution", element, "restitution");
   if (const auto friction = read_scalar(element, "friction", Quantity::plain_number, Limits::non_negative(), Presence::optional))
     granular.friction = Real(*friction);
 }
@@ -1440,15 +1450,17 @@ void SceneReader::read_micropolar(const pugi::xml_node& element, material::Micro
     micropolar.angular_smoothing = Real(*smoothing);
 }
 
-void SceneReader::read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity) {
+void SceneReader::read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity, FieldLocations& fields) {
   check_attributes(element, {});
   check_children(element, {"shear_modulus", "poisson_ratio", "relaxation_time"});
   elasticity.enabled = true;
-  if (const auto modulus = read_scalar(element, "shear_modulus", Quantity::stress, Limits::positive(), Presence::required))
+  if (const auto modulus = read_scalar(element, "shear_modulus", Quantity::stress, Limits::any(), Presence::required))
     elasticity.shear_modulus = Real(*modulus);
-  if (const auto ratio = read_scalar(element, "poisson_ratio", Quantity::plain_number, Limits{std::nullopt, 0.0, 0.49},
-                                     Presence::optional))
+  if (const auto ratio = read_scalar(element, "poisson_ratio", Quantity::plain_number, Limits::any(), Presence::optional))
     elasticity.poisson_ratio = Real(*ratio);
+  fields.emplace_back("elasticity", where(element));
+  record_field(fields, "elasticity.shear_modulus", element, "shear_modulus");
+  record_field(fields, "elasticity.poisson_ratio", element, "poisson_ratio");
   if (const auto relaxation = read_scalar(element, "relaxation_time", Quantity::time, Limits::non_negative(), Presence::optional))
     elasticity.relaxation_time = Real(*relaxation);
 }
@@ -1474,10 +1486,17 @@ std::vector<MaterialEntry> SceneReader::read_material_library() {
   for (const auto& element : child_elements(root, "material")) {
     check_attributes(element, {"name"});
     const auto name = read_attribute(element, "name", Presence::required);
-    auto material = read_material_values(element, nullptr);
+    FieldLocations fields;
+    auto material = read_material_values(element, nullptr, fields);
     if (!name || !material) continue;
     material->name = *name;
-    entries.push_back(MaterialEntry{std::move(*material), where(element)});
+    entries.push_back(MaterialEntry{std::move(*material), where(element), std::move(fields)});
+  }
+  // Each preset as the one material of default settings: what the engine would refuse in any scene.
+  for (const MaterialEntry& entry : entries) {
+    sph::Parameters parameters;
+    parameters.phases.push_back(entry.material);
+    report_parameter_problems(sph::check_parameters(parameters), parameters, std::span(&entry, 1));
   }
   if (!diagnostics_.empty()) throw InputError(std::move(diagnostics_));
   return entries;
@@ -1828,14 +1847,44 @@ void SceneReader::check_materials() {
                                         defined.name));
     }
   }
-  // Fluids and discrete spheres do not interact yet.
-  for (const DefinedMaterial& defined : defined_materials_) {
-    if (defined.granular == defined_materials_.front().granular) continue;
-    const DefinedMaterial& first = defined_materials_.front();
-    report(defined.where, fmt::format("material '{}' is {} but material '{}' (line {}) is {}; a scene's materials are all "
-                                      "fluids or all <granular> for now",
-                                      defined.name, defined.granular ? "granular" : "a fluid", first.name, first.where.line,
-                                      first.granular ? "granular" : "a fluid"));
+}
+
+void SceneReader::check_engine_parameters() {
+  if (scene_.materials.empty()) return;  // already reported: no material, or none that could be read
+  const sph::Parameters parameters = solver_parameters(scene_);
+  report_parameter_problems(sph::check_parameters(parameters), parameters, scene_.materials);
+}
+
+void SceneReader::report_parameter_problems(const std::vector<sph::ParameterProblem>& problems, const sph::Parameters& parameters,
+                                            std::span<const MaterialEntry> phase_entries) {
+  auto location_of = [](const FieldLocations& fields, const std::string& field, const SourceLocation& fallback) {
+    for (const auto& [name, location] : fields)
+      if (name == field) return location;
+    return fallback;
+  };
+  for (const sph::ParameterProblem& problem : problems) {
+    SourceLocation location{file_.string(), 0};
+    std::string owner;
+    switch (problem.subject) {
+      case sph::ParameterProblem::Subject::settings:
+        location = location_of(scene_.solver_fields, problem.field, location_of(scene_.solver_fields, "", location));
+        break;
+      case sph::ParameterProblem::Subject::phase: {
+        const MaterialEntry& entry = phase_entries[problem.index];
+        location = location_of(entry.fields, problem.field, entry.where);
+        owner = fmt::format("material '{}'", entry.material.name);
+        break;
+      }
+      case sph::ParameterProblem::Subject::nozzle:
+        location = problem.index < scene_.print_heads.size() ? scene_.print_heads[problem.index].where : location;
+        owner = fmt::format("print head '{}'", parameters.nozzles[problem.index].name);
+        break;
+    }
+    // "<poisson_ratio> must be in [0, 0.49], got 0.5"; a whole material's problem names the material.
+    const std::size_t dot = problem.field.rfind('.');
+    const std::string element = problem.field.substr(dot == std::string::npos ? 0 : dot + 1);
+    report(location, problem.field.empty() ? fmt::format("{} {}", owner, problem.message)
+                                           : fmt::format("<{}> {}", element, problem.message));
   }
 }
 
@@ -1862,6 +1911,22 @@ std::vector<fs::path> model_search_path(const fs::path& scene_file) {
   }
   folders.emplace_back(M3DP_PROJECT_MODELS);
   return folders;
+}
+
+std::uint16_t Scene::material_index(const std::string& name) const {
+  for (std::size_t i = 0; i < materials.size(); ++i)
+    if (materials[i].material.name == name) return static_cast<std::uint16_t>(i);
+  return 0;
+}
+
+sph::Parameters solver_parameters(const Scene& scene) {
+  sph::Parameters parameters;
+  parameters.settings = scene.solver;
+  for (const auto& entry : scene.materials) parameters.phases.push_back(entry.material);
+  for (const auto& head : scene.print_heads)
+    parameters.nozzles.push_back(
+        sph::NozzleSettings{head.name, head.inner_diameter, head.exit_speed, scene.material_index(head.material)});
+  return parameters;
 }
 
 const MaterialEntry* Scene::find_material(const std::string& name) const {

@@ -72,9 +72,14 @@ struct NozzleMount {
   SourceLocation where;
 };
 
+/// Where each engine field of an entry was written, by the names sph::ParameterProblem uses
+/// ("density", "elasticity.poisson_ratio"): a problem the engine finds is reported at that line.
+using FieldLocations = std::vector<std::pair<std::string, SourceLocation>>;
+
 struct MaterialEntry {
   material::Material material;
   SourceLocation where;
+  FieldLocations fields = {};  // the material's own elements, or its preset's
 };
 
 /// Particles on a lattice of spacing 2·particle_radius filling a box [min, max] or, when `cylinder_radius`
@@ -122,6 +127,7 @@ struct Scene {
   std::string world_name;
   double end_time = 1;          // s of simulated time
   sph::SolverSettings solver;   // includes gravity (from the world's <gravity>) and bounds
+  FieldLocations solver_fields; // where <particle_radius>, <air><density>… were written
   std::vector<MaterialEntry> materials;
   std::vector<StaticBody> bodies;
   std::vector<DynamicBody> dynamic_bodies;
@@ -133,8 +139,14 @@ struct Scene {
   std::vector<Diagnostic> warnings;  // not errors: e.g. G-code commands that were skipped (file:line)
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
+  /// The material's index (the engine's phase); 0 for a name the loader did not accept.
+  [[nodiscard]] std::uint16_t material_index(const std::string& name) const;
   [[nodiscard]] const RobotInclude* find_robot(const std::string& name) const;
 };
+
+/// The engine's parameters: the solver settings, the materials as phases (in scene order) and the
+/// print heads as nozzles.
+sph::Parameters solver_parameters(const Scene& scene);
 
 /// Where `model://NAME` URIs are looked for, in order: models/ beside the scene file and one level
 /// up, each folder of the M3DP_MODEL_PATH environment variable (':'-separated), and the project's

@@ -9,31 +9,9 @@
 
 namespace m3dp::sim {
 
-sph::Parameters make_solver_parameters(const scene::Scene& scene) {
-  sph::Parameters parameters;
-  parameters.settings = scene.solver;
-  for (const auto& entry : scene.materials) parameters.phases.push_back(entry.material);
-  auto phase_of = [&](const std::string& name) {
-    for (std::size_t i = 0; i < scene.materials.size(); ++i)
-      if (scene.materials[i].material.name == name) return static_cast<std::uint16_t>(i);
-    return std::uint16_t(0);  // the scene loader has checked that every name exists
-  };
-  for (const auto& head : scene.print_heads)
-    parameters.nozzles.push_back(sph::NozzleSettings{head.name, head.inner_diameter, head.exit_speed, phase_of(head.material)});
-  return parameters;
-}
-
-namespace {
-std::uint16_t phase_index(const scene::Scene& scene, const std::string& material) {
-  for (std::size_t i = 0; i < scene.materials.size(); ++i)
-    if (scene.materials[i].material.name == material) return static_cast<std::uint16_t>(i);
-  return 0;
-}
-
-}  // namespace
 
 Simulation::Simulation(const scene::Scene& scene)
-    : scene_(scene), solver_(make_solver_parameters(scene)), world_(world::WorldSettings{scene.solver.gravity}) {
+    : scene_(scene), solver_(scene::solver_parameters(scene)), world_(world::WorldSettings{scene.solver.gravity}) {
   const Real spacing = solver_.particle_diameter();
   const Real wall_spacing = scene_.solver.boundary_spacing_factor * spacing;
   for (const auto& body : scene_.bodies) {
@@ -63,7 +41,7 @@ Simulation::Simulation(const scene::Scene& scene)
       const Real radius = *block.cylinder_radius;
       std::erase_if(points, [&](const Vec3& p) { return (p - axis_point).head<2>().norm() > radius; });
     }
-    initial_particles += solver_.add_particles(points, block.initial_velocity, phase_index(scene_, block.material));
+    initial_particles += solver_.add_particles(points, block.initial_velocity, scene_.material_index(block.material));
   }
   // Reserve for everything the print heads will emit, so steps do not reallocate.
   double emitted_volume = 0;

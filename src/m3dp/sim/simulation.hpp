@@ -14,9 +14,6 @@
 
 namespace m3dp::sim {
 
-/// Builds solver parameters from a scene (materials → phases, print heads → nozzles).
-sph::Parameters make_solver_parameters(const scene::Scene& scene);
-
 class Simulation {
  public:
   explicit Simulation(const scene::Scene& scene);

@@ -152,15 +152,15 @@ ParameterError::ParameterError(std::vector<ParameterProblem> problems, const Par
 std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
   std::vector<ParameterProblem> problems;
   const auto& settings = parameters.settings;
-  if (!(settings.particle_radius > 0)) problems.push_back(settings_problem("particle_radius", "must be > 0 m"));
-  if (!(settings.neighbor_skin >= 0)) problems.push_back(settings_problem("neighbor_skin", "must be >= 0 (support radii)"));
-  if (settings.air_drag && !(settings.air_density > 0)) problems.push_back(settings_problem("air.density", "must be > 0 kg/m^3"));
-  if (settings.air_drag && !(settings.air_viscosity > 0)) problems.push_back(settings_problem("air.viscosity", "must be > 0 Pa*s"));
+  if (!(settings.particle_radius > 0)) problems.push_back(settings_problem("particle_radius", fmt::format("must be > 0 m, got {}", settings.particle_radius)));
+  if (!(settings.neighbor_skin >= 0)) problems.push_back(settings_problem("neighbor_skin", fmt::format("must be >= 0 (support radii), got {}", settings.neighbor_skin)));
+  if (settings.air_drag && !(settings.air_density > 0)) problems.push_back(settings_problem("air.density", fmt::format("must be > 0 kg/m^3, got {}", settings.air_density)));
+  if (settings.air_drag && !(settings.air_viscosity > 0)) problems.push_back(settings_problem("air.viscosity", fmt::format("must be > 0 Pa*s, got {}", settings.air_viscosity)));
   if (parameters.phases.empty()) problems.push_back(settings_problem("", "at least one material is needed"));
   const bool granular = !parameters.phases.empty() && parameters.phases.front().granular.enabled;
   for (std::size_t p = 0; p < parameters.phases.size(); ++p) {
     const FluidPhase& phase = parameters.phases[p];
-    if (!(phase.density > 0)) problems.push_back(phase_problem(p, "density", "must be > 0 kg/m^3"));
+    if (!(phase.density > 0)) problems.push_back(phase_problem(p, "density", fmt::format("must be > 0 kg/m^3, got {}", phase.density)));
     // Akinci's adhesion pulls against Akinci's cohesion; without it (measured on sessile drops) the
     // contact line sprayed apart.
     if (phase.adhesion > 0 && settings.surface_tension_model == SurfaceTensionModel::csf_brackbill1992)
@@ -171,9 +171,10 @@ std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
         problems.push_back(phase_problem(p, "elasticity", "needs the implicit viscosity solver: an elastic material's "
                                                           "stiffness is solved with its viscosity"));
       if (!(phase.elasticity.shear_modulus > 0))
-        problems.push_back(phase_problem(p, "elasticity.shear_modulus", "must be > 0 Pa"));
+        problems.push_back(phase_problem(p, "elasticity.shear_modulus", fmt::format("must be > 0 Pa, got {}", phase.elasticity.shear_modulus)));
       if (!(phase.elasticity.poisson_ratio >= 0 && phase.elasticity.poisson_ratio <= Real(0.49)))
-        problems.push_back(phase_problem(p, "elasticity.poisson_ratio", "must be in [0, 0.49]"));
+        problems.push_back(
+            phase_problem(p, "elasticity.poisson_ratio", fmt::format("must be in [0, 0.49], got {}", phase.elasticity.poisson_ratio)));
     }
     // Granular mode: every phase or none (a fluid and discrete spheres do not interact yet).
     if (phase.granular.enabled != granular)
@@ -182,7 +183,8 @@ std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
                              phase.granular.enabled ? "granular" : "a fluid", parameters.phases.front().name,
                              granular ? "granular" : "a fluid")));
     if (phase.granular.enabled && !(phase.granular.restitution > 0 && phase.granular.restitution <= 1))
-      problems.push_back(phase_problem(p, "granular.restitution", "must be in (0, 1]"));
+      problems.push_back(
+          phase_problem(p, "granular.restitution", fmt::format("must be in (0, 1], got {}", phase.granular.restitution)));
   }
   for (std::size_t n = 0; n < parameters.nozzles.size(); ++n)
     if (parameters.nozzles[n].phase >= parameters.phases.size())
