@@ -122,6 +122,27 @@ Index keep_candidates_within(NeighborLists::CandidateBuffer& buffer, const Vec3&
   return keep_candidates_within_generic(buffer, query, radius_squared, self);
 }
 
+/// Runs pass(stride, note_needed) until every list fits its stride: note_needed(n) says a list needed
+/// n slots, and a pass in which one needed more than `stride` runs again with a stride that fits it
+/// (rare: a denser region than ever before). The staging holds `list_count` strides.
+template <class Pass>
+void with_growing_stride(NeighborLists& lists, std::size_t list_count, Pass&& pass) {
+  for (;;) {
+    const Index stride = lists.stride;
+    if (lists.staging.size() < list_count * stride) lists.staging.resize(list_count * stride);
+    std::atomic<Index> most_needed{0};
+    auto note_needed = [&](Index needed) {
+      if (needed <= stride) return;
+      Index previous = most_needed.load(std::memory_order_relaxed);
+      while (needed > previous && !most_needed.compare_exchange_weak(previous, needed)) {
+      }
+    };
+    pass(stride, note_needed);
+    if (most_needed.load() == 0) return;
+    lists.stride = most_needed.load() + 16;
+  }
+}
+
 }  // namespace
 
 void SpatialHashGrid::build(std::span<const Vec3> positions, Real cell_size) {
@@ -310,11 +331,7 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
   out.counts.resize(query_count);
   out.staged_firsts.resize(query_count);
   const std::size_t order_count = query_order.empty() ? query_count : query_order.size();
-  for (;;) {
-    const std::size_t needed = std::max(order_count, query_count) * out.stride;
-    if (out.staging.size() < needed) out.staging.resize(needed);
-    std::atomic<Index> most_needed{0};
-    const Index stride = out.stride;
+  with_growing_stride(out, std::max(order_count, query_count), [&](const Index stride, auto&& note_needed) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, order_count, 64), [&](const tbb::blocked_range<std::size_t>& range) {
       NeighborLists::CandidateBuffer& buffer = out.candidate_buffers.local();
       buffer.valid = false;  // the grid may have changed since this thread's last search
@@ -356,17 +373,10 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
         out.counts[i] = std::min(count, stride);
         out.staged_firsts[i] = cursor;
         cursor += out.counts[i];
-        if (count > stride) {
-          Index previous = most_needed.load(std::memory_order_relaxed);
-          while (count > previous && !most_needed.compare_exchange_weak(previous, count)) {
-          }
-        }
+        note_needed(count);
       }
     });
-    if (most_needed.load() == 0) break;
-    // Rare: a denser region than ever before. Grow and redo this search.
-    out.stride = most_needed.load() + 16;
-  }
+  });
   pack_staged_lists(out, query_count, sort_lists);
 }
 
@@ -396,29 +406,19 @@ void pack_staged_lists(NeighborLists& out, std::size_t query_count, bool sort_li
 namespace {
 
 /// Fills `lists` with `count` fixed-stride lists: fill(k, slots, stride) writes list k into slots (at
-/// most `stride` of them) and returns its full length. A list that did not fit grows the stride and
-/// the whole pass runs again (rare: a denser region than ever before).
+/// most `stride` of them) and returns its full length.
 template <class Fill>
 void fill_staged_lists(NeighborLists& lists, std::size_t count, std::size_t grain, Fill&& fill) {
   lists.counts.resize(count);
-  for (;;) {
-    const Index stride = lists.stride;
-    if (lists.staging.size() < count * stride) lists.staging.resize(count * stride);
-    std::atomic<Index> most_needed{0};
+  with_growing_stride(lists, count, [&](const Index stride, auto&& note_needed) {
     tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, grain), [&](const tbb::blocked_range<std::size_t>& range) {
       for (std::size_t k = range.begin(); k != range.end(); ++k) {
         const Index found = fill(k, lists.staging.data() + k * stride, stride);
         lists.counts[k] = std::min(found, stride);
-        if (found > stride) {
-          Index previous = most_needed.load(std::memory_order_relaxed);
-          while (found > previous && !most_needed.compare_exchange_weak(previous, found)) {
-          }
-        }
+        note_needed(found);
       }
     });
-    if (most_needed.load() == 0) return;
-    lists.stride = most_needed.load() + 16;
-  }
+  });
 }
 
 /// Squared distance written out term by term: the same value from either end of a pair (a − b and
