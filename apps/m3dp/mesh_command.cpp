@@ -22,11 +22,11 @@ void add_mesh_options(CLI::App& command, MeshOptions& options) {
       ->required()
       ->check(CLI::ExistingFile);
   command.add_option("-o,--output", options.output,
-                     "Mesh file (.obj, .ply, .stl) or, for a .pvd sequence or --format sdf, a folder")
+                     fmt::format("Mesh file ({}) or, for a .pvd sequence or --format sdf, a folder", io::mesh_format_names()))
       ->required();
-  command.add_option("--method", options.method, "spherical, sph_blobby, zhu_bridson or anisotropic")
-      ->capture_default_str();
-  command.add_option("--format", options.format, "obj, ply, stl or sdf (a Gazebo model folder); default from -o, else obj");
+  command.add_option("--method", options.method, surface::method_names())->capture_default_str();
+  command.add_option("--format", options.format,
+                     fmt::format("{} or sdf (a Gazebo model folder); default from -o, else obj", io::mesh_format_names()));
   command.add_option("--particle-radius", options.particle_radius,
                      "Particle radius r in m (default: read from the file, as m3dp run writes it)")
       ->check(CLI::PositiveNumber);
@@ -48,11 +48,11 @@ namespace {
 
 std::string format_of(const MeshOptions& options, bool sequence) {
   if (!options.format.empty()) {
-    if (options.format != "obj" && options.format != "ply" && options.format != "stl" && options.format != "sdf")
-      throw Error(fmt::format("--format '{}': expected obj, ply, stl or sdf", options.format));
+    if (options.format != "sdf" && !io::find_mesh_format(options.format))
+      throw Error(fmt::format("--format '{}': expected {} or sdf", options.format, io::mesh_format_names()));
     return options.format;
   }
-  if (!sequence && io::is_writable_mesh_extension(options.output)) return options.output.extension().string().substr(1);
+  if (const io::MeshFormat* format = io::mesh_format_of(options.output); format && !sequence) return std::string(format->name);
   return "obj";
 }
 

@@ -325,19 +325,6 @@ TriangleMesh read_stl(const fs::path& file) {
 
 }  // namespace
 
-TriangleMesh read_triangle_mesh(const std::filesystem::path& file) {
-  const std::string extension = lowercase(file.extension().string());
-  if (extension == ".obj") return read_obj(file);
-  if (extension == ".stl") return read_stl(file);
-  fail(file, 0,
-       fmt::format("unsupported mesh file extension '{}'; expected .obj or .stl", file.extension().string()));
-}
-
-bool is_writable_mesh_extension(const std::filesystem::path& file) {
-  const std::string extension = lowercase(file.extension().string());
-  return extension == ".obj" || extension == ".ply" || extension == ".stl";
-}
-
 namespace {
 template <class T>
 void write_le(std::ostream& stream, T value) {
@@ -380,18 +367,51 @@ void write_binary_stl(std::ostream& stream, const TriangleMesh& mesh) {
 }
 }  // namespace
 
-void write_triangle_mesh(const std::filesystem::path& file, const TriangleMesh& mesh) {
+constexpr MeshFormat kMeshFormats[] = {
+    {"obj", ".obj", "Wavefront OBJ (text)", false, write_obj, read_obj},
+    {"ply", ".ply", "binary PLY", true, write_ply, nullptr},
+    {"stl", ".stl", "binary STL (read: ASCII or binary)", true, write_binary_stl, read_stl},
+};
+
+std::span<const MeshFormat> mesh_formats() { return kMeshFormats; }
+
+const MeshFormat* find_mesh_format(std::string_view name) {
+  for (const MeshFormat& format : kMeshFormats)
+    if (format.name == name) return &format;
+  return nullptr;
+}
+
+const MeshFormat* mesh_format_of(const std::filesystem::path& file) {
   const std::string extension = lowercase(file.extension().string());
-  if (extension == ".obj") {
-    write_file_atomically(file, [&](std::ostream& stream) { write_obj(stream, mesh); });
-  } else if (extension == ".ply") {
-    write_file_atomically(file, [&](std::ostream& stream) { write_ply(stream, mesh); }, true);
-  } else if (extension == ".stl") {
-    write_file_atomically(file, [&](std::ostream& stream) { write_binary_stl(stream, mesh); }, true);
-  } else {
-    throw Error(fmt::format("{}: unsupported mesh file extension '{}'; expected .obj, .ply or .stl", file.string(),
-                            file.extension().string()));
+  for (const MeshFormat& format : kMeshFormats)
+    if (format.extension == extension) return &format;
+  return nullptr;
+}
+
+std::string mesh_format_names(bool readable_only) {
+  std::string names;
+  for (const MeshFormat& format : kMeshFormats)
+    if (!readable_only || format.read) names += (names.empty() ? "" : ", ") + std::string(format.name);
+  return names;
+}
+
+TriangleMesh read_triangle_mesh(const std::filesystem::path& file) {
+  const MeshFormat* format = mesh_format_of(file);
+  if (!format || !format->read) {
+    std::string extensions;
+    for (const MeshFormat& each : kMeshFormats)
+      if (each.read) extensions += (extensions.empty() ? "" : " or ") + std::string(each.extension);
+    fail(file, 0, fmt::format("unsupported mesh file extension '{}'; expected {}", file.extension().string(), extensions));
   }
+  return format->read(file);
+}
+
+void write_triangle_mesh(const std::filesystem::path& file, const TriangleMesh& mesh) {
+  const MeshFormat* format = mesh_format_of(file);
+  if (!format)
+    throw Error(fmt::format("{}: unsupported mesh file extension '{}'; expected one of {}", file.string(),
+                            file.extension().string(), mesh_format_names()));
+  write_file_atomically(file, [&](std::ostream& stream) { format->write(stream, mesh); }, format->binary);
 }
 
 void write_sdf_model(const std::filesystem::path& folder, const std::string& model_name, const TriangleMesh& mesh) {

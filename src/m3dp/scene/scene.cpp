@@ -1799,8 +1799,13 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
   }
   if (const auto period = read_scalar(meshing, "period", Quantity::time, Limits::positive(), Presence::optional))
     settings.period = Real(*period);
-  if (const auto format = read_keyword<std::string_view>(meshing, "format", {{"obj", "obj"}, {"ply", "ply"}, {"stl", "stl"}}))
-    settings.format = std::string(*format);
+  if (const pugi::xml_node format = meshing.child("format")) {
+    const std::string_view name = leaf_text(format, {});
+    if (io::find_mesh_format(name))
+      settings.format = std::string(name);
+    else
+      report(format, fmt::format("<format> must be one of: {}; got '{}'", io::mesh_format_names(), name));
+  }
   if (const pugi::xml_node material = meshing.child("material")) {
     settings.material = std::string(leaf_text(material, {}));
     material_uses_.push_back(MaterialUse{settings.material, "<meshing>", where(material)});

@@ -115,7 +115,7 @@ struct OutputSettings {
 struct MeshingSettings {
   bool enabled = false;
   Real period = Real(0.5);                // s of simulated time between meshes
-  std::string format = "ply";            // obj, ply or stl
+  std::string format = "ply";            // a name of io::mesh_formats()
   std::string material;                  // mesh only this material; empty = all
   std::optional<Aabb> region;            // mesh only particles inside this box (m); none = everywhere
   surface::SurfaceSettings surface;       // particle_radius filled from the solver

@@ -1,5 +1,5 @@
-// The one translation unit that includes OpenVDB (slow to compile): particle fields on sparse
-// grids and their iso-surfaces. See surface.hpp for the methods and their papers.
+// Particle fields to meshes on sparse OpenVDB grids: the table of methods (each filled by its file in
+// methods/), the tiled mesher and the incremental cache of resting material. See surface.hpp.
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Composite.h>
 #include <openvdb/tools/ParticlesToLevelSet.h>
@@ -27,21 +27,18 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/sph/kernels.hpp"
 #include "m3dp/sph/neighbors/neighbor_search.hpp"
-#include "m3dp/surface/anisotropic_yu_turk2013.hpp"
+#include "m3dp/surface/methods/anisotropic_yu_turk2013.hpp"
 #include "m3dp/surface/mesh_tools.hpp"
+#include "m3dp/surface/field.hpp"
 #include "m3dp/surface/surface.hpp"
 
 namespace m3dp::surface {
 
+/// The table of methods: each is its file's FieldMethod (one row per method).
+extern const FieldMethod kSphericalMethod, kSphBlobbyMethod, kZhuBridsonMethod, kAnisotropicMethod;
+constexpr const FieldMethod* kFieldMethods[] = {&kSphericalMethod, &kSphBlobbyMethod, &kZhuBridsonMethod, &kAnisotropicMethod};
+
 namespace {
-
-using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-void initialize_openvdb() {
-  static std::once_flag once;
-  std::call_once(once, [] { openvdb::initialize(); });
-}
 
 /// Throws for a particle that is not finite (a blown-up frame): every grid key below would be garbage.
 void check_finite(std::span<const Vec3> positions) {
@@ -49,501 +46,6 @@ void check_finite(std::span<const Vec3> positions) {
     if (!positions[i].allFinite())
       throw Error(fmt::format("surface reconstruction: particle {} of {} is not finite ({}, {}, {})", i, positions.size(),
                               positions[i].x(), positions[i].y(), positions[i].z()));
-}
-
-/// Particle indices in Z-order of a coarse grid (so each thread's splats stay in a compact region),
-/// and each one's cell's Morton key: particles of one cell come out consecutive.
-struct SpatialOrder {
-  std::vector<Index> order;
-  std::vector<std::uint64_t> key;  // key[n]: the cell key of particle order[n]
-};
-
-std::array<std::int32_t, 3> coarse_cell_of(const Vec3& p, Real inverse_cell_size) {
-  return {static_cast<std::int32_t>(std::floor(p.x() * inverse_cell_size)),
-          static_cast<std::int32_t>(std::floor(p.y() * inverse_cell_size)),
-          static_cast<std::int32_t>(std::floor(p.z() * inverse_cell_size))};
-}
-
-SpatialOrder spatial_order(std::span<const Vec3> positions, Real cell_size) {
-  std::vector<std::pair<std::uint64_t, Index>> keyed(positions.size());
-  const Real inverse = Real(1) / cell_size;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, positions.size(), 4096), [&](const auto& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const auto cell = coarse_cell_of(positions[i], inverse);
-      keyed[i] = {sph::morton_code(cell[0], cell[1], cell[2]), static_cast<Index>(i)};
-    }
-  });
-  tbb::parallel_sort(keyed.begin(), keyed.end());
-  SpatialOrder result;
-  result.order.resize(keyed.size());
-  result.key.resize(keyed.size());
-  for (std::size_t n = 0; n < keyed.size(); ++n) {
-    result.key[n] = keyed[n].first;
-    result.order[n] = keyed[n].second;
-  }
-  return result;
-}
-
-/// Where the material is deep, the field is "inside" whatever the exact sums: only particles near
-/// the surface need to be splatted, and the deep cells are filled with an inside value afterwards.
-/// This makes the cost follow the surface rather than the volume (issue 4).
-/// Cells have the size of the farthest reach of a particle's contribution. A cell is full when it
-/// holds at least 60 % of a resting lattice's particles; interior when it and its 26 neighbours are
-/// full (the surface cannot cross it); a particle contributes unless all 27 cells around its own
-/// are interior (then no voxel it reaches can be near the surface).
-struct DeepRegion {
-  std::vector<Index> contributing;                 // particle indices, Z-ordered
-  std::vector<std::array<std::int32_t, 3>> interior_cells;
-  Real cell_size = 0;
-};
-
-DeepRegion find_deep_region(std::span<const Vec3> positions, Real cell_size, Real particle_radius) {
-  DeepRegion region;
-  region.cell_size = cell_size;
-  const Real inverse = Real(1) / cell_size;
-  const SpatialOrder sorted = spatial_order(positions, cell_size);
-  // The occupied cells: runs of one key in the sorted order.
-  struct Cell {
-    std::array<std::int32_t, 3> coord;
-    std::size_t first, end;  // its particles: sorted.order[first, end)
-    bool full = false, interior = false, deep = false;
-  };
-  std::vector<Cell> cells;
-  for (std::size_t n = 0; n < sorted.order.size();) {
-    std::size_t end = n;
-    while (end < sorted.order.size() && sorted.key[end] == sorted.key[n]) ++end;
-    cells.push_back(Cell{coarse_cell_of(positions[sorted.order[n]], inverse), n, end});
-    n = end;
-  }
-  std::unordered_map<std::uint64_t, std::size_t> cell_index;
-  cell_index.reserve(2 * cells.size());
-  for (std::size_t c = 0; c < cells.size(); ++c) cell_index.emplace(sorted.key[cells[c].first], c);
-  const double lattice_capacity = std::pow(static_cast<double>(cell_size / (2 * particle_radius)), 3);
-  const auto full_count = static_cast<std::size_t>(std::max(1.0, 0.6 * lattice_capacity));
-  for (Cell& cell : cells) cell.full = cell.end - cell.first >= full_count;
-  // Whether `flag` holds for the cell and its 26 neighbours (an empty cell has no flag).
-  auto all_around = [&](const Cell& cell, bool Cell::*flag) {
-    for (int dz = -1; dz <= 1; ++dz)
-      for (int dy = -1; dy <= 1; ++dy)
-        for (int dx = -1; dx <= 1; ++dx) {
-          const auto found =
-              cell_index.find(sph::morton_code(cell.coord[0] + dx, cell.coord[1] + dy, cell.coord[2] + dz));
-          if (found == cell_index.end() || !(cells[found->second].*flag)) return false;
-        }
-    return true;
-  };
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 256), [&](const auto& range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) cells[c].interior = all_around(cells[c], &Cell::full);
-  });
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, cells.size(), 256), [&](const auto& range) {
-    for (std::size_t c = range.begin(); c != range.end(); ++c) cells[c].deep = all_around(cells[c], &Cell::interior);
-  });
-  region.contributing.reserve(positions.size());
-  for (const Cell& cell : cells) {
-    if (cell.interior) region.interior_cells.push_back(cell.coord);
-    if (!cell.deep)
-      region.contributing.insert(region.contributing.end(), sorted.order.begin() + static_cast<std::ptrdiff_t>(cell.first),
-                                 sorted.order.begin() + static_cast<std::ptrdiff_t>(cell.end));
-  }
-  return region;
-}
-
-/// Sets every voxel of the interior cells to `inside` (active), after the splats.
-template <class GridT>
-void fill_interior(GridT& grid, const DeepRegion& region, Real voxel_size, typename GridT::ValueType inside) {
-  const double ratio = static_cast<double>(region.cell_size) / voxel_size;
-  for (const auto& cell : region.interior_cells) {
-    openvdb::Coord low, high;
-    for (int k = 0; k < 3; ++k) {
-      low[k] = static_cast<int>(std::ceil(cell[k] * ratio - 1e-9));
-      high[k] = static_cast<int>(std::ceil((cell[k] + 1) * ratio - 1e-9)) - 1;
-    }
-    grid.tree().fill(openvdb::CoordBBox(low, high), inside, true);
-  }
-}
-
-/// Adds splat(particle, accessors…) over all particles into per-thread grids merged by compSum.
-/// The split tree is fixed (deterministic reduce), so the sums come out the same on every run.
-template <class GridT, class Splat>
-typename GridT::Ptr splat_particles(const std::vector<Index>& order, const openvdb::math::Transform::Ptr& transform,
-                                    typename GridT::ValueType background, const Splat& splat) {
-  struct Body {
-    const std::vector<Index>* order;
-    const Splat* splat;
-    typename GridT::Ptr grid;
-    openvdb::math::Transform::Ptr transform;
-    typename GridT::ValueType background;
-
-    Body(const std::vector<Index>* order_, const Splat* splat_, openvdb::math::Transform::Ptr transform_,
-         typename GridT::ValueType background_)
-        : order(order_), splat(splat_), grid(GridT::create(background_)), transform(transform_), background(background_) {
-      grid->setTransform(transform);
-    }
-    Body(Body& other, tbb::split) : Body(other.order, other.splat, other.transform, other.background) {}
-    void operator()(const tbb::blocked_range<std::size_t>& range) {
-      typename GridT::Accessor accessor = grid->getAccessor();
-      for (std::size_t n = range.begin(); n != range.end(); ++n) (*splat)((*order)[n], accessor);
-    }
-    void join(Body& other) { openvdb::tools::compSum(*grid, *other.grid); }
-  };
-  Body body(&order, &splat, transform, background);
-  // A fixed number of blocks (not of particles per block): few grids to merge, same split on every run.
-  const std::size_t grain = std::max<std::size_t>(1024, order.size() / 8 + 1);
-  tbb::parallel_deterministic_reduce(tbb::blocked_range<std::size_t>(0, order.size(), grain), body);
-  return body.grid;
-}
-
-/// Index-space box of voxels whose centres lie within `half_extent` of `centre`.
-openvdb::CoordBBox voxel_box(const Vec3& centre, const Vec3& half_extent, Real voxel_size) {
-  const Real inverse = Real(1) / voxel_size;
-  return openvdb::CoordBBox(openvdb::Coord(static_cast<int>(std::ceil((centre.x() - half_extent.x()) * inverse)),
-                                           static_cast<int>(std::ceil((centre.y() - half_extent.y()) * inverse)),
-                                           static_cast<int>(std::ceil((centre.z() - half_extent.z()) * inverse))),
-                            openvdb::Coord(static_cast<int>(std::floor((centre.x() + half_extent.x()) * inverse)),
-                                           static_cast<int>(std::floor((centre.y() + half_extent.y()) * inverse)),
-                                           static_cast<int>(std::floor((centre.z() + half_extent.z()) * inverse))));
-}
-
-/// Particle list in the form ParticlesToLevelSet reads (the reference the tests compare against).
-struct ParticleList {
-  using PosType = openvdb::Vec3R;
-  std::span<const Vec3> positions;
-  Real radius;
-  [[nodiscard]] std::size_t size() const { return positions.size(); }
-  void getPos(std::size_t n, openvdb::Vec3R& xyz) const { xyz = openvdb::Vec3R(positions[n].x(), positions[n].y(), positions[n].z()); }
-  void getPosRad(std::size_t n, openvdb::Vec3R& xyz, openvdb::Real& rad) const {
-    getPos(n, xyz);
-    rad = radius;
-  }
-};
-
-/// A coordinate triple (leaf or tile indices) packed into one key, 21 bits each offset to be
-/// positive: ±2^20 on each axis. Keys order like the triples compared x first.
-constexpr std::int64_t kKeyOffset = 1 << 20, kKeyMask = (1 << 21) - 1;
-std::uint64_t coord_key(const openvdb::Coord& c) {
-  return static_cast<std::uint64_t>(c.x() + kKeyOffset) << 42 | static_cast<std::uint64_t>(c.y() + kKeyOffset) << 21 |
-         static_cast<std::uint64_t>(c.z() + kKeyOffset);
-}
-openvdb::Coord coord_of_key(std::uint64_t key) {
-  return openvdb::Coord(static_cast<int>((static_cast<std::int64_t>(key >> 42) & kKeyMask) - kKeyOffset),
-                        static_cast<int>((static_cast<std::int64_t>(key >> 21) & kKeyMask) - kKeyOffset),
-                        static_cast<int>((static_cast<std::int64_t>(key) & kKeyMask) - kKeyOffset));
-}
-
-/// Half-width of the spherical level set's narrow band, in voxels.
-constexpr float kSphereBandVoxels = 2;
-
-/// The union of spheres of radius `sphere_radius` (m) around `centres` as a narrow-band level set:
-/// the values OpenVDB's ParticlesToLevelSet writes (each voxel within R + band of a centre holds
-/// min_j |x − x_j| − R, active; a voxel at a centre's core is inactive inside), computed by gathering
-/// rather than scattering. Spheres are sorted by the leaf node of their box's lowest corner (their
-/// home), and each leaf is filled by one thread from the spheres of the homes below it, keeping the
-/// smallest squared distance per voxel and taking one square root per voxel at the end. There are
-/// no per-thread grids to merge and no tree look-ups per voxel: about four times faster than
-/// ParticlesToLevelSet, whose per-thread grids and their union were most of the spherical
-/// method's time (issue 4). Throws for a centre beyond the leaf keys' range.
-openvdb::FloatGrid::Ptr union_of_spheres(std::span<const Vec3> centres, Real sphere_radius, Real voxel_size) {
-  using LeafT = openvdb::FloatTree::LeafNodeType;
-  constexpr int kLeafDim = static_cast<int>(LeafT::DIM);
-  constexpr int kLeafLog2 = static_cast<int>(LeafT::LOG2DIM);
-  auto grid = openvdb::createLevelSet<openvdb::FloatGrid>(voxel_size, kSphereBandVoxels);
-  const float background = grid->background();
-  // In voxel units and double precision, as ParticlesToLevelSet computes them.
-  const double dx = voxel_size, radius = sphere_radius / dx, band = background / dx;
-  const double reach = radius + band, reach_squared = reach * reach;
-  const double core = std::max(0.0, radius - band), core_squared = core * core;
-  // Index-space centres as OpenVDB's UniformScaleMap maps them: times the inverse, not divided.
-  const double inverse_dx = 1.0 / dx;
-  // Leaf keys hold 21 bits a coordinate: ±2^20 leaves of 8 voxels.
-  const double max_index = double(1 << 20) * 8 - 64;
-  auto box_of = [&](const Vec3& centre) {
-    const openvdb::Vec3d p(centre.x() * inverse_dx, centre.y() * inverse_dx, centre.z() * inverse_dx);
-    return openvdb::CoordBBox(openvdb::Coord(static_cast<int>(std::floor(p[0] - reach)), static_cast<int>(std::floor(p[1] - reach)),
-                                             static_cast<int>(std::floor(p[2] - reach))),
-                              openvdb::Coord(static_cast<int>(std::ceil(p[0] + reach)), static_cast<int>(std::ceil(p[1] + reach)),
-                                             static_cast<int>(std::ceil(p[2] + reach))));
-  };
-
-  // A sphere's box is at most ⌈2 reach⌉ + 2 voxels wide, so it spans its lowest corner's leaf (its
-  // "home") and at most leaf_span − 1 more on each axis (2 for the default spheres).
-  const int box_width = static_cast<int>(std::ceil(2 * reach)) + 2;
-  const int leaf_span = 1 + (box_width - 1 + kLeafDim - 1) / kLeafDim;
-  auto home_of = [&](const Vec3& centre) {
-    const openvdb::Coord low = box_of(centre).min();
-    return openvdb::Coord(low.x() >> kLeafLog2, low.y() >> kLeafLog2, low.z() >> kLeafLog2);
-  };
-  for (const Vec3& centre : centres)
-    if (!(std::abs(centre.x() * inverse_dx) < max_index && std::abs(centre.y() * inverse_dx) < max_index &&
-          std::abs(centre.z() * inverse_dx) < max_index))
-      throw Error(fmt::format("surface reconstruction: a particle at ({}, {}, {}) m is not finite or lies beyond the "
-                              "grid's reach of {:.3g} m at voxel size {:.3g} m",
-                              centre.x(), centre.y(), centre.z(), max_index * dx, dx));
-  // Spheres sorted by home leaf; each home's spheres in one run.
-  std::vector<std::pair<std::uint64_t, Index>> by_home(centres.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) by_home[i] = {coord_key(home_of(centres[i])), static_cast<Index>(i)};
-  });
-  tbb::parallel_sort(by_home.begin(), by_home.end());
-  // Centres (in voxels) and boxes in that order, for the gather's sequential reads.
-  struct SphereInVoxels {
-    openvdb::Vec3d centre;
-    openvdb::CoordBBox box;
-  };
-  std::vector<SphereInVoxels> spheres(centres.size());
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, centres.size(), 4096), [&](const auto& range) {
-    for (std::size_t n = range.begin(); n != range.end(); ++n) {
-      const Vec3& centre = centres[by_home[n].second];
-      spheres[n] = {openvdb::Vec3d(centre.x() * inverse_dx, centre.y() * inverse_dx, centre.z() * inverse_dx), box_of(centre)};
-    }
-  });
-  std::unordered_map<std::uint64_t, std::pair<std::size_t, std::size_t>> home_run;  // key → [begin, end) in by_home
-  std::vector<std::uint64_t> target_keys;  // every leaf a sphere may reach: each home and its + neighbours
-  for (std::size_t n = 0; n < by_home.size();) {
-    std::size_t end = n;
-    while (end < by_home.size() && by_home[end].first == by_home[n].first) ++end;
-    home_run.emplace(by_home[n].first, std::pair{n, end});
-    const openvdb::Coord home = coord_of_key(by_home[n].first);
-    for (int dx_leaf = 0; dx_leaf < leaf_span; ++dx_leaf)
-      for (int dy_leaf = 0; dy_leaf < leaf_span; ++dy_leaf)
-        for (int dz_leaf = 0; dz_leaf < leaf_span; ++dz_leaf) target_keys.push_back(coord_key(home.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
-    n = end;
-  }
-  tbb::parallel_sort(target_keys.begin(), target_keys.end());
-  target_keys.erase(std::unique(target_keys.begin(), target_keys.end()), target_keys.end());
-
-  std::vector<LeafT*> leaves(target_keys.size(), nullptr);  // null where no band reaches
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, leaves.size(), 16), [&](const auto& range) {
-    // Per voxel the smallest squared distance (voxels²) to a centre: |x − x_j| − R grows with it, so
-    // the level set value needs one square root per voxel, not one per sphere and voxel.
-    std::array<double, LeafT::SIZE> nearest_squared;
-    for (std::size_t target = range.begin(); target != range.end(); ++target) {
-      const openvdb::Coord leaf_coord = coord_of_key(target_keys[target]);
-      const openvdb::Coord origin(leaf_coord.x() * kLeafDim, leaf_coord.y() * kLeafDim, leaf_coord.z() * kLeafDim);
-      const openvdb::CoordBBox leaf_box(origin, origin.offsetBy(kLeafDim - 1));
-      nearest_squared.fill(reach_squared);
-      for (int dx_leaf = 1 - leaf_span; dx_leaf <= 0; ++dx_leaf)
-        for (int dy_leaf = 1 - leaf_span; dy_leaf <= 0; ++dy_leaf)
-          for (int dz_leaf = 1 - leaf_span; dz_leaf <= 0; ++dz_leaf) {
-            const auto home = home_run.find(coord_key(leaf_coord.offsetBy(dx_leaf, dy_leaf, dz_leaf)));
-            if (home == home_run.end()) continue;
-            for (std::size_t n = home->second.first; n < home->second.second; ++n) {
-              const SphereInVoxels& sphere = spheres[n];
-              openvdb::CoordBBox box = sphere.box;
-              box.intersect(leaf_box);
-              if (box.empty()) continue;  // a sphere of a neighbouring home may not reach this leaf
-              // Whole rows of the box, not only the voxels within reach: the minimum of squared
-              // distances ignores the others, and a fixed-length loop needs no root per row.
-              const openvdb::Vec3d& p = sphere.centre;
-              const int row_length = box.max().z() - box.min().z() + 1;
-              std::array<double, kLeafDim> z_squared;
-              for (int k = 0; k < row_length; ++k) z_squared[k] = (box.min().z() + k - p[2]) * (box.min().z() + k - p[2]);
-              for (int x = box.min().x(); x <= box.max().x(); ++x) {
-                const double x2 = (x - p[0]) * (x - p[0]);
-                if (x2 >= reach_squared) continue;
-                for (int y = box.min().y(); y <= box.max().y(); ++y) {
-                  const double x2y2 = x2 + (y - p[1]) * (y - p[1]);
-                  if (x2y2 >= reach_squared) continue;
-                  double* row = nearest_squared.data() + ((x - origin.x()) << (2 * kLeafLog2)) +
-                                ((y - origin.y()) << kLeafLog2) + (box.min().z() - origin.z());
-                  for (int k = 0; k < row_length; ++k) row[k] = std::min(row[k], x2y2 + z_squared[k]);
-                }
-              }
-            }
-          }
-      auto leaf = std::make_unique<LeafT>(origin, background, false);
-      bool any = false;
-      for (openvdb::Index voxel = 0; voxel < LeafT::SIZE; ++voxel) {
-        const double d2 = nearest_squared[voxel];
-        if (d2 >= reach_squared) continue;  // no sphere's band reaches it
-        if (d2 <= core_squared) {
-          leaf->setValueOff(voxel, -background);  // deep inside a sphere, as ParticlesToLevelSet leaves it
-          any = true;
-          continue;
-        }
-        // ParticlesToLevelSet writes only values below the current one (the background at first).
-        const auto distance = static_cast<float>(dx * (std::sqrt(d2) - radius));
-        if (!(distance < background)) continue;
-        leaf->setValueOn(voxel, distance);
-        any = true;
-      }
-      if (any) leaves[target] = leaf.release();
-    }
-  });
-  for (LeafT* leaf : leaves)
-    if (leaf) grid->tree().addLeaf(leaf);  // the tree takes ownership
-  openvdb::tools::pruneLevelSet(grid->tree());
-  return grid;
-}
-
-openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats) {
-  // Cells of the deep region a voxel wider than a splat reaches: at 3.5 r the lattice fills cells too
-  // unevenly (1 or 2 particles a side) for the 60 % rule, and no cell counts as interior.
-  const Real reach = settings.sphere_radius + (kSphereBandVoxels + 1) * settings.voxel_size;
-  const DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
-  stats.surface_particles += region.contributing.size();
-  std::vector<Vec3> near_surface(region.contributing.size());
-  for (std::size_t n = 0; n < near_surface.size(); ++n) near_surface[n] = positions[region.contributing[n]];
-  auto grid = union_of_spheres(near_surface, settings.sphere_radius, settings.voxel_size);
-  fill_interior(*grid, region, settings.voxel_size, -static_cast<float>(grid->background()));
-  return grid;
-}
-
-/// Calls visit(ijk, q) for every voxel centre x with q = ‖M (x − centre)‖ < 1: a sphere of radius R
-/// for M = I/R, an anisotropic kernel's ellipsoid for M = G. Walks only the voxels inside: per
-/// (i, j) column the z range solves |u + dz·m₃|² ≤ 1, so no time goes to the box's corners.
-template <class Visit>
-void for_each_voxel_in_ellipsoid(const Vec3& centre, const Eigen::Matrix3f& transform_m, const Vec3& half_extent,
-                                 Real voxel_size, Visit&& visit) {
-  const openvdb::CoordBBox box = voxel_box(centre, half_extent, voxel_size);
-  const Vec3 column = transform_m.col(2);
-  const Real a = column.squaredNorm();
-  for (int i = box.min().x(); i <= box.max().x(); ++i)
-    for (int j = box.min().y(); j <= box.max().y(); ++j) {
-      const Vec3 u = transform_m * Vec3(i * voxel_size - centre.x(), j * voxel_size - centre.y(), -centre.z());
-      // |u + z m₃|² < 1 with z the voxel's absolute height: a z² + 2 (u·m₃) z + |u|² − 1 < 0.
-      const Real b = u.dot(column), c = u.squaredNorm() - 1;
-      const Real discriminant = b * b - a * c;
-      if (discriminant <= 0) continue;
-      const Real root = std::sqrt(discriminant);
-      const int k_low = static_cast<int>(std::ceil((-b - root) / a / voxel_size));
-      const int k_high = static_cast<int>(std::floor((-b + root) / a / voxel_size));
-      for (int k = k_low; k <= k_high; ++k) {
-        const Real q = (u + (k * voxel_size) * column).norm();
-        if (q < 1) visit(openvdb::Coord(i, j, k), q);
-      }
-    }
-}
-
-/// −Σ_j V_j W(x − x_j): negative inside, so the mesher's "inside = below the iso-value" holds.
-openvdb::FloatGrid::Ptr blobby_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                     const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats) {
-  const Real spacing = 2 * settings.particle_radius;
-  const Real volume = spacing * spacing * spacing;
-  const sph::CubicSplineKernel kernel(settings.kernel_radius);
-  const Real voxel = settings.voxel_size;
-  const Vec3 half_extent = Vec3::Constant(settings.kernel_radius);
-  const DeepRegion region = find_deep_region(positions, settings.kernel_radius, settings.particle_radius);
-  stats.surface_particles += region.contributing.size();
-  const Eigen::Matrix3f to_unit = Eigen::Matrix3f::Identity() / settings.kernel_radius;
-  auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    for_each_voxel_in_ellipsoid(positions[particle], to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
-      const float weight = volume * kernel.W(q * settings.kernel_radius);
-      accessor.modifyValue(ijk, [weight](float& value) { value -= weight; });
-    });
-  };
-  auto grid = splat_particles<openvdb::FloatGrid>(region.contributing, transform, 0.f, splat);
-  fill_interior(*grid, region, voxel, -1.f);
-  return grid;
-}
-
-/// Adds −sign · V W_i(x) of every kernel to a new grid (volume fractions are stored negated; sign −1
-/// takes kernels back out, for incremental meshing).
-openvdb::FloatGrid::Ptr splat_anisotropic_kernels(const AnisotropicKernels& kernels, const SurfaceSettings& settings,
-                                                  const openvdb::math::Transform::Ptr& transform, float sign) {
-  const Real spacing = 2 * settings.particle_radius;
-  const Real volume = spacing * spacing * spacing;
-  const sph::CubicSplineKernel unit_kernel(1);
-  const Real voxel = settings.voxel_size;
-  std::vector<Index> order(kernels.centre.size());
-  std::iota(order.begin(), order.end(), Index(0));
-  auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    const Real scale = sign * volume * kernels.determinant[particle];
-    for_each_voxel_in_ellipsoid(kernels.centre[particle], kernels.transform[particle], kernels.half_extent[particle], voxel,
-                                [&](const openvdb::Coord& ijk, Real q) {
-                                  const float weight = scale * unit_kernel.W(q);
-                                  accessor.modifyValue(ijk, [weight](float& value) { value -= weight; });
-                                });
-  };
-  return splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
-}
-
-/// The kernels an anisotropic field splatted, and for which of its particles.
-struct SplattedKernels {
-  std::vector<Index> particles;
-  AnisotropicKernels kernels;
-};
-
-/// `also_neighbours`: particles whose field is made elsewhere but that the kernels of `positions`
-/// must see as neighbours (incremental meshing). `splatted`, if given, receives the kernels.
-openvdb::FloatGrid::Ptr anisotropic_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats,
-                                          std::span<const Vec3> also_neighbours, SplattedKernels* splatted) {
-  // Kernels reach at most the kernel radius (their axes are capped at the isotropic one's), and
-  // smoothing moves a centre by less than the neighbourhood radius times λ.
-  const Real reach = settings.kernel_radius + settings.centre_smoothing * settings.anisotropy_neighborhood;
-  DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
-  stats.surface_particles += region.contributing.size();
-  std::vector<Vec3> with_neighbours;  // `positions` first, so region.contributing indexes it unchanged
-  if (!also_neighbours.empty()) {
-    with_neighbours.reserve(positions.size() + also_neighbours.size());
-    with_neighbours.assign(positions.begin(), positions.end());
-    with_neighbours.insert(with_neighbours.end(), also_neighbours.begin(), also_neighbours.end());
-  }
-  AnisotropicKernels kernels = compute_anisotropic_kernels(
-      also_neighbours.empty() ? positions : std::span<const Vec3>(with_neighbours), settings, region.contributing);
-  auto grid = splat_anisotropic_kernels(kernels, settings, transform, 1.f);
-  fill_interior(*grid, region, settings.voxel_size, -1.f);
-  if (splatted) *splatted = SplattedKernels{std::move(region.contributing), std::move(kernels)};
-  return grid;
-}
-
-/// Zhu & Bridson 2005: φ(x) = |x − x̄| − r̄, x̄ = Σ k_i x_i / Σ k_i, k(s) = max(0, 1 − s²)³, s = |x − x_i| / R.
-openvdb::FloatGrid::Ptr zhu_bridson_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
-                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats) {
-  const Real support = settings.kernel_radius;
-  const Real voxel = settings.voxel_size;
-  const Vec3 half_extent = Vec3::Constant(support);
-  const DeepRegion region = find_deep_region(positions, support, settings.particle_radius);
-  stats.surface_particles += region.contributing.size();
-  const std::vector<Index>& order = region.contributing;
-  // x̄ needs Σk and Σk·x: a float grid and a Vec3 grid (OpenVDB registers no Vec4 float grid).
-  const Eigen::Matrix3f to_unit = Eigen::Matrix3f::Identity() / support;
-  auto splat_weight = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
-    for_each_voxel_in_ellipsoid(positions[particle], to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
-      const Real one_minus = 1 - q * q;
-      const float weight = one_minus * one_minus * one_minus;
-      accessor.modifyValue(ijk, [weight](float& value) { value += weight; });
-    });
-  };
-  auto splat_moment = [&](Index particle, openvdb::Vec3SGrid::Accessor& accessor) {
-    const Vec3 centre = positions[particle];
-    for_each_voxel_in_ellipsoid(centre, to_unit, half_extent, voxel, [&](const openvdb::Coord& ijk, Real q) {
-      const Real one_minus = 1 - q * q;
-      const Real weight = one_minus * one_minus * one_minus;
-      const openvdb::Vec3s moment(weight * centre.x(), weight * centre.y(), weight * centre.z());
-      accessor.modifyValue(ijk, [&moment](openvdb::Vec3s& value) { value += moment; });
-    });
-  };
-  auto weight = splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat_weight);
-  auto moment = splat_particles<openvdb::Vec3SGrid>(order, transform, openvdb::Vec3s(0, 0, 0), splat_moment);
-
-  const float outside = static_cast<float>(support);
-  stats.grid_bytes = weight->memUsage() + moment->memUsage();
-  auto phi = openvdb::FloatGrid::create(outside);
-  phi->setTransform(transform);
-  phi->setTree(std::make_shared<openvdb::FloatTree>(weight->tree(), outside, openvdb::TopologyCopy()));
-  openvdb::tree::LeafManager<openvdb::FloatTree> leaves(phi->tree());
-  const Real mean_radius = settings.zhu_bridson_radius;
-  tbb::parallel_for(leaves.leafRange(), [&](const openvdb::tree::LeafManager<openvdb::FloatTree>::LeafRange& range) {
-    for (auto leaf = range.begin(); leaf; ++leaf) {
-      const auto* weight_leaf = weight->tree().probeConstLeaf(leaf->origin());
-      const auto* moment_leaf = moment->tree().probeConstLeaf(leaf->origin());
-      for (auto value = leaf->beginValueOn(); value; ++value) {
-        const auto offset = value.pos();
-        const float weight_sum = weight_leaf->getValue(offset);
-        const openvdb::Coord ijk = value.getCoord();
-        if (!(weight_sum > 0) || moment_leaf == nullptr) {
-          value.setValue(outside);
-          continue;
-        }
-        const openvdb::Vec3s mean = moment_leaf->getValue(offset) / weight_sum;
-        const Vec3 x(ijk.x() * voxel, ijk.y() * voxel, ijk.z() * voxel);
-        value.setValue(static_cast<float>((x - Vec3(mean.x(), mean.y(), mean.z())).norm() - mean_radius));
-      }
-    }
-  });
-  fill_interior(*phi, region, voxel, static_cast<float>(-mean_radius));
-  return phi;
 }
 
 TriangleMesh extract_mesh(const openvdb::FloatGrid& grid, double isovalue) {
@@ -569,38 +71,24 @@ struct Field {
   double isovalue = 0;
 };
 
-/// Volume fractions are stored negated (see blobby_field); level sets have their surface at 0.
+/// Volume fractions are stored negated (see methods/sph_blobby.cpp); level sets have their surface at 0.
 double isovalue_of(const SurfaceSettings& settings) {
-  const bool volume_fraction = settings.method == Method::sph_blobby || settings.method == Method::anisotropic;
-  return volume_fraction ? -static_cast<double>(settings.iso_level) : 0.0;
+  return field_method(settings.method).volume_fraction ? -static_cast<double>(settings.iso_level) : 0.0;
 }
 
-/// The field of `positions` by `settings.method` (resolved settings). `also_neighbours` and
-/// `splatted` only matter to the anisotropic kernels (see anisotropic_field).
-Field field_of(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats,
-               std::span<const Vec3> also_neighbours = {}, SplattedKernels* splatted = nullptr) {
+/// The field of `positions` by `settings.method` (resolved settings).
+Field field_of(std::span<const Vec3> positions, const SurfaceSettings& settings, SurfaceStats& stats, const FieldInputs& inputs = {}) {
   const auto transform = openvdb::math::Transform::createLinearTransform(settings.voxel_size);
-  const double isovalue = isovalue_of(settings);
-  switch (settings.method) {
-    case Method::spherical:
-      return {spherical_field(positions, settings, stats), isovalue};
-    case Method::sph_blobby:
-      return {blobby_field(positions, settings, transform, stats), isovalue};
-    case Method::anisotropic:
-      return {anisotropic_field(positions, settings, transform, stats, also_neighbours, splatted), isovalue};
-    case Method::zhu_bridson:
-      return {zhu_bridson_field(positions, settings, transform, stats), isovalue};
-  }
-  throw Error("surface reconstruction: unknown method");
+  return {field_method(settings.method).field(positions, settings, transform, stats, inputs), isovalue_of(settings)};
 }
 
-/// `into` becomes the field of both particle sets; `from` is emptied. Spherical level sets combine
-/// by union (min), volume fractions by sum: both are exactly the field of the union of the sets.
+/// `into` becomes the field of both particle sets; `from` is emptied. Level sets combine by union
+/// (min), volume fractions by sum: both are exactly the field of the union of the sets.
 void merge_field(Method method, openvdb::FloatGrid& into, openvdb::FloatGrid& from) {
-  if (method == Method::spherical)
-    openvdb::tools::csgUnion(into, from);
-  else
+  if (field_method(method).volume_fraction)
     openvdb::tools::compSum(into, from);
+  else
+    openvdb::tools::csgUnion(into, from);
 }
 
 /// Marks inside every active voxel that is outside (≥ 0) while all 26 around it are inside: the
@@ -943,7 +431,7 @@ TriangleMesh mesh_of_field(const Field& field, const SurfaceSettings& settings, 
   // material. Voxel-sized ones are filled in the field, only where their shells are certain to be
   // dropped anyway (8 voxels³ ≤ the particle volume).
   const Real spacing = 2 * settings.particle_radius;
-  const bool spherical = settings.method == Method::spherical;
+  const bool spherical = field_method(settings.method).fills_pockets;
   const bool fill_pockets = spherical && 8 * std::pow(settings.voxel_size, 3) <= std::pow(spacing, 3);
   const double max_cavity_volume = spherical ? std::pow(spacing, 3) : 0.0;
   TriangleMesh mesh;
@@ -1005,6 +493,46 @@ class OccupiedCells {
 
 }  // namespace
 
+const FieldMethod& field_method(Method method) {
+  for (const FieldMethod* entry : kFieldMethods)
+    if (entry->method == method) return *entry;
+  throw Error("surface reconstruction: unknown method");
+}
+
+std::string_view method_name(Method method) {
+  for (const FieldMethod* entry : kFieldMethods)
+    if (entry->method == method) return entry->name;
+  return "unknown";
+}
+
+std::optional<Method> parse_method(std::string_view name) {
+  for (const FieldMethod* entry : kFieldMethods)
+    if (entry->name == name) return entry->method;
+  return std::nullopt;
+}
+
+std::string method_names() {
+  std::string names;
+  for (const FieldMethod* entry : kFieldMethods) names += (names.empty() ? "" : ", ") + std::string(entry->name);
+  return names;
+}
+
+namespace {
+/// Particle list in the form ParticlesToLevelSet reads (the reference the tests compare against).
+struct ParticleList {
+  using PosType = openvdb::Vec3R;
+  std::span<const Vec3> positions;
+  Real radius;
+  [[nodiscard]] std::size_t size() const { return positions.size(); }
+  void getPos(std::size_t n, openvdb::Vec3R& xyz) const { xyz = openvdb::Vec3R(positions[n].x(), positions[n].y(), positions[n].z()); }
+  void getPosRad(std::size_t n, openvdb::Vec3R& xyz, openvdb::Real& rad) const {
+    getPos(n, xyz);
+    rad = radius;
+  }
+};
+
+}  // namespace
+
 namespace detail {
 SphericalFieldComparison compare_spherical_field_with_openvdb(std::span<const Vec3> centres, Real sphere_radius,
                                                               Real voxel_size) {
@@ -1045,6 +573,7 @@ SphericalFieldComparison compare_spherical_field_with_openvdb(std::span<const Ve
   return result;
 }
 }  // namespace detail
+
 
 TriangleMesh reconstruct_surface(std::span<const Vec3> positions, const SurfaceSettings& input_settings, SurfaceStats* stats) {
   const SurfaceSettings settings = input_settings.resolved();
@@ -1174,7 +703,7 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
   check_finite(resting);
   const SurfaceSettings& settings = cache_->settings;
   initialize_openvdb();
-  if (settings.method == Method::zhu_bridson) {
+  if (!field_method(settings.method).sum_over_particles) {
     // Not a sum over particles: the field is made whole; the mesh of unchanged tiles is kept.
     std::vector<Vec3> all(moving.begin(), moving.end());
     all.insert(all.end(), resting.begin(), resting.end());
@@ -1223,7 +752,7 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
 
   // Anisotropic kernels see every particle near them, whichever part it belongs to. The other
   // fields are sums over particles alone.
-  const bool anisotropic = settings.method == Method::anisotropic;
+  const bool anisotropic = field_method(settings.method).kernels_see_neighbours;
   auto neighbours_of = [&](std::span<const Vec3> part, std::span<const Vec3> first, std::span<const Vec3> second) {
     std::vector<Vec3> near;
     if (!anisotropic) return near;
@@ -1236,7 +765,8 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
   if (anisotropic) local_stats.refreshed_kernels = cache_->refresh_kernels(moving, resting, resting_ids, is_added);
   if (!added.empty()) {
     SplattedKernels splatted;
-    Field part = field_of(added, settings, local_stats, neighbours_of(added, kept, moving), anisotropic ? &splatted : nullptr);
+    const std::vector<Vec3> neighbours = neighbours_of(added, kept, moving);
+    Field part = field_of(added, settings, local_stats, {neighbours, anisotropic ? &splatted : nullptr});
     cache_->add_to_resting_field(part.grid);
     if (anisotropic) cache_->record_kernels(splatted, added_ids);
     for (std::size_t n = 0; n < added.size(); ++n) cache_->kept.emplace(added_ids[n], added[n]);
@@ -1245,7 +775,8 @@ TriangleMesh IncrementalSurface::reconstruct(std::span<const Vec3> moving, std::
   Field field;
   field.isovalue = isovalue_of(settings);
   if (!moving.empty()) {
-    field = field_of(moving, settings, local_stats, neighbours_of(moving, resting, {}));
+    const std::vector<Vec3> neighbours = neighbours_of(moving, resting, {});
+    field = field_of(moving, settings, local_stats, {neighbours, nullptr});
     if (cache_->resting_field) {
       openvdb::FloatGrid::Ptr copy = cache_->resting_field->deepCopy();
       merge_field(settings.method, *copy, *field.grid);

@@ -8,11 +8,6 @@
 namespace m3dp::surface {
 
 namespace {
-constexpr std::array<std::pair<Method, std::string_view>, 4> kMethods{{{Method::spherical, "spherical"},
-                                                                       {Method::sph_blobby, "sph_blobby"},
-                                                                       {Method::zhu_bridson, "zhu_bridson"},
-                                                                       {Method::anisotropic, "anisotropic"}}};
-
 /// r̄ that puts the Zhu–Bridson surface of a flat cubic-lattice block (spacing 2r) one radius beyond
 /// its last layer of centres, i.e. on the block's geometric face. Averaged over points above a
 /// lattice site, an edge midpoint and a cell centre.
@@ -40,24 +35,6 @@ Real calibrated_zhu_bridson_radius(Real particle_radius, Real support) {
   return static_cast<Real>(total / queries.size());
 }
 }  // namespace
-
-std::string_view method_name(Method method) {
-  for (const auto& [value, name] : kMethods)
-    if (value == method) return name;
-  return "unknown";
-}
-
-std::optional<Method> parse_method(std::string_view name) {
-  for (const auto& [value, known] : kMethods)
-    if (known == name) return value;
-  return std::nullopt;
-}
-
-std::string method_names() {
-  std::string names;
-  for (const auto& [value, name] : kMethods) names += (names.empty() ? "" : ", ") + std::string(name);
-  return names;
-}
 
 SurfaceSettings SurfaceSettings::resolved() const {
   if (!(particle_radius > 0)) throw Error("surface reconstruction: particle_radius must be > 0 m");

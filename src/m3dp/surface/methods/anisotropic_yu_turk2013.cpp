@@ -1,11 +1,18 @@
-#include "m3dp/surface/anisotropic_yu_turk2013.hpp"
+// The anisotropic method after J. Yu, G. Turk, "Reconstructing surfaces of particle-based fluids using
+// anisotropic kernels", ACM Transactions on Graphics 32(1), 2013: smoothed centres and one ellipsoidal
+// kernel per particle from its neighbourhood's covariance; the volume fraction of those kernels, with
+// the surface at iso_level.
+#include "m3dp/surface/methods/anisotropic_yu_turk2013.hpp"
 
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/kernels.hpp"
 #include "m3dp/sph/neighbors/neighbor_search.hpp"
+#include "m3dp/surface/field.hpp"
 
 namespace m3dp::surface {
 
@@ -115,5 +122,57 @@ AnisotropicKernels compute_anisotropic_kernels(std::span<const Vec3> positions, 
   for (const unsigned char flag : sparse) kernels.sparse_particles += flag;
   return kernels;
 }
+
+openvdb::FloatGrid::Ptr splat_anisotropic_kernels(const AnisotropicKernels& kernels, const SurfaceSettings& settings,
+                                                  const openvdb::math::Transform::Ptr& transform, float sign) {
+  const Real spacing = 2 * settings.particle_radius;
+  const Real volume = spacing * spacing * spacing;
+  const sph::CubicSplineKernel unit_kernel(1);
+  const Real voxel = settings.voxel_size;
+  std::vector<Index> order(kernels.centre.size());
+  std::iota(order.begin(), order.end(), Index(0));
+  auto splat = [&](Index particle, openvdb::FloatGrid::Accessor& accessor) {
+    const Real scale = sign * volume * kernels.determinant[particle];
+    for_each_voxel_in_ellipsoid(kernels.centre[particle], kernels.transform[particle], kernels.half_extent[particle], voxel,
+                                [&](const openvdb::Coord& ijk, Real q) {
+                                  const float weight = scale * unit_kernel.W(q);
+                                  accessor.modifyValue(ijk, [weight](float& value) { value -= weight; });
+                                });
+  };
+  return splat_particles<openvdb::FloatGrid>(order, transform, 0.f, splat);
+}
+
+
+namespace {
+
+/// `also_neighbours`: particles whose field is made elsewhere but that the kernels of `positions`
+/// must see as neighbours (incremental meshing). `splatted`, if given, receives the kernels.
+openvdb::FloatGrid::Ptr anisotropic_field(std::span<const Vec3> positions, const SurfaceSettings& settings,
+                                          const openvdb::math::Transform::Ptr& transform, SurfaceStats& stats,
+                                          const FieldInputs& inputs) {
+  const std::span<const Vec3> also_neighbours = inputs.also_neighbours;
+  SplattedKernels* splatted = inputs.splatted;
+  // Kernels reach at most the kernel radius (their axes are capped at the isotropic one's), and
+  // smoothing moves a centre by less than the neighbourhood radius times λ.
+  const Real reach = settings.kernel_radius + settings.centre_smoothing * settings.anisotropy_neighborhood;
+  DeepRegion region = find_deep_region(positions, reach, settings.particle_radius);
+  stats.surface_particles += region.contributing.size();
+  std::vector<Vec3> with_neighbours;  // `positions` first, so region.contributing indexes it unchanged
+  if (!also_neighbours.empty()) {
+    with_neighbours.reserve(positions.size() + also_neighbours.size());
+    with_neighbours.assign(positions.begin(), positions.end());
+    with_neighbours.insert(with_neighbours.end(), also_neighbours.begin(), also_neighbours.end());
+  }
+  AnisotropicKernels kernels = compute_anisotropic_kernels(
+      also_neighbours.empty() ? positions : std::span<const Vec3>(with_neighbours), settings, region.contributing);
+  auto grid = splat_anisotropic_kernels(kernels, settings, transform, 1.f);
+  fill_interior(*grid, region, settings.voxel_size, -1.f);
+  if (splatted) *splatted = SplattedKernels{std::move(region.contributing), std::move(kernels)};
+  return grid;
+}
+
+}  // namespace
+
+extern const FieldMethod kAnisotropicMethod{Method::anisotropic, "anisotropic", true, true, true, false, anisotropic_field};
 
 }  // namespace m3dp::surface
