@@ -12,6 +12,7 @@
 #include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/vtk_writer.hpp"
 #include "m3dp/sim/presets.hpp"
+#include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/surface/mesh_tools.hpp"
 #include "m3dp/surface/surface.hpp"
@@ -45,7 +46,7 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   options.output_directory = directory;
   options.show_progress = false;
   const auto summary = sim::run_simulation(simulation, options);
-  EXPECT_EQ(summary.status, "completed");
+  EXPECT_EQ(summary.status, sim::RunStatus::completed);
 
   // Frames at t = 0, 0.025, ..., 0.1.
   const std::string pvd = read_text(directory / "particles.pvd");
@@ -107,7 +108,7 @@ TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
   sim::Simulation simulation(scene);
   const fs::path directory = fresh_directory("meshing");
   const auto summary = run_into(simulation, directory);
-  ASSERT_EQ(summary.status, "completed");
+  ASSERT_EQ(summary.status, sim::RunStatus::completed);
   EXPECT_TRUE(summary.error.empty()) << summary.error;
 
   // Requested at 0.04 and 0.08 (either may be skipped while the mesher is busy), plus the final state.
@@ -153,7 +154,7 @@ TEST(Outputs, StopRequestEndsCleanlyWithSummary) {
   options.show_progress = false;
   options.stop_requested = &stop;
   const auto summary = sim::run_simulation(simulation, options);
-  EXPECT_EQ(summary.status, "interrupted");
+  EXPECT_EQ(summary.status, sim::RunStatus::interrupted);
   const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
   EXPECT_EQ(json["status"], "interrupted");
   EXPECT_TRUE(fs::exists(directory / "timing.csv"));
@@ -169,7 +170,7 @@ TEST(Outputs, ExplodingStateStopsWithAReport) {
   scene.fluid_blocks[0].box.max.z() += Real(0.05);
   sim::Simulation simulation(scene);
   const auto summary = sim::run_simulation(simulation, {});
-  EXPECT_EQ(summary.status, "failed");
+  EXPECT_EQ(summary.status, sim::RunStatus::failed);
   EXPECT_NE(summary.error.find("unstable at t = "), std::string::npos) << summary.error;
   EXPECT_NE(summary.error.find("particle"), std::string::npos);
   EXPECT_LT(summary.simulated_time, 0.1);
@@ -194,7 +195,7 @@ TEST(Outputs, RobotRunsReportRobotsNozzlesAndWorldTimes) {
   sim::Simulation simulation(scene);
   const fs::path directory = fresh_directory("robot_run");
   const auto summary = run_into(simulation, directory);
-  ASSERT_EQ(summary.status, "completed");
+  ASSERT_EQ(summary.status, sim::RunStatus::completed);
   const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
   ASSERT_EQ(json["robots"].size(), 1u);
   const auto& robot = json["robots"][0];
@@ -230,7 +231,7 @@ TEST(Outputs, MaterialAtRestIsMeshedIncrementallyAndGivesTheWholeFramesMesh) {
   options.show_progress = false;
   options.wait_for_meshes = true;
   const auto summary = sim::run_simulation(simulation, options);
-  ASSERT_EQ(summary.status, "completed");
+  ASSERT_EQ(summary.status, sim::RunStatus::completed);
   ASSERT_GT(summary.particles_at_rest, summary.particles * 9 / 10);
 
   const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));

@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include "m3dp/sim/presets.hpp"
+#include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/surface/surface.hpp"
 #include "m3dp/world/world.hpp"
@@ -71,12 +72,12 @@ TEST(World, MeshMadeDuringARunStopsAFallingBox) {
   // Until 0.3 s, then on to the end (0.4 s): the box's height at both times says whether it is held.
   options.until = 0.3;
   const auto first_part = sim::run_simulation(simulation, options);
-  ASSERT_EQ(first_part.status, "completed");
+  ASSERT_EQ(first_part.status, sim::RunStatus::completed);
   const Real held_at = simulation.world().pose(box).position.z();
   options.until.reset();
   const auto summary = sim::run_simulation(simulation, options);
   std::filesystem::remove_all(options.output_directory);
-  ASSERT_EQ(summary.status, "completed");
+  ASSERT_EQ(summary.status, sim::RunStatus::completed);
   EXPECT_EQ(first_part.meshes_skipped + summary.meshes_skipped, 0u);
   EXPECT_GE(first_part.meshes_inserted + summary.meshes_inserted, 19u);  // every 20 ms of 0.4 s
   // The box lands on the highest point of the water's surface under it (the same field as the run's).

@@ -16,6 +16,7 @@
 
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/sim/presets.hpp"
+#include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
 
 namespace m3dp::app {
@@ -70,7 +71,7 @@ int bench_ur10_wall(const BenchOptions& options) {
   std::filesystem::remove_all(run.output_directory);
   fmt::print("{} in {:.2f} s wall: real-time factor {:.3g} (goal >= 1), {} steps ({:.2f} ms/step, mean dt {:.3g} ms), "
              "{} particles at the end, {:.3g} particle-steps/s\n",
-             summary.status, summary.wall_time, summary.real_time_factor, summary.steps, 1e3 * summary.wall_time / double(summary.steps),
+             sim::to_string(summary.status), summary.wall_time, summary.real_time_factor, summary.steps, 1e3 * summary.wall_time / double(summary.steps),
              1e3 * summary.simulated_time / double(summary.steps), summary.particles, summary.particle_steps_per_second);
   fmt::print("meshes: {} written, {} skipped while busy; density iterations {:.2f}, divergence {:.2f} per step\n",
              summary.meshes_written, summary.meshes_skipped, summary.mean_density_iterations, summary.mean_divergence_iterations);
@@ -80,7 +81,7 @@ int bench_ur10_wall(const BenchOptions& options) {
   fmt::print("stage,ms_per_step\n");
   for (std::size_t c = 0; c < columns.size(); ++c)
     if (columns[c].starts_with("ms_")) fmt::print("{},{:.3f}\n", columns[c].substr(3), rows ? sums[c] / double(rows) : 0.0);
-  return summary.status == "completed" ? 0 : 1;
+  return summary.status == sim::RunStatus::completed ? 0 : 1;
 }
 }  // namespace
 

@@ -16,6 +16,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/world/world.hpp"
 
@@ -50,8 +51,8 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
   std::signal(SIGINT, SIG_DFL);
   std::signal(SIGTERM, SIG_DFL);
   fmt::print("{}", sim::format_summary(summary, output));
-  if (summary.status == "failed") return 3;
-  if (summary.status == "interrupted") return 130;
+  if (summary.status == sim::RunStatus::failed) return 3;
+  if (summary.status == sim::RunStatus::interrupted) return 130;
   return 0;
 }
 

@@ -1,0 +1,51 @@
+#pragma once
+// The run as a schedule of observers: every output, sensor or stream is an object that watches the
+// simulation at its own period of simulated time (particle frames, timing.csv, the summary, the
+// printed-material meshes; cameras, recordings and live streams the same way). Observers read the
+// simulation; only its step changes it.
+#include <memory>
+#include <vector>
+
+#include "m3dp/sim/run.hpp"
+#include "m3dp/sph/state.hpp"
+
+namespace m3dp::sim {
+
+/// What an observer is told of the step it sees.
+struct StepReport {
+  const sph::StepStats& stats;
+  double output_ms = 0;  // wall ms the observers that ran before it spent on this step's outputs
+};
+
+class RunObserver {
+ public:
+  virtual ~RunObserver() = default;
+  /// Simulated seconds between observations (at multiples of it); 0: after every step.
+  [[nodiscard]] virtual double period() const { return 0; }
+  /// Whether its time is the run's output time (timing.csv's ms_output): files it writes.
+  [[nodiscard]] virtual bool is_output() const { return true; }
+  /// The run starts at the simulation's current time (its first frame, its files' headers).
+  virtual void start(const Simulation& /*simulation*/) {}
+  /// After a step at which it is due.
+  virtual void observe(const Simulation& simulation, const StepReport& report) = 0;
+  /// The run has ended (summary.status says how): complete its files, add its figures to the summary.
+  virtual void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) {}
+};
+
+/// The observers of one run, in the order they were added (which is the order they observe in).
+class ObserverSchedule {
+ public:
+  RunObserver& add(std::unique_ptr<RunObserver> observer);
+  void start(const Simulation& simulation);
+  void after_step(const Simulation& simulation, const sph::StepStats& stats);
+  void finish(const Simulation& simulation, RunSummary& summary);
+
+ private:
+  struct Entry {
+    std::unique_ptr<RunObserver> observer;
+    double next_time = 0;  // s: when a periodic observer is next due
+  };
+  std::vector<Entry> entries_;
+};
+
+}  // namespace m3dp::sim

@@ -1,0 +1,83 @@
+// The summary's figures: sums over the steps (iterations, particle-steps, the largest density error)
+// and, when the run ends, the state's totals, the nozzles' and the robots' reports.
+#include <algorithm>
+#include <chrono>
+
+#include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+namespace m3dp::sim::outputs {
+
+namespace {
+
+class RunFigures final : public RunObserver {
+ public:
+  [[nodiscard]] bool is_output() const override { return false; }
+  void start(const Simulation& /*simulation*/) override { wall_start_ = std::chrono::steady_clock::now(); }
+
+  void observe(const Simulation& simulation, const StepReport& report) override {
+    const sph::StepStats& stats = report.stats;
+    ++steps_;
+    particle_steps_ += static_cast<double>(simulation.solver().fluid().size());
+    density_iterations_ += stats.density_iterations;
+    divergence_iterations_ += stats.divergence_iterations;
+    viscosity_iterations_ += stats.viscosity_iterations;
+    max_density_error_ = std::max(max_density_error_, static_cast<double>(stats.density_error));
+  }
+
+  void finish(const Simulation& simulation, RunSummary& summary) override {
+    const auto& solver = simulation.solver();
+    const auto& state = solver.state();
+    summary.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count();
+    summary.simulated_time = solver.time();
+    summary.steps = state.step;
+    summary.real_time_factor = summary.wall_time > 0 ? summary.simulated_time / summary.wall_time : 0;
+    summary.particle_steps_per_second = summary.wall_time > 0 ? particle_steps_ / summary.wall_time : 0;
+    summary.max_density_error = max_density_error_;
+    summary.particles = solver.fluid().size();
+    summary.particles_at_rest = solver.fluid().size() - state.active_count;
+    summary.particles_removed = state.particles_removed_total;
+    summary.mass_emitted = state.mass_emitted_total;
+    summary.mass_lost = state.mass_removed_total;
+    summary.mass_final = solver.total_fluid_mass();
+    for (const auto& nozzle : state.nozzles) {
+      summary.particles_emitted += nozzle.particles_emitted;
+      summary.blocked_layers += nozzle.blocked_layers;
+    }
+    const auto& world = simulation.world();
+    for (std::size_t r = 0; r < simulation.robots().size(); ++r) {
+      const world::RobotIndex index = simulation.robots()[r];
+      RunSummary::Robot robot;
+      robot.name = world.robot_name(index);
+      robot.contacts = world.robot_contacts(index);
+      if (world.has_diff_drive(index)) robot.base = world.base_report(index);
+      for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) {
+        const auto& mount = simulation.scene().print_heads[h].mount;
+        if (!mount || mount->robot != robot.name) continue;
+        robot.tracking_rms = world.tool_tracking_rms(*simulation.print_head_tool(h));
+        robot.tracking_max = world.tool_tracking_max(*simulation.print_head_tool(h));
+      }
+      summary.robots.push_back(robot);
+    }
+    summary.granular = solver.granular();
+    if (steps_ > 0) {
+      // Over the steps of this run (one that continues another starts its sums anew).
+      summary.mean_density_iterations = density_iterations_ / steps_;
+      summary.mean_divergence_iterations = divergence_iterations_ / steps_;
+      summary.mean_viscosity_iterations = viscosity_iterations_ / steps_;
+    }
+  }
+
+ private:
+  std::chrono::steady_clock::time_point wall_start_;
+  double steps_ = 0, particle_steps_ = 0, density_iterations_ = 0, divergence_iterations_ = 0, viscosity_iterations_ = 0;
+  double max_density_error_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<RunObserver> make_run_figures(Simulation& /*simulation*/, const RunOptions& /*options*/) {
+  return std::make_unique<RunFigures>();
+}
+
+}  // namespace m3dp::sim::outputs

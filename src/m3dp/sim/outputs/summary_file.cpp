@@ -1,0 +1,113 @@
+// summary.json (what the run did, the bodies' fluid forces, the nozzles', robots' and meshes'
+// reports), written when the run ends however it ends, and scene.sdf, the scene's copy, at the start.
+#include <nlohmann/json.hpp>
+
+#include "m3dp/io/atomic_file.hpp"
+#include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+namespace m3dp::sim::outputs {
+
+namespace {
+
+nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulation) {
+  nlohmann::json bodies = nlohmann::json::array();
+  for (const auto& body : simulation.solver().bodies())
+    bodies.push_back({{"name", body.name},
+                      {"fluid_force_N", {body.fluid_force.x(), body.fluid_force.y(), body.fluid_force.z()}},
+                      {"fluid_torque_Nm", {body.fluid_torque.x(), body.fluid_torque.y(), body.fluid_torque.z()}}});
+  nlohmann::json meshes = nlohmann::json::array();
+  for (const auto& mesh : summary.meshes)
+      meshes.push_back({{"time_s", mesh.time},
+                        {"file", std::filesystem::relative(mesh.file, std::filesystem::path(summary.output_directory)).generic_string()},
+                        {"particles", mesh.particles},
+                        {"triangles", mesh.triangles},
+                        {"reused_particles", mesh.reused_particles},
+                        {"tiles", mesh.tiles},
+                        {"remeshed_tiles", mesh.remeshed_tiles},
+                        {"seconds", mesh.seconds}});
+  nlohmann::json nozzles = nlohmann::json::array();
+  const auto& solver = simulation.solver();
+  for (std::size_t n = 0; n < solver.state().nozzles.size(); ++n) {
+    const auto& nozzle = solver.state().nozzles[n];
+    nozzles.push_back({{"name", solver.parameters().nozzles[n].name},
+                       {"layers_emitted", nozzle.layers_emitted},
+                       {"particles_emitted", nozzle.particles_emitted},
+                       {"steps_blocked", nozzle.blocked_layers}});
+  }
+  nlohmann::json robots = nlohmann::json::array();
+  for (const auto& robot : summary.robots)
+    robots.push_back({{"name", robot.name},
+                      {"contacts_with_robots", robot.contacts.with_robots},
+                      {"contacts_with_printed_material", robot.contacts.with_printed_material},
+                      {"contacts_with_other", robot.contacts.with_other},
+                      {"world_steps_in_contact", robot.contacts.steps_in_contact},
+                      {"nozzle_tracking_rms_m", robot.tracking_rms},
+                      {"nozzle_tracking_max_m", robot.tracking_max}});
+  for (std::size_t r = 0; r < summary.robots.size(); ++r)
+    if (const auto& base = summary.robots[r].base)
+      robots[r]["base"] = {{"tracking_rms_m", base->tracking_rms},
+                           {"tracking_max_m", base->tracking_max},
+                           {"odometry_error_m", base->odometry_error},
+                           {"distance_m", base->distance}};
+  return {
+      {"scene", simulation.scene().file.string()},
+      {"status", to_string(summary.status)},
+      {"error", summary.error},
+      {"simulated_time_s", summary.simulated_time},
+      {"end_time_s", summary.end_time},
+      {"steps", summary.steps},
+      {"wall_time_s", summary.wall_time},
+      {"real_time_factor", summary.real_time_factor},
+      {"particle_steps_per_second", summary.particle_steps_per_second},
+      {"particles", summary.particles},
+      {"particles_emitted", summary.particles_emitted},
+      {"particles_removed", summary.particles_removed},
+      {"mass_initial_kg", summary.mass_initial},
+      {"mass_emitted_kg", summary.mass_emitted},
+      {"mass_lost_kg", summary.mass_lost},
+      {"mass_final_kg", summary.mass_final},
+      {"max_density_error", summary.max_density_error},
+      {"mean_density_iterations", summary.mean_density_iterations},
+      {"mean_divergence_iterations", summary.mean_divergence_iterations},
+      {"mean_viscosity_iterations", summary.mean_viscosity_iterations},
+      {"granular", summary.granular},
+      {"particles_at_rest", summary.particles_at_rest},
+      {"frames_written", summary.frames_written},
+      {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
+      {"bodies", bodies},
+      {"nozzles", nozzles},
+      {"robots", robots},
+      {"meshes", meshes},
+      {"meshes_skipped", summary.meshes_skipped},
+  };
+}
+
+class SummaryFile final : public RunObserver {
+ public:
+  explicit SummaryFile(std::filesystem::path output_directory) : output_directory_(std::move(output_directory)) {}
+  [[nodiscard]] double period() const override { return 0; }
+  [[nodiscard]] bool is_output() const override { return false; }
+  void start(const Simulation& simulation) override {
+    std::error_code ignored;
+    if (std::filesystem::exists(simulation.scene().file))
+      std::filesystem::copy_file(simulation.scene().file, output_directory_ / "scene.sdf",
+                                 std::filesystem::copy_options::overwrite_existing, ignored);
+  }
+  void observe(const Simulation& /*simulation*/, const StepReport& /*report*/) override {}
+  void finish(const Simulation& simulation, RunSummary& summary) override {
+    io::write_text_atomically(output_directory_ / "summary.json", summary_json(summary, simulation).dump(2) + "\n");
+  }
+
+ private:
+  std::filesystem::path output_directory_;
+};
+
+}  // namespace
+
+std::unique_ptr<RunObserver> make_summary_file(Simulation& /*simulation*/, const RunOptions& options) {
+  if (options.output_directory.empty()) return nullptr;
+  return std::make_unique<SummaryFile>(options.output_directory);
+}
+
+}  // namespace m3dp::sim::outputs
