@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "m3dp/toolpath/parametric.hpp"
+#include "m3dp/world/controllers/controller.hpp"
 #include "m3dp/world/world.hpp"
 
 using namespace m3dp;
@@ -211,4 +212,37 @@ TEST(Robots, MobileManipulatorKeepsTheNozzleOnItsPathWhileDriving) {
   EXPECT_LE(rms, 1e-3);
   EXPECT_GT(world.tool_pose(tool).rotate(Vec3::UnitZ()).dot(Vec3(0, 0, -1)), 0.99);
   EXPECT_GT(world.base_pose(robot).position.x(), 0.29);
+}
+
+namespace {
+/// A controller of the kind a user's code adds (world/controllers/controller.hpp): it swings the
+/// shoulder to an angle that changes with time, through the joint targets the servo tracks.
+class ShoulderSwing final : public world::Controller {
+ public:
+  void command(world::RobotIo& robot, double /*step*/, double next_time, double /*chunk_fraction*/) override {
+    robot.joint_targets()[0] = 0.5 * std::sin(next_time);
+    ++commands;
+  }
+  int commands = 0;
+};
+}  // namespace
+
+TEST(Robots, AnAddedControllerDrivesTheJointsThroughTheServo) {
+  world::World world;
+  world::RobotDescription description;
+  description.name = "ur10";
+  description.urdf_file = kUr10;
+  description.initial_joint_positions = {0, -1.2, 1.8, -2.1, -1.57, 0};
+  const auto robot = world.add_robot(description);
+  auto controller = std::make_unique<ShoulderSwing>();
+  const ShoulderSwing& swing = *controller;
+  world.add_controller(robot, std::move(controller));
+  world.step_to(1.0);
+  const double shoulder = world.joint_positions(robot)[0];
+  std::printf("shoulder at t = 1 s: %.4f rad (target 0.5 sin 1 = %.4f rad), %d commands\n", shoulder, 0.5 * std::sin(1.0),
+              swing.commands);
+  EXPECT_EQ(swing.commands, 1000);  // one per 1 ms world step
+  EXPECT_NEAR(shoulder, 0.5 * std::sin(1.0), 2e-3);
+  // The other joints hold their initial positions.
+  EXPECT_NEAR(world.joint_positions(robot)[2], 1.8, 2e-3);
 }

@@ -16,6 +16,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/robots.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/world/world.hpp"
@@ -59,17 +60,11 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
 int validate_command(const std::filesystem::path& scene_file) {
   const m3dp::scene::Scene scene = m3dp::scene::load_scene(scene_file);
   for (const auto& warning : scene.warnings) fmt::print(stderr, "{}: warning: {}\n", warning.location.str(), warning.message);
-  // Robots are loaded by DART's URDF loader too, which may reject what the XML check let through.
+  // Robots as a run loads them: DART's URDF loader may reject what the XML check let through, and a
+  // mobile base or a mount may name what the robot does not have.
   m3dp::world::World world;
-  for (const auto& robot : scene.robots) {
-    try {
-      world.add_robot(m3dp::world::RobotDescription{robot.name, robot.urdf_file, robot.pose, {}});
-    } catch (const m3dp::InputError& error) {
-      std::vector<m3dp::Diagnostic> diagnostics = error.diagnostics();
-      diagnostics.push_back(m3dp::Diagnostic{robot.where, fmt::format("robot '{}' included here could not be loaded", robot.name)});
-      throw m3dp::InputError(std::move(diagnostics));
-    }
-  }
+  const auto robots = m3dp::sim::add_scene_robots(scene, world);
+  m3dp::sim::add_print_head_tools(scene, world, robots, 2 * scene.solver.particle_radius);
   std::size_t collisions = 0;
   for (const auto& body : scene.bodies) collisions += body.collisions.size();
   fmt::print("{}: OK — world '{}', {} static bodies ({} collision shapes), {} dynamic bodies, {} robots, {} materials, {} fluid "

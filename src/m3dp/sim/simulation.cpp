@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "m3dp/sim/robots.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 
 namespace m3dp::sim {
@@ -56,63 +57,8 @@ Simulation::Simulation(const scene::Scene& scene)
 }
 
 void Simulation::add_robots() {
-  for (const auto& robot : scene_.robots) {
-    world::RobotDescription description;
-    description.name = robot.name;
-    description.urdf_file = robot.urdf_file;
-    description.base_pose = robot.pose;
-    world::RobotIndex index = 0;
-    try {
-      index = world_.add_robot(description);
-    } catch (const InputError& error) {
-      // Name the scene line that included the robot too.
-      std::vector<Diagnostic> diagnostics = error.diagnostics();
-      diagnostics.push_back(Diagnostic{robot.where, fmt::format("robot '{}' included here could not be loaded", robot.name)});
-      throw InputError(std::move(diagnostics));
-    }
-    if (robot.mobile_base) {
-      const auto& base = *robot.mobile_base;
-      world_.make_diff_drive(index, world::DiffDriveDescription{base.left_wheel_joint, base.right_wheel_joint,
-                                                                base.wheel_radius, base.wheel_separation, 0});
-      if (base.path) {
-        const toolpath::Trajectory* path = &*base.path;
-        world_.set_base_trajectory(index, [path](double time) { return path->sample(time).position; });
-      }
-    }
-    if (!robot.initial_joint_positions.empty()) {
-      const auto names = world_.joint_names(index);
-      std::vector<double> positions = world_.joint_positions(index);
-      for (const auto& [joint, value] : robot.initial_joint_positions)
-        for (std::size_t k = 0; k < names.size(); ++k)
-          if (names[k] == joint) positions[k] = value;
-      world_.set_joint_positions(index, positions);
-    }
-    robots_.push_back(index);
-  }
-  const Real diameter = solver_.particle_diameter();
-  for (std::size_t h = 0; h < scene_.print_heads.size(); ++h) {
-    const auto& head = scene_.print_heads[h];
-    if (!head.mount) {
-      head_tools_.emplace_back();
-      continue;
-    }
-    std::size_t robot = 0;
-    while (scene_.robots[robot].name != head.mount->robot) ++robot;  // the scene loader checked that it exists
-    world::ToolDescription tool;
-    tool.name = head.name;
-    tool.link = head.mount->link;
-    tool.offset = head.mount->offset;
-    tool.body_radius = head.mount->barrel_radius;
-    // The barrel ends a particle diameter before the exit, so the first layer is never blocked by it.
-    tool.body_clearance = diameter;
-    const world::ToolIndex index = world_.add_tool(robots_[robot], tool);
-    const toolpath::Trajectory* trajectory = &head.trajectory;
-    const Vec3 axis = head.direction.normalized();
-    world_.set_tool_trajectory(index, [trajectory, axis](double time) {
-      return world::ToolTarget{trajectory->sample(time).position, axis};
-    });
-    head_tools_.emplace_back(index);
-  }
+  robots_ = add_scene_robots(scene_, world_);
+  head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter());
 }
 
 void Simulation::update_print_heads() {

@@ -1,4 +1,5 @@
-// The only translation unit that includes DART.
+// The only translation unit that includes DART: the world's bodies, robots and contacts, and RobotIo,
+// through which the controllers (controllers/) read and command the robots.
 #include "m3dp/world/world.hpp"
 
 #include <assimp/scene.h>
@@ -17,6 +18,9 @@
 #include <variant>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/world/controllers/base_tracking_kanayama1990.hpp"
+#include "m3dp/world/controllers/joint_servo.hpp"
+#include "m3dp/world/controllers/tool_ik.hpp"
 
 namespace m3dp::world {
 
@@ -198,20 +202,20 @@ struct World::Impl {
     RobotIndex robot = 0;
     dart::dynamics::EndEffector* end_effector = nullptr;
     std::shared_ptr<dart::dynamics::SimpleFrame> target;
-    ToolTrajectory trajectory;
     std::vector<Eigen::Index> target_slot;  // per IK DoF: its slot in the robot's position targets, or −1
     Eigen::VectorXd solution;
-    double error_squared_sum = 0, error_max = 0;
-    std::size_t error_count = 0;
+    TrackingError tracking;                 // from its target, at the ends of the IK's chunks
   };
   struct Robot {
     std::string name;
     SkeletonPtr skeleton;
     std::vector<dart::dynamics::DegreeOfFreedom*> joint_dofs;  // the actuated joints, in joint_names() order
     Eigen::VectorXd position_targets;
-    Eigen::VectorXd chunk_start_targets, chunk_end_targets;  // joint targets at the ends of the current IK chunk
     std::vector<ToolIndex> tools;
     RobotContacts contacts;
+    // Run in order each world step; the joint servo is always last.
+    std::vector<std::unique_ptr<Controller>> controllers;
+    ToolIk* tool_ik = nullptr;  // among the controllers, once a tool follows a trajectory
     struct DiffDrive {
       DiffDriveDescription description;
       dart::dynamics::DegreeOfFreedom* left = nullptr;
@@ -220,11 +224,9 @@ struct World::Impl {
       double max_wheel_speed = 0;
       double odometry_x = 0, odometry_y = 0, odometry_heading = 0;
       double last_left = 0, last_right = 0;  // wheel angles at the last odometry update (rad)
-      double reference_heading = 0;
-      BaseTrajectory trajectory;
-      Vec3 last_target = Vec3::Zero();
-      double error_squared_sum = 0, error_max = 0, distance = 0;
-      std::size_t error_count = 0;
+      double requested_speed = 0, requested_turn = 0;  // this step's drive_base (m/s, rad/s)
+      double distance = 0;                   // m driven
+      TrackingError tracking;                // from its path (a base tracking controller)
     };
     std::optional<DiffDrive> drive;
     /// The joints the robot's own position loop drives (not the wheels).
@@ -250,14 +252,64 @@ struct World::Impl {
   double ik_period = 4e-3;      // s of world time between IK solutions (joint targets are interpolated between)
   std::vector<char> touched;    // per robot, scratch of count_contacts
 
-  /// IK for every tool with a trajectory at `end_time`: the joint targets at the end of a chunk of world steps.
-  void solve_tool_targets(double end_time);
-  /// Servo commands for one world step; `chunk_fraction` (0, 1] says how far into the chunk its end is.
+  class DartRobotIo;
+  /// Every robot's controllers at the start of a chunk of world steps that ends at `end_time`.
+  void plan_chunk(double end_time);
+  /// The controllers' commands for one world step; `chunk_fraction` (0, 1] says how far into the chunk its end is.
   void control(double step, double chunk_fraction);
-  void drive_base(Robot& robot, double step, double next_time);
+  /// After one world step: contacts, odometry and the controllers' own bookkeeping.
+  void after_step();
+  void end_chunk();
+  /// The wheel and planar-joint commands of this step's drive request.
+  void drive_base(Robot& robot, double step);
   void update_odometry(Robot& robot);
   void count_contacts();
-  void record_tracking();
+};
+
+/// The robot as its controllers see it (controllers/controller.hpp), over its DART skeleton.
+class World::Impl::DartRobotIo final : public RobotIo {
+ public:
+  DartRobotIo(Impl& impl, Robot& robot) : impl_(impl), robot_(robot) {}
+  [[nodiscard]] std::size_t joint_count() const override { return robot_.joint_dofs.size(); }
+  [[nodiscard]] double joint_position(std::size_t joint) const override { return robot_.joint_dofs[joint]->getPosition(); }
+  [[nodiscard]] std::pair<double, double> joint_velocity_limits(std::size_t joint) const override {
+    return {robot_.joint_dofs[joint]->getVelocityLowerLimit(), robot_.joint_dofs[joint]->getVelocityUpperLimit()};
+  }
+  [[nodiscard]] bool is_wheel(std::size_t joint) const override { return robot_.is_wheel(robot_.joint_dofs[joint]); }
+  [[nodiscard]] Eigen::VectorXd& joint_targets() override { return robot_.position_targets; }
+  void command_joint_velocity(std::size_t joint, double velocity) override { robot_.joint_dofs[joint]->setCommand(velocity); }
+  [[nodiscard]] Eigen::Isometry3d tool_transform(ToolIndex tool) const override {
+    return impl_.tools.at(tool).end_effector->getWorldTransform();
+  }
+  void solve_tool_ik(ToolIndex tool_index, const Eigen::Isometry3d& target, Eigen::VectorXd& joints) override {
+    Tool& tool = impl_.tools.at(tool_index);
+    tool.target->setTransform(target);
+    // The best solution found is used even when it misses the (tight) bounds: it is close.
+    tool.end_effector->getIK()->findSolution(tool.solution);
+    for (std::size_t k = 0; k < tool.target_slot.size(); ++k)
+      if (tool.target_slot[k] >= 0) joints[tool.target_slot[k]] = tool.solution[static_cast<Eigen::Index>(k)];
+  }
+  [[nodiscard]] TrackingError& tool_tracking(ToolIndex tool) override { return impl_.tools.at(tool).tracking; }
+  [[nodiscard]] Odometry base_odometry() const override {
+    const auto& drive = drive_of();
+    return {drive.odometry_x, drive.odometry_y, drive.odometry_heading};
+  }
+  [[nodiscard]] Eigen::Vector3d base_position() const override {
+    return robot_.skeleton->getRootBodyNode()->getWorldTransform().translation();
+  }
+  void drive_base(double speed, double turn_rate) override {
+    drive_of().requested_speed = speed;
+    drive_of().requested_turn = turn_rate;
+  }
+  [[nodiscard]] TrackingError& base_tracking() override { return drive_of().tracking; }
+
+ private:
+  [[nodiscard]] Robot::DiffDrive& drive_of() const {
+    if (!robot_.drive) throw Error(fmt::format("robot '{}' has no mobile base", robot_.name));
+    return *robot_.drive;
+  }
+  Impl& impl_;
+  Robot& robot_;
 };
 
 World::World(const WorldSettings& settings) : impl_(std::make_unique<Impl>()) {
@@ -380,6 +432,7 @@ RobotIndex World::add_robot(const RobotDescription& description) {
   robot.joint_dofs = joint_dofs;
   robot.position_targets.resize(static_cast<Eigen::Index>(joint_dofs.size()));
   for (std::size_t k = 0; k < joint_dofs.size(); ++k) robot.position_targets[static_cast<Eigen::Index>(k)] = joint_dofs[k]->getPosition();
+  robot.controllers.push_back(std::make_unique<JointServo>());
   impl_->world->addSkeleton(skeleton);
   const RobotIndex index = impl_->robots.size();
   impl_->robot_of_skeleton[skeleton.get()] = index;
@@ -502,7 +555,6 @@ void World::make_diff_drive(RobotIndex robot_index, const DiffDriveDescription& 
   drive.odometry_x = base.translation().x();
   drive.odometry_y = base.translation().y();
   drive.odometry_heading = heading;
-  drive.reference_heading = heading;
   drive.last_left = drive.left->getPosition();
   drive.last_right = drive.right->getPosition();
   impl_->wheel_nodes.insert(drive.left->getChildBodyNode());
@@ -513,7 +565,12 @@ void World::make_diff_drive(RobotIndex robot_index, const DiffDriveDescription& 
 void World::set_base_trajectory(RobotIndex robot, BaseTrajectory trajectory) {
   auto& drive = impl_->robots.at(robot).drive;
   if (!drive) throw Error(fmt::format("robot '{}' has no mobile base", impl_->robots.at(robot).name));
-  drive->trajectory = std::move(trajectory);
+  add_controller(robot, std::make_unique<BaseTrackingKanayama1990>(std::move(trajectory), drive->odometry_heading));
+}
+
+void World::add_controller(RobotIndex robot_index, std::unique_ptr<Controller> controller) {
+  auto& controllers = impl_->robots.at(robot_index).controllers;
+  controllers.insert(controllers.end() - 1, std::move(controller));  // before the joint servo
 }
 
 bool World::has_diff_drive(RobotIndex robot) const { return impl_->robots.at(robot).drive.has_value(); }
@@ -535,43 +592,18 @@ BaseReport World::base_report(RobotIndex robot) const {
   BaseReport report;
   const auto& drive = impl_->robots.at(robot).drive;
   if (!drive) return report;
-  report.tracking_rms = drive->error_count ? std::sqrt(drive->error_squared_sum / double(drive->error_count)) : 0.0;
-  report.tracking_max = drive->error_max;
+  report.tracking_rms = drive->tracking.rms();
+  report.tracking_max = drive->tracking.max;
   const Vec3 truth = base_pose(robot).position;
   report.odometry_error = std::hypot(truth.x() - drive->odometry_x, truth.y() - drive->odometry_y);
   report.distance = drive->distance;
   return report;
 }
 
-void World::Impl::drive_base(Robot& robot, double step, double next_time) {
+void World::Impl::drive_base(Robot& robot, double step) {
   auto& drive = *robot.drive;
   const auto& description = drive.description;
-  double v = 0, w = 0;  // m/s, rad/s asked of the base
-  if (drive.trajectory) {
-    // Reference pose and velocities from the path (heading along its tangent; held while it stops).
-    constexpr double kDelta = 0.01;  // s, for the path's derivatives
-    const Vec3 target = drive.trajectory(next_time);
-    const Vec3 ahead = drive.trajectory(next_time + kDelta), behind = drive.trajectory(next_time - kDelta);
-    const double dx = double(ahead.x() - behind.x()) / (2 * kDelta), dy = double(ahead.y() - behind.y()) / (2 * kDelta);
-    const double reference_speed = std::hypot(dx, dy);
-    double reference_turn = 0;
-    if (reference_speed > 1e-4) {
-      const double heading = std::atan2(dy, dx);
-      const Vec3 further = drive.trajectory(next_time + 2 * kDelta);
-      const double heading_ahead = std::atan2(double(further.y() - target.y()), double(further.x() - target.x()));
-      reference_turn = std::remainder(heading_ahead - heading, 2 * kPi) / (1.5 * kDelta);
-      drive.reference_heading = heading;
-    }
-    drive.last_target = target;
-    // Kanayama et al. 1990 tracking law on the odometry pose.
-    constexpr double kx = 4.0, ky = 400.0, ktheta = 20.0;  // 1/s, 1/m², 1/m
-    const double cos_h = std::cos(drive.odometry_heading), sin_h = std::sin(drive.odometry_heading);
-    const double ex = cos_h * (target.x() - drive.odometry_x) + sin_h * (target.y() - drive.odometry_y);
-    const double ey = -sin_h * (target.x() - drive.odometry_x) + cos_h * (target.y() - drive.odometry_y);
-    const double etheta = std::remainder(drive.reference_heading - drive.odometry_heading, 2 * kPi);
-    v = reference_speed * std::cos(etheta) + kx * ex;
-    w = reference_turn + reference_speed * (ky * ey + ktheta * std::sin(etheta));
-  }
+  const double v = drive.requested_speed, w = drive.requested_turn;  // m/s, rad/s asked of the base
   // Wheel speeds, both scaled down together when one would exceed its limit.
   const double radius = description.wheel_radius, half_track = description.wheel_separation / 2;
   double right = (v + w * half_track) / radius, left = (v - w * half_track) / radius;
@@ -603,17 +635,16 @@ void World::Impl::update_odometry(Robot& robot) {
   drive.odometry_y += distance * std::sin(drive.odometry_heading + turn / 2);
   drive.odometry_heading += turn;
   drive.distance += std::abs(distance);
-  if (drive.trajectory) {
-    const Eigen::Vector3d truth = robot.skeleton->getRootBodyNode()->getWorldTransform().translation();
-    const double error = std::hypot(truth.x() - drive.last_target.x(), truth.y() - drive.last_target.y());
-    drive.error_squared_sum += error * error;
-    ++drive.error_count;
-    drive.error_max = std::max(drive.error_max, error);
-  }
 }
 
 void World::set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory) {
-  impl_->tools.at(tool).trajectory = std::move(trajectory);
+  Impl::Robot& robot = impl_->robots.at(impl_->tools.at(tool).robot);
+  if (!robot.tool_ik) {
+    auto controller = std::make_unique<ToolIk>();
+    robot.tool_ik = controller.get();
+    add_controller(impl_->tools.at(tool).robot, std::move(controller));
+  }
+  robot.tool_ik->follow(tool, std::move(trajectory));
 }
 
 void World::set_joint_targets(RobotIndex robot_index, const std::vector<double>& positions) {
@@ -662,12 +693,9 @@ Vec3 World::tool_linear_velocity(ToolIndex tool) const {
 
 const RobotContacts& World::robot_contacts(RobotIndex robot) const { return impl_->robots.at(robot).contacts; }
 
-double World::tool_tracking_rms(ToolIndex tool) const {
-  const auto& record = impl_->tools.at(tool);
-  return record.error_count ? std::sqrt(record.error_squared_sum / static_cast<double>(record.error_count)) : 0.0;
-}
+double World::tool_tracking_rms(ToolIndex tool) const { return impl_->tools.at(tool).tracking.rms(); }
 
-double World::tool_tracking_max(ToolIndex tool) const { return impl_->tools.at(tool).error_max; }
+double World::tool_tracking_max(ToolIndex tool) const { return impl_->tools.at(tool).tracking.max; }
 
 std::size_t World::link_count() const { return impl_->links.size(); }
 
@@ -710,53 +738,41 @@ LinkIndex World::link_of_body(BodyIndex body) const {
   return link;
 }
 
-void World::Impl::solve_tool_targets(double end_time) {
+void World::Impl::plan_chunk(double end_time) {
   for (Robot& robot : robots) {
-    robot.chunk_start_targets = robot.position_targets;
-    robot.chunk_end_targets = robot.position_targets;
-    // A tool with a trajectory drives its robot: the joint targets at the chunk's end are the IK
-    // solution for the tool's target then, seeded with the current joint positions.
-    for (const ToolIndex t : robot.tools) {
-      Tool& tool = tools[t];
-      if (!tool.trajectory) continue;
-      const ToolTarget target = tool.trajectory(end_time);
-      Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
-      transform.translation() = target.position.cast<double>();
-      // The target's rotation about its axis is free; take the tool's own, turned by the least
-      // rotation that brings its axis onto the target axis. (An arbitrary choice can leave the two
-      // frames near half a turn apart about the axis, where the IK's rotation error is ill-conditioned.)
-      const Eigen::Matrix3d current = tool.end_effector->getWorldTransform().linear();
-      transform.linear() =
-          Eigen::Quaterniond::FromTwoVectors(current.col(2), target.axis.cast<double>().normalized()).toRotationMatrix() * current;
-      tool.target->setTransform(transform);
-      // The best solution found is used even when it misses the (tight) bounds: it is close.
-      tool.end_effector->getIK()->findSolution(tool.solution);
-      for (std::size_t k = 0; k < tool.target_slot.size(); ++k)
-        if (tool.target_slot[k] >= 0) robot.chunk_end_targets[tool.target_slot[k]] = tool.solution[static_cast<Eigen::Index>(k)];
-    }
+    DartRobotIo io(*this, robot);
+    for (const auto& controller : robot.controllers) controller->plan(io, end_time);
   }
 }
 
 void World::Impl::control(double step, double chunk_fraction) {
   const double next_time = world->getTime() + step;
   for (Robot& robot : robots) {
-    // Joint space is smooth over a few milliseconds: the targets between IK solutions are interpolated.
-    if (robot.chunk_end_targets.size() == robot.position_targets.size())
-      robot.position_targets = robot.chunk_start_targets + chunk_fraction * (robot.chunk_end_targets - robot.chunk_start_targets);
-    // Servo velocity that reaches the target in one step, within the joint's speed limits.
-    if (robot.drive) drive_base(robot, step, next_time);
-    for (std::size_t k = 0; k < robot.joint_dofs.size(); ++k) {
-      auto* dof = robot.joint_dofs[k];
-      if (robot.is_wheel(dof)) continue;
-      double velocity = (robot.position_targets[static_cast<Eigen::Index>(k)] - dof->getPosition()) / step;
-      velocity = std::clamp(velocity, dof->getVelocityLowerLimit(), dof->getVelocityUpperLimit());
-      dof->setCommand(velocity);
-    }
+    if (robot.drive) robot.drive->requested_speed = robot.drive->requested_turn = 0;  // stands, unless asked
+    DartRobotIo io(*this, robot);
+    for (const auto& controller : robot.controllers) controller->command(io, step, next_time, chunk_fraction);
+    if (robot.drive) drive_base(robot, step);
   }
   for (const Link& link : links) {
     if (link.force.isZero() && link.torque.isZero()) continue;
     link.node->addExtForce(link.force.cast<double>(), Eigen::Vector3d::Zero(), false, true);
     link.node->addExtTorque(link.torque.cast<double>(), false);
+  }
+}
+
+void World::Impl::after_step() {
+  count_contacts();
+  for (Robot& robot : robots) {
+    if (robot.drive) update_odometry(robot);
+    DartRobotIo io(*this, robot);
+    for (const auto& controller : robot.controllers) controller->after_step(io);
+  }
+}
+
+void World::Impl::end_chunk() {
+  for (Robot& robot : robots) {
+    DartRobotIo io(*this, robot);
+    for (const auto& controller : robot.controllers) controller->end_chunk(io);
   }
 }
 
@@ -770,28 +786,15 @@ void World::Impl::count_contacts() {
       const auto robot = robot_of_skeleton.find(nodes[side]->getSkeleton().get());
       if (robot == robot_of_skeleton.end()) continue;
       const BodyNode* other = nodes[1 - side];
-      RobotContacts& contacts = robots[robot->second].contacts;
-      if (other && robot_of_skeleton.count(other->getSkeleton().get()) && other->getSkeleton() != nodes[side]->getSkeleton())
-        ++contacts.with_robots;
-      else if (other && printed_skeletons.count(other->getSkeleton().get()))
-        ++contacts.with_printed_material;
-      else
-        ++contacts.with_other;
+      const bool other_robot =
+          other && robot_of_skeleton.count(other->getSkeleton().get()) && other->getSkeleton() != nodes[side]->getSkeleton();
+      const bool printed = other && printed_skeletons.count(other->getSkeleton().get());
+      robots[robot->second].contacts.add(other_robot ? ContactWith::robot : printed ? ContactWith::printed_material : ContactWith::other);
       touched[robot->second] = true;
     }
   }
   for (std::size_t r = 0; r < robots.size(); ++r)
     if (touched[r]) ++robots[r].contacts.steps_in_contact;
-}
-
-void World::Impl::record_tracking() {
-  for (Tool& tool : tools) {
-    if (!tool.trajectory) continue;
-    const double error = (tool.end_effector->getWorldTransform().translation() - tool.target->getWorldTransform().translation()).norm();
-    tool.error_squared_sum += error * error;
-    ++tool.error_count;
-    tool.error_max = std::max(tool.error_max, error);
-  }
 }
 
 void World::step_to(double time) {
@@ -816,15 +819,13 @@ void World::step_to(double time) {
       mobile_arm ? 1L : std::max(1L, static_cast<long>(std::floor(impl_->ik_period / step + 1e-9)));
   for (long chunk_begin = 0; chunk_begin < steps; chunk_begin += steps_per_chunk) {
     const long chunk_steps = std::min(steps_per_chunk, steps - chunk_begin);
-    impl_->solve_tool_targets(impl_->world->getTime() + static_cast<double>(chunk_steps) * step);
+    impl_->plan_chunk(impl_->world->getTime() + static_cast<double>(chunk_steps) * step);
     for (long k = 1; k <= chunk_steps; ++k) {
       impl_->control(step, static_cast<double>(k) / static_cast<double>(chunk_steps));
       impl_->world->step();  // clears the commands and external forces: control() sets them every step
-      impl_->count_contacts();
-      for (auto& robot : impl_->robots)
-        if (robot.drive) impl_->update_odometry(robot);
+      impl_->after_step();
     }
-    impl_->record_tracking();  // at the chunk's end, where the IK target is
+    impl_->end_chunk();  // at the chunk's end, where the IK target is
   }
   impl_->world->setTime(time);  // no rounding drift between the two clocks
 }

@@ -13,6 +13,7 @@
 
 #include "m3dp/core/geometry.hpp"
 #include "m3dp/core/types.hpp"
+#include "m3dp/world/statistics.hpp"
 
 namespace m3dp::world {
 
@@ -85,13 +86,7 @@ struct LinkShapes {
   std::vector<Pose> poses;           // of each shape, in the link frame
 };
 
-/// Contacts of one robot, summed over every world step so far.
-struct RobotContacts {
-  std::uint64_t with_robots = 0;           // contact points with another robot's links
-  std::uint64_t with_printed_material = 0; // with a printed-material mesh
-  std::uint64_t with_other = 0;            // static shapes, rigid bodies
-  std::uint64_t steps_in_contact = 0;      // world steps with at least one contact
-};
+class Controller;  // controllers/controller.hpp
 
 class World {
  public:
@@ -122,12 +117,15 @@ class World {
   /// Fixes a tool to a robot link. Throws Error if the link does not exist.
   ToolIndex add_tool(RobotIndex robot, const ToolDescription& tool);
   /// From now on the robot's joints follow inverse kinematics (DART's IK, joint limits respected)
-  /// so that the tool follows `trajectory`: each world step asks for the target at the step's end.
+  /// so that the tool follows `trajectory` (controllers/tool_ik.hpp).
   void set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory);
+  /// Adds a controller to the robot (controllers/controller.hpp): it runs each world step after the
+  /// ones added before it and before the joint servo, which tracks the joint targets.
+  void add_controller(RobotIndex robot, std::unique_ptr<Controller> controller);
   /// Makes the robot's floating base a differential drive (see DiffDriveDescription). Throws Error
   /// if a wheel joint does not exist or the base is not floating.
   void make_diff_drive(RobotIndex robot, const DiffDriveDescription& drive);
-  /// The base follows `trajectory` (a tracking controller on odometry, Kanayama et al. 1990).
+  /// The base follows `trajectory` (controllers/base_tracking_kanayama1990.hpp, on odometry).
   void set_base_trajectory(RobotIndex robot, BaseTrajectory trajectory);
   [[nodiscard]] Pose base_pose(RobotIndex robot) const;
   [[nodiscard]] Pose base_odometry(RobotIndex robot) const;

@@ -1,0 +1,77 @@
+#include "m3dp/sim/robots.hpp"
+
+#include <fmt/format.h>
+
+#include "m3dp/core/error.hpp"
+
+namespace m3dp::sim {
+
+std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world) {
+  std::vector<world::RobotIndex> robots;
+  for (const auto& robot : scene.robots) {
+    world::RobotDescription description;
+    description.name = robot.name;
+    description.urdf_file = robot.urdf_file;
+    description.base_pose = robot.pose;
+    world::RobotIndex index = 0;
+    try {
+      index = world.add_robot(description);
+    } catch (const InputError& error) {
+      // Name the scene line that included the robot too.
+      std::vector<Diagnostic> diagnostics = error.diagnostics();
+      diagnostics.push_back(Diagnostic{robot.where, fmt::format("robot '{}' included here could not be loaded", robot.name)});
+      throw InputError(std::move(diagnostics));
+    }
+    if (robot.mobile_base) {
+      const auto& base = *robot.mobile_base;
+      world.make_diff_drive(index, world::DiffDriveDescription{base.left_wheel_joint, base.right_wheel_joint,
+                                                                base.wheel_radius, base.wheel_separation, 0});
+      if (base.path) {
+        const toolpath::Trajectory* path = &*base.path;
+        world.set_base_trajectory(index, [path](double time) { return path->sample(time).position; });
+      }
+    }
+    if (!robot.initial_joint_positions.empty()) {
+      const auto names = world.joint_names(index);
+      std::vector<double> positions = world.joint_positions(index);
+      for (const auto& [joint, value] : robot.initial_joint_positions)
+        for (std::size_t k = 0; k < names.size(); ++k)
+          if (names[k] == joint) positions[k] = value;
+      world.set_joint_positions(index, positions);
+    }
+    robots.push_back(index);
+  }
+  return robots;
+}
+
+std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::Scene& scene, world::World& world,
+                                                                  const std::vector<world::RobotIndex>& robots,
+                                                                  Real particle_diameter) {
+  std::vector<std::optional<world::ToolIndex>> head_tools;
+  for (std::size_t h = 0; h < scene.print_heads.size(); ++h) {
+    const auto& head = scene.print_heads[h];
+    if (!head.mount) {
+      head_tools.emplace_back();
+      continue;
+    }
+    std::size_t robot = 0;
+    while (scene.robots[robot].name != head.mount->robot) ++robot;  // the scene loader checked that it exists
+    world::ToolDescription tool;
+    tool.name = head.name;
+    tool.link = head.mount->link;
+    tool.offset = head.mount->offset;
+    tool.body_radius = head.mount->barrel_radius;
+    // The barrel ends a particle diameter before the exit, so the first layer is never blocked by it.
+    tool.body_clearance = particle_diameter;
+    const world::ToolIndex index = world.add_tool(robots[robot], tool);
+    const toolpath::Trajectory* trajectory = &head.trajectory;
+    const Vec3 axis = head.direction.normalized();
+    world.set_tool_trajectory(index, [trajectory, axis](double time) {
+      return world::ToolTarget{trajectory->sample(time).position, axis};
+    });
+    head_tools.emplace_back(index);
+  }
+  return head_tools;
+}
+
+}  // namespace m3dp::sim
