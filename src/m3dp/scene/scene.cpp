@@ -1752,12 +1752,13 @@ std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& ele
     }
   }
   const auto radius = read_scalar(element, "radius", Quantity::length, Limits::positive(), Presence::required);
-  auto turns = read_scalar(element, "turns", Quantity::plain_number, Limits::any(), Presence::optional);
-  if (turns && *turns == 0) {
-    report(element.child("turns"), "<turns> must not be 0 (negative turns go clockwise)");
-    turns.reset();
+  double turns = 1;  // a plain value, not an optional: GCC 12 warns of one copied about here
+  bool turns_valid = !element.child("turns");
+  if (const auto read = read_scalar(element, "turns", Quantity::plain_number, Limits::any(), Presence::optional)) {
+    turns = *read;
+    turns_valid = turns != 0;
+    if (!turns_valid) report(element.child("turns"), "<turns> must not be 0 (negative turns go clockwise)");
   }
-  const bool turns_valid = turns || !element.child("turns");
   const auto start_angle =
       read_scalar(element, "start_angle", Quantity::angle, Limits::any(), Presence::optional);
   const bool start_angle_valid = start_angle || !element.child("start_angle");
@@ -1766,7 +1767,7 @@ std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& ele
                              : std::optional<double>(0.0);
   if (!centre || !radius || !turns_valid || !start_angle_valid || !rise) return std::nullopt;
 
-  const Real turn_count = Real(turns.value_or(1));
+  const Real turn_count = Real(turns);
   const Real angle = Real(start_angle.value_or(0));
   if (is_helix) return toolpath::HelixCurve{*centre, Real(*radius), angle, turn_count, Real(*rise)};
   return toolpath::CircleCurve{*centre, Real(*radius), angle, turn_count};

@@ -161,8 +161,7 @@ std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
   for (std::size_t p = 0; p < parameters.phases.size(); ++p) {
     const FluidPhase& phase = parameters.phases[p];
     if (!(phase.density > 0)) problems.push_back(phase_problem(p, "density", fmt::format("must be > 0 kg/m^3, got {}", phase.density)));
-    // Akinci's adhesion pulls against Akinci's cohesion; without it (measured on sessile drops) the
-    // contact line sprayed apart.
+    // Akinci's adhesion pulls against Akinci's cohesion; without it the contact line sprays apart.
     if (phase.adhesion > 0 && settings.surface_tension_model == SurfaceTensionModel::csf_brackbill1992)
       problems.push_back(phase_problem(p, "adhesion", "needs the akinci2013 surface tension model: brackbill1992 wets walls "
                                                       "at 90° and has no adhesion"));

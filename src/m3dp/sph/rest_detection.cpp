@@ -50,8 +50,7 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
     std::atomic_ref<Real>(fluid.rest_time[j]).store(0, std::memory_order_relaxed);
     std::atomic_ref<int>(state.resting_woken).store(1, std::memory_order_relaxed);
   };
-  // With none resting there is nothing to wake: no pass over the fast particles' lists (in the 47k
-  // dam break, most of them: 0.5 ms a step).
+  // With none resting there is nothing to wake: no pass over the fast particles' lists.
   const bool any_resting = active < fluid.size();
   parallel_for_each_index(active, [&](std::size_t i) {
     const FluidPhase& phase = model.phases[fluid.phase[i]];

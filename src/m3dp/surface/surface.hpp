@@ -44,9 +44,9 @@ struct SurfaceSettings {
                                 // surface sits a radius beyond its last layer of centres
   // Yu & Turk 2013 (their names in brackets):
   Real anisotropy_neighborhood = 0;  // m, covariance and smoothing radius [r_i]; 0 = 1.5 × kernel_radius
-  Real centre_smoothing = Real(0.05);  // [λ] 0 = raw centres, 1 = neighbourhood means. Yu & Turk
-                                      // used 0.9; with this neighbourhood a flat face then sinks
-                                      // 1.2 r (0.1: 0.2 r, measured), so the default only smooths noise
+  Real centre_smoothing = Real(0.05);  // [λ] 0 = raw centres, 1 = neighbourhood means. Yu & Turk's
+                                      // 0.9 sinks a flat face with this neighbourhood, so the
+                                      // default only smooths noise
   Real max_anisotropy = 4;            // [k_r] largest ratio of the ellipsoid's axes
   int min_neighbors = 10;             // [N_ε] fewer neighbours: isotropic kernel of scale sparse_scale.
                                       // Yu & Turk's 25 in a neighbourhood of 2h, scaled to this 1.5h

@@ -89,8 +89,8 @@ struct Rheology {
 
  private:
   /// Whether the yield term alone reaches the cap, from its lower bound τ0 m/(1 + mγ̇) ((1 − e^(−x))/x ≥
-  /// 1/(1 + x)): unyielded material, most of a settled print, is then capped without an exp and a pow
-  /// (they were 1.5 % of the clay bench). Equal to the full formula at γ̇ = 0.
+  /// 1/(1 + x)): unyielded material, most of a settled print, is then capped without an exp and a pow.
+  /// Equal to the full formula at γ̇ = 0.
   [[nodiscard]] bool yield_term_reaches_cap(Real rate, Real tau0) const {
     return tau0 > 0 && tau0 * regularization >= max_viscosity * (1 + regularization * rate);
   }

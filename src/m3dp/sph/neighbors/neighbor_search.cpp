@@ -75,10 +75,9 @@ constexpr std::array<std::uint64_t, 256> make_pack_table() {
 constexpr std::array<std::uint64_t, 256> kPackTable = make_pack_table();
 
 /// The same with AVX2, eight candidates at a time: distances, the mask of neighbours, and the
-/// neighbours' indices packed by a table-driven permutation (the neighbour stage of the 47k dam break
-/// went from 18.7-21.0 to 15.1-16.4 ms a step). Every group is stored, even one without a neighbour
-/// (popcount 0 leaves the count as it was): skipping those, about a third of the groups and in no
-/// predictable order, cost a mispredicted branch each (the stage went 9.0-10.3 -> 7.3-8.4 ms without).
+/// neighbours' indices packed by a table-driven permutation. Every group is stored, even one without
+/// a neighbour (popcount 0 leaves the count as it was): skipping those, about a third of the groups
+/// and in no predictable order, would cost a mispredicted branch each.
 __attribute__((target("avx2,popcnt"))) Index keep_candidates_within_avx2(NeighborLists::CandidateBuffer& buffer,
                                                                              const Vec3& query, Real radius_squared, Index self) {
   const std::size_t candidate_count = buffer.count;
@@ -303,8 +302,7 @@ void SpatialHashGrid::append_points_around_cell(const std::array<std::int32_t, 3
     buffer.y.resize(at + total);
     buffer.z.resize(at + total);
   }
-  // One loop over the four arrays: a bucket holds about eight points, too few for four library copies
-  // (their calls cost more than the copying: 5 % of the dam break).
+  // One loop over the four arrays: a bucket holds about eight points, too few for four library copies.
   Index* index_out = buffer.index.data();
   Real *x_out = buffer.x.data(), *y_out = buffer.y.data(), *z_out = buffer.z.data();
   for (int k = 0; k < range_count; ++k)
@@ -364,7 +362,7 @@ void find_neighbors(std::span<const SpatialHashGrid* const> grids, std::span<con
         Index* slots = out.staging.data() + cursor;
         if ((count + 7) / 8 * 8 <= stride) {
           // Whole groups of eight, past the list's end within its own slots (the found buffer has the
-          // slack): no library call per query (a memmove each was 1.7 % of the dam break).
+          // slack): no library call per query.
           for (Index group = 0; group < count; group += 8)
             for (Index lane = 0; lane < 8; ++lane) slots[group + lane] = found[group + lane];
         } else {

@@ -18,8 +18,8 @@ namespace m3dp::sph {
 /// indices[firsts[i], firsts[i] + counts[i]). The search writes fixed-stride lists (staging, `stride`
 /// slots a particle, grown outside the hot loop when a particle has more) in its own query order, then
 /// packs them: the solvers' sweeps stream the lists and their per-pair arrays (indexed like
-/// `indices`), and the unused slots of fixed-stride lists made each sweep read a third more memory
-/// (a stride of 72 instead of 48 cost the dam break's pressure solve 22 %). SkinnedNeighborSearch writes
+/// `indices`), and the unused slots of fixed-stride lists made each sweep read a third more memory.
+/// SkinnedNeighborSearch writes
 /// them back to back within blocks of particles, with unused room after each block (no packing pass).
 struct NeighborLists {
   Index stride = 48;

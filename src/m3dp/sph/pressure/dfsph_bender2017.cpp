@@ -35,10 +35,9 @@ constexpr Real kFactorEpsilon = Real(1e-12);
 // (the surface would otherwise be pulled inwards), as in the reference implementation.
 constexpr int kMinNeighborsForDivergence = 20;
 
-/// max(value, floor) as one instruction. In the sweeps' per-particle finish GCC made std::max a jump,
-/// which the particles compressed or not, in no order a predictor learns, mispredicted for about a
-/// third of them; each miss threw away the next particle's loads already under way (the dam break's
-/// rate sweep 0.75 → 0.6 ms). NaN passes through, as with std::max(value, floor).
+/// max(value, floor) as one instruction: GCC makes std::max a jump, which a predictor cannot learn
+/// (compressed or not follows no order) and each miss discards the next particle's loads. NaN passes
+/// through, as with std::max(value, floor).
 inline Real max_without_branch(Real value, Real floor) {
 #if defined(__SSE2__)
   if constexpr (std::is_same_v<Real, float>)
@@ -337,8 +336,7 @@ void solve_divergence(const Model& model, State& state, Workspace& workspace) {
     const bool converged = settings.min_divergence_iterations == 0 && mean_error <= settings.divergence_tolerance;
     if (settings.warm_start && !converged) {
       // Half of last step's κ as the initial guess, where the flow diverges now (as the density solve).
-      // Not where the flow is divergence-free already: then the guess would only cost two sweeps (in
-      // the 47k dam break, 5 of 7 ms a step, for no iteration saved).
+      // Not where the flow is divergence-free already: then the guess would only cost two sweeps.
       parallel_for_each_index(count, [&](std::size_t i) {
         kappa_total[i] = view.density_advected[i] > Real(0) ? Real(0.5) * kappa_total[i] : Real(0);
         view.kappa[i] = view.mass[i] * kappa_total[i];

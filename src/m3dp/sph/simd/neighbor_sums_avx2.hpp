@@ -358,10 +358,8 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
   }
   if (k < count) {
     // The last one to seven pairs as one masked group, not one by one in the caller's scalar loop,
-    // where their branchy kernel made a tenth of the pairs a third of the pass (the dam break's
-    // density stage 3.3 → 2.9 ms). The empty lanes repeat the last neighbour and count nothing, and
-    // their pair gradients are not stored. (The same in the velocity gradient and the viscous
-    // coefficients, whose scalar pairs are cheap, was no faster.)
+    // where their branchy kernel made a tenth of the pairs a third of the pass. The empty lanes
+    // repeat the last neighbour and count nothing, and their pair gradients are not stored.
     const Index left = count - k;
     Index tail[8];
     for (Index lane = 0; lane < 8; ++lane) tail[lane] = neighbor[k + std::min<Index>(lane, left - 1)];

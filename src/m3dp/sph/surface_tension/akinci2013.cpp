@@ -139,7 +139,6 @@ void add_wall_adhesion(const Model& model, State& state, Workspace& workspace) {
 /// Akinci 2013 eqs. 1, 4, 5: cohesion and curvature between particles of phases with surface tension.
 void add_akinci_surface_tension(const Model& model, State& state, Workspace& workspace) {
   const auto& calibration = model.surface_tension_calibration;
-  const auto& settings = model.settings;
   auto& fluid = state.fluid;
   const std::size_t count = state.active_count;
   const Real h = model.support_radius;

@@ -10,10 +10,8 @@
 
 namespace m3dp::sph::stages {
 
-// Aggregates of the coarse level: cells of this many particle spacings (up to 512 particles). In the clay
-// bench (48.8k particles) 4 spacings took 26 CG iterations a step but the factorisation of their
-// 4.5k unknowns cost more than it saved (280 ms a step in the solve), 6 took 33 (181 ms), 8 took 42
-// (153 ms).
+// Aggregates of the coarse level: cells of this many particle spacings (up to 512 particles). Smaller
+// ones save iterations but their factorisation costs more than it saves (docs/decisions.md).
 constexpr Real kAggregateSpacings = 8;
 // Aggregates a coarse cell can couple to: its own and the 26 around it (cells ≥ the support radius).
 constexpr std::size_t kMaxCoarseNeighbours = 27;
@@ -23,12 +21,12 @@ constexpr int kCoarseLevelFromIterations = 12;
 
 /// The coarse level of the viscosity solve's preconditioner. A stiff paste is nearly rigid over many
 /// particles, and block Jacobi, which sees one particle at a time, needs about as many CG iterations as
-/// the material is particles across to move it as a whole (122 a step in the clay bench). The coarse
+/// the material is particles across to move it as a whole. The coarse
 /// level lets each aggregate of particles move as a rigid body: z = D⁻¹ r + P A_c⁻¹ Pᵀ r, with
 /// P_i = [I  −[x_i − c]×] (v_i = t + ω × (x_i − c), c the aggregate's centroid) and A_c = Pᵀ A P,
 /// built and factorised for every solve (six unknowns per aggregate of up to 512 particles). It lives
-/// in the solver's state: its buffers are reused, and so is the factorisation's symbolic analysis
-/// (the AMD ordering, 0.66 of 1.5 ms in the clay bench) while A_c keeps its pattern. Rigid motions
+/// in the workspace: its buffers are reused, and so is the factorisation's symbolic analysis (the
+/// AMD ordering) while A_c keeps its pattern. Rigid motions
 /// are what the viscous term cannot see: a pair's c r rᵀ (v_i − v_j) vanishes for a common
 /// translation and for a common rotation.
 class CoarseViscosityLevel {

@@ -42,8 +42,7 @@ void solve_implicit_viscosity(const Model& model, State& state, Workspace& works
   if (!any_viscosity) return;
   // Where the largest viscous change any phase can have is below the solve's tolerance, CG would take
   // v* as it is: ‖A v* − b‖ ≤ 2 Σ_j |c_ij| r² |v| ≈ 2 (Δt μ/ρ0) coupling ‖b‖. Nothing to solve then
-  // (water at centimetre spacing and millisecond steps: 13 ms a step in the 47k dam break for a
-  // change of 3·10⁻⁴). The factor 1.5 covers neighbourhoods denser than the rest lattice.
+  // (water at centimetre spacing). The factor 1.5 covers neighbourhoods denser than the rest lattice.
   const bool negligible = std::all_of(model.phases.begin(), model.phases.end(), [&](const FluidPhase& phase) {
     if (phase.elasticity.enabled || phase.ageing.enabled()) return false;
     const Real mu = phase.rheology.model == material::RheologyModel::newtonian ? phase.rheology.viscosity

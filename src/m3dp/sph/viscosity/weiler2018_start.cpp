@@ -23,14 +23,10 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
   double residual_norm = std::sqrt(start[1]);
   // A second start: the velocity the last solve ended with. v* carries this step's pressure and gravity
   // kicks, rough on the particle scale, which a stiff paste's viscosity takes out again at the cost of
-  // most of CG's iterations (the clay bench's first residual was 10⁴–10⁵ times the tolerance from
-  // v* plus the last change). The last solution lacks this step's acceleration, and CG stops within
-  // the tolerance before putting it back, step after step (a Bingham channel flow then lagged 2.6 %).
-  // So the start is the combination α v_A + β v_B of both that is best in A's energy norm (a 2×2
-  // Galerkin system from the two products): clay 41 → 11 iterations a step, the channel flow unbiased.
-  // Only where the first start is far off (a stiff material): a runny one starts within a few times the
-  // tolerance, and a blend with the last solution, small as it is (3 % in a sessile water drop), would
-  // take part of this step's kicks away without an iteration to put them back (the drop then shed 8 %).
+  // most of CG's iterations; the last solution lacks this step's acceleration, which CG would not put
+  // back within its tolerance. So the start is the combination α v_A + β v_B of both that is best in
+  // A's energy norm (a 2×2 Galerkin system from the two products), and only where the first start is
+  // far off (a stiff material): a runny one's blend would take part of this step's kicks away.
   constexpr double kFarOff = 10;
   if (settings.warm_start && residual_norm > kFarOff * settings.viscosity_tolerance * std::sqrt(start[0])) {
     parallel_for_each_index(count, [&](std::size_t i) { system.padded_operand[i] = padded(fluid.viscous_velocity[i]); }, 1024);
