@@ -20,6 +20,7 @@ PATTERNS = {
     "ms_per_step": re.compile(r"([0-9.]+) ms/step"),
     "cost_ratio": re.compile(r"cost of a step at layer \d+ / at layer 2: ([0-9.]+)"),
     "real_time_factor": re.compile(r"real-time factor ([0-9.e+-]+)"),
+    "wall_seconds": re.compile(r"simulated in ([0-9.]+) s wall"),
 }
 
 

@@ -45,6 +45,11 @@ struct SolverSettings {
   Real min_time_step = Real(1e-5);            // s
   Real max_time_step = Real(5e-3);            // s
   Real density_tolerance = Real(0.0005);      // mean relative density error of the density solve
+  // The compression the volume correction leaves (a fraction of ρ0): after the viscosity solve, what
+  // a particle would be compressed beyond this is taken out of the positions (correct_volume).
+  Real volume_tolerance = Real(0.01);
+  // The least distance between two particles the volume correction leaves, in particle diameters.
+  Real minimum_spacing = Real(0.7);
   Real divergence_tolerance = Real(0.001);    // mean relative density change per step of the divergence solve
   int min_density_iterations = 2;
   int max_density_iterations = 100;

@@ -69,6 +69,9 @@ void integrate_accelerations(const Model& model, State& state, Workspace& worksp
 void add_elastic_stiffness(const Model& model, State& state, Workspace& workspace);
 /// Implicit viscosity (Weiler et al. 2018), with the wall friction's reaction on the bodies (viscosity/weiler2018.cpp).
 void solve_implicit_viscosity(const Model& model, State& state, Workspace& workspace);
+/// The volume correction: the compression the viscous velocities would leave, solved again with the
+/// density solve and taken out of the positions, not the velocities (pressure/dfsph_bender2017.cpp).
+void correct_volume(const Model& model, State& state, Workspace& workspace);
 /// XSPH velocity smoothing (Monaghan 1989) where SolverSettings::xsph_factor > 0 (forces/xsph_monaghan1989.cpp).
 void apply_xsph(const Model& model, State& state, Workspace& workspace);
 

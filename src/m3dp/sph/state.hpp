@@ -53,6 +53,8 @@ struct StepStats {
   int viscosity_iterations = 0;         // conjugate-gradient iterations of the implicit viscosity solve
   Real density_error = 0;               // mean relative density error after the density solve
   Real max_density_error = 0;           // max over particles of (ρ/ρ0 − 1) at the start of the step
+  Real volume_error = 0;                // mean predicted ρ/ρ0 − 1 after the viscosity solve, before the volume correction
+  int volume_iterations = 0;            // iterations of the volume correction (correct_volume)
   std::size_t particles_emitted = 0;
   std::size_t particles_removed = 0;
   std::size_t particles_at_rest = 0;    // at the end of the step (not simulated)

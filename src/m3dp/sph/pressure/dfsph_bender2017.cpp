@@ -156,7 +156,9 @@ Real sum_over_rates(const SolverView& view, const tbb::blocked_range<std::size_t
   return total;
 }
 
-/// One pressure velocity update with the m κ in view.kappa; adds the reaction on the bodies.
+/// One pressure velocity update with the m κ in view.kappa; with kWallReaction, adds the reaction on
+/// the bodies (the volume correction moves particles without a force, and has none).
+template <bool kWallReaction = true>
 void apply_pressure_velocity_update(const SolverView& view, State& state, Workspace& workspace, Real time_step) {
   for_each_particle_range(state.active_count, [&](const tbb::blocked_range<std::size_t>& range) {
     std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
@@ -189,7 +191,8 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Worksp
       if (view.boundary_neighbor_count[i] > 0) {
         // The walls' share, −m_i κ_i Σ_b g_b r_b, and its reaction on the bodies, +m_i κ_i g_b r_b each.
         momentum_change -= weighted_kappa_i * walls.gradient;
-        if (walls.body != Workspace::kSeveralBodies) {
+        if constexpr (!kWallReaction) {
+        } else if (walls.body != Workspace::kSeveralBodies) {
           Wrench& wrench = wrenches[walls.body];
           wrench.force += weighted_kappa_i * walls.gradient.head<3>();
           wrench.torque += weighted_kappa_i * walls.torque;
@@ -364,64 +367,133 @@ void solve_divergence(const Model& model, State& state, Workspace& workspace) {
   }
 }
 
+namespace {
+
+/// ρ*/ρ0 = ρ/ρ0 + Δt · (rate of change) of every active particle into view.density_advected, clamped
+/// at 1: the solver only pushes, never pulls (free surface). Returns the mean of ρ*/ρ0 − 1.
+Real update_predicted_density(const Model& model, const State& state, const SolverView& view, Real time_step,
+                              Real floor = 1) {
+  const std::size_t count = state.active_count;
+  const Real volume = model.particle_volume;
+  return tbb::parallel_deterministic_reduce(
+             tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
+             [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
+               return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
+                        const Real predicted = view.density[i] * volume / view.mass[i] + time_step * rate;
+                        view.density_advected[i] = max_without_branch(predicted, floor);
+                        return view.density_advected[i] - floor;
+                      });
+             },
+             std::plus<Real>()) /
+         Real(count);
+}
+
+/// Jacobi iterations of the constant-density solve (Bender & Koschier 2017, Algorithm 3) from the
+/// predicted densities in view.density_advected (mean error `mean_error`) until the tolerance, each
+/// κ added into `kappa_total` where given. Returns the iterations; `mean_error` ends as the last one.
+template <bool kWallReaction>
+int iterate_density(const Model& model, State& state, Workspace& workspace, const SolverView& view, Real time_step,
+                    int min_iterations, std::vector<Real>* kappa_total, Real& mean_error, Real floor = 1) {
+  const auto& settings = model.settings;
+  const std::size_t count = state.active_count;
+  const Real inverse_time_step_squared = Real(1) / (time_step * time_step);
+  int iterations = 0;
+  while ((iterations < min_iterations || mean_error > settings.density_tolerance) && iterations < settings.max_density_iterations) {
+    parallel_for_each_index(count, [&](std::size_t i) {
+      const Real kappa = (view.density_advected[i] - floor) * view.factor[i] * inverse_time_step_squared;
+      if (kappa_total) (*kappa_total)[i] += kappa;
+      view.kappa[i] = view.mass[i] * kappa;
+    });
+    apply_pressure_velocity_update<kWallReaction>(view, state, workspace, time_step);
+    mean_error = update_predicted_density(model, state, view, time_step, floor);
+    ++iterations;
+  }
+  return iterations;
+}
+
+}  // namespace
+
 void solve_density(const Model& model, State& state, Workspace& workspace) {
   const auto& settings = model.settings;
   const std::size_t count = state.active_count;
   const Real time_step = state.time_step;
-  Real& mean_density_error = state.last_step.density_error;
-  mean_density_error = 0;
+  state.last_step.density_error = 0;
   if (count == 0) return;
   const SolverView view = pack_for_solve(state, workspace);
-  const Real inverse_time_step_squared = Real(1) / (time_step * time_step);
   auto& kappa_total = state.fluid.kappa_density;  // Σ κ over this step's updates (a pressure, see above)
-  const Real volume = model.particle_volume;
-
-  {
-    // ρ*/ρ0 = ρ/ρ0 + Δt · (rate of change), clamped at 1: the solver only pushes, never pulls (free surface).
-    auto update_predicted_density = [&]() {
-      return tbb::parallel_deterministic_reduce(
-          tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
-          [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
-            return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
-                     const Real predicted = view.density[i] * volume / view.mass[i] + time_step * rate;
-                     view.density_advected[i] = max_without_branch(predicted, Real(1));
-                     return view.density_advected[i] - Real(1);
-                   });
-          },
-          std::plus<Real>());
-    };
-
-    if (settings.warm_start) {
-      // Half of last step's pressure, where the particle is compressed now (Bender & Koschier 2017,
-      // Sec. 4.4). Not the whole: the solver only pushes (ρ* is clamped at ρ0), so an initial guess
-      // that overshoots can never be taken back, and with the whole pressure a settling column
-      // gains energy at large time steps.
-      update_predicted_density();
-      parallel_for_each_index(count, [&](std::size_t i) {
-        kappa_total[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
-        view.kappa[i] = view.mass[i] * kappa_total[i];
-      });
-      apply_pressure_velocity_update(view, state, workspace, time_step);
-    } else {
-      parallel_for_each_index(count, [&](std::size_t i) { kappa_total[i] = 0; });
-    }
-
-    mean_density_error = update_predicted_density() / Real(count);
-    int iterations = 0;
-    while ((iterations < settings.min_density_iterations || mean_density_error > settings.density_tolerance) &&
-           iterations < settings.max_density_iterations) {
-      parallel_for_each_index(count, [&](std::size_t i) {
-        const Real kappa = (view.density_advected[i] - Real(1)) * view.factor[i] * inverse_time_step_squared;
-        kappa_total[i] += kappa;
-        view.kappa[i] = view.mass[i] * kappa;
-      });
-      apply_pressure_velocity_update(view, state, workspace, time_step);
-      mean_density_error = update_predicted_density() / Real(count);
-      ++iterations;
-    }
-    unpack_velocities(state, workspace);
-    state.last_step.density_iterations = iterations;
+  if (settings.warm_start) {
+    // Half of last step's pressure, where the particle is compressed now (Bender & Koschier 2017,
+    // Sec. 4.4). Not the whole: the solver only pushes (ρ* is clamped at ρ0), so an initial guess
+    // that overshoots can never be taken back, and with the whole pressure a settling column
+    // gains energy at large time steps.
+    update_predicted_density(model, state, view, time_step);
+    parallel_for_each_index(count, [&](std::size_t i) {
+      kappa_total[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
+      view.kappa[i] = view.mass[i] * kappa_total[i];
+    });
+    apply_pressure_velocity_update(view, state, workspace, time_step);
+  } else {
+    parallel_for_each_index(count, [&](std::size_t i) { kappa_total[i] = 0; });
   }
+  Real mean_error = update_predicted_density(model, state, view, time_step);
+  state.last_step.density_iterations =
+      iterate_density<true>(model, state, workspace, view, time_step, settings.min_density_iterations, &kappa_total, mean_error);
+  state.last_step.density_error = mean_error;
+  unpack_velocities(state, workspace);
+}
+
+void correct_volume(const Model& model, State& state, Workspace& workspace) {
+  const std::size_t count = state.active_count;
+  const Real time_step = state.time_step;
+  // Only the viscosity solve undoes the density solve's work: without it (water, the explicit
+  // solver) the velocities are the density solve's own.
+  if (count == 0 || state.last_step.viscosity_iterations == 0) return;
+  // The compression the velocities after the viscosity solve would leave: the same prediction as the
+  // density solve's, from this step's densities.
+  const SolverView view = pack_for_solve(state, workspace);
+  // Down to the volume tolerance, not to ρ0: the compression of a standing paste's last tenths of a
+  // per cent comes back every step, and taking it out kinematically, step after step, made an
+  // unyielded column creep (docs/decisions.md).
+  const Real floor = 1 + model.settings.volume_tolerance;
+  Real mean_error = update_predicted_density(model, state, view, time_step, floor);
+  state.last_step.volume_error = mean_error;
+  // A stiff material's viscosity undoes most of the pressure solve's relief: each step's compression
+  // would stay, and accumulate. Solved again, the correction moves the particles apart but adds no
+  // velocity: no force, no wall reaction, and the viscous velocities stay as they were.
+  state.last_step.volume_iterations = iterate_density<false>(model, state, workspace, view, time_step, 0, nullptr, mean_error, floor);
+  auto& fluid = state.fluid;
+  // And no pair closer than the minimum spacing: the cubic spline's repulsion weakens below two
+  // thirds of a diameter, so a viscous material's particles pair up (the pairing instability,
+  // Dehnen & Aly 2012), and at a free surface, where the density is short, nothing else parts them.
+  const Real minimum = model.settings.minimum_spacing * model.particle_diameter;
+  parallel_for_each_index(count, [&](std::size_t i) {
+    Vec3 displacement = time_step * (workspace.solver_velocity[i].head<3>() - fluid.velocity[i]);
+    if (minimum > 0) {
+      const Vec3 position_i = fluid.position[i];
+      for (const Index j : workspace.fluid_neighbors.of(i)) {
+        const Vec3 r = position_i - fluid.position[j];
+        const Real distance_squared = r.squaredNorm();
+        if (distance_squared >= minimum * minimum || distance_squared == 0) continue;
+        const Real distance = std::sqrt(distance_squared);
+        displacement += ((j < count ? Real(0.5) : Real(1)) * (minimum - distance) / distance) * r;
+      }
+    }
+    // The pump drives the material in a nozzle's exit: the correction never pushes it back in.
+    for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+      const NozzleState& nozzle = state.nozzles[n];
+      if (!nozzle.extruding) continue;
+      const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
+      const Vec3 offset = fluid.position[i] - nozzle.pose.position;
+      const Real axial = offset.dot(axis);
+      const Real radius = model.nozzles[n].inner_diameter / 2 + model.particle_diameter;
+      if (axial < -model.particle_diameter || axial > 2 * model.particle_diameter ||
+          (offset - axial * axis).squaredNorm() > radius * radius)
+        continue;
+      const Real backwards = displacement.dot(axis);
+      if (backwards < 0) displacement -= backwards * axis;
+    }
+    fluid.position[i] += displacement;
+  }, 4096);
 }
 
 }  // namespace m3dp::sph::stages
