@@ -177,13 +177,24 @@ TEST(Outputs, ExplodingStateStopsWithAReport) {
 }
 
 TEST(Outputs, ProgressLineShowsTimeSpeedParticlesAndEta) {
-  const std::string line = ProgressBar::format_line({0.5, 2.0, 100, 1234, 10.0}, 20);
+  ProgressSample sample;
+  sample.simulated_time_s = 0.5;
+  sample.end_time_s = 2.0;
+  sample.steps = 100;
+  sample.particles = 1234;
+  sample.wall_time_s = 10.0;
+  const std::string line = ProgressBar::format_line(sample, 20);
   EXPECT_NE(line.find("25.0%"), std::string::npos) << line;
   EXPECT_NE(line.find("t=0.500/2.000 s"), std::string::npos) << line;
   EXPECT_NE(line.find("10 steps/s"), std::string::npos) << line;
   EXPECT_NE(line.find("RTF 0.05"), std::string::npos) << line;
   EXPECT_NE(line.find("1234 particles"), std::string::npos) << line;
   EXPECT_NE(line.find("ETA 00:30"), std::string::npos) << line;
+  EXPECT_EQ(line.find("rho/rho0"), std::string::npos) << "no density measured yet: none shown: " << line;
+  sample.density_error_p99 = 0.0123;
+  sample.density_error_max = -0.004;
+  const std::string with_density = ProgressBar::format_line(sample, 20);
+  EXPECT_NE(with_density.find("rho/rho0-1 p99 +1.23% max -0.40%"), std::string::npos) << with_density;
 }
 
 TEST(Outputs, RobotRunsReportRobotsNozzlesAndWorldTimes) {

@@ -84,6 +84,16 @@ TEST_P(EveryMethod, BallIsClosedOutwardAndOfTheRightSize) {
   EXPECT_TRUE(edges.watertight());
   EXPECT_EQ(edges.inconsistent_edges, 0u);
   EXPECT_EQ(connected_components(mesh), 1u);
+  // Sections through the centre are the disc of the mesh's own ball (R from its volume), along
+  // every axis; a plane past the ball cuts nothing.
+  const double mesh_ball_radius = std::cbrt(3 * volume / (4 * kPi));
+  for (int axis = 0; axis < 3; ++axis) {
+    const double section = cross_section_area(mesh, axis, centre[axis]);
+    const double error = section / (kPi * mesh_ball_radius * mesh_ball_radius) - 1;
+    std::printf("  section through the centre across axis %d: %+.2f %% of pi R^2 (tolerance 3 %%)\n", axis, 100 * error);
+    EXPECT_LT(std::abs(error), 0.03) << "axis " << axis;
+  }
+  EXPECT_EQ(cross_section_area(mesh, 2, centre.z() + 1.5 * ball_radius), 0.0);
   if (GetParam() == Method::spherical) {
     // A union of spheres is bumpy by design: its area is no measure of the ball's, and dimples
     // between spheres face sideways. Its volume overshoots by the spheres' overlap past the face.

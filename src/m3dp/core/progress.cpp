@@ -29,9 +29,13 @@ std::string ProgressBar::format_line(const ProgressSample& sample, int width) {
   const double steps_per_second = sample.wall_time_s > 0 ? sample.steps / sample.wall_time_s : 0.0;
   const double real_time_factor = sample.wall_time_s > 0 ? sample.simulated_time_s / sample.wall_time_s : 0.0;
   const double eta = fraction > 0 ? sample.wall_time_s * (1.0 - fraction) / fraction : -1.0;
-  return fmt::format("[{}] {:5.1f}% t={:.3f}/{:.3f} s | {:.0f} steps/s | RTF {:.3g} | {} particles | ETA {}", bar,
+  const std::string density =
+      sample.density_error_p99 && sample.density_error_max
+          ? fmt::format(" | rho/rho0-1 p99 {:+.2f}% max {:+.2f}%", 100 * *sample.density_error_p99, 100 * *sample.density_error_max)
+          : std::string();
+  return fmt::format("[{}] {:5.1f}% t={:.3f}/{:.3f} s | {:.0f} steps/s | RTF {:.3g} | {} particles{} | ETA {}", bar,
                      100.0 * fraction, sample.simulated_time_s, sample.end_time_s, steps_per_second,
-                     real_time_factor, sample.particles, format_duration(eta));
+                     real_time_factor, sample.particles, density, format_duration(eta));
 }
 
 void ProgressBar::update(const ProgressSample& sample) {

@@ -3,6 +3,7 @@
 // On a terminal it redraws in place; otherwise (CI logs, pipes) it prints a line every 10 %.
 #include <chrono>
 #include <cstdio>
+#include <optional>
 #include <string>
 
 namespace m3dp {
@@ -13,6 +14,8 @@ struct ProgressSample {
   long long steps = 0;
   long long particles = 0;
   double wall_time_s = 0;
+  /// The latest measured ρ/ρ0 − 1 (99th percentile and max over the particles), if there is one.
+  std::optional<double> density_error_p99, density_error_max;
 };
 
 class ProgressBar {

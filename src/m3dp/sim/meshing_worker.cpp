@@ -6,6 +6,7 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/io/mesh_io.hpp"
+#include "m3dp/surface/mesh_tools.hpp"
 
 namespace m3dp::sim {
 
@@ -99,6 +100,7 @@ void MeshingWorker::run() {
       mesh.remeshed_tiles = stats.remeshed_tiles;
       io::write_triangle_mesh(mesh.file, *surface);
       mesh.triangles = surface->triangles.size();
+      mesh.volume = surface::signed_volume(*surface);
     } catch (const std::exception& error) {
       failure = fmt::format("mesh at t = {:.4f} s: {}", time, error.what());
     }

@@ -25,6 +25,7 @@ class MeshingWorker {
     double time = 0;                 // s, simulated time of the particles it was made from
     std::filesystem::path file;
     std::size_t particles = 0, triangles = 0;
+    double volume = 0;               // m³ the mesh encloses (surface::signed_volume)
     std::size_t reused_particles = 0;  // resting particles whose field was kept from earlier meshes
     std::size_t tiles = 0, remeshed_tiles = 0;  // mesh tiles (32 voxels), and those meshed again
     double seconds = 0;              // wall time to reconstruct and write

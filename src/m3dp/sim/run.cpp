@@ -10,10 +10,11 @@
 namespace m3dp::sim {
 
 namespace {
-/// The run's outputs, in the order they observe and finish: the printed mesh after the frames (as
-/// the step's files), the figures after the meshes they count, the summary file last.
+/// The run's outputs, in the order they observe and finish: the density check first (the progress
+/// line shows it), the printed mesh after the frames (as the step's files), the figures after the
+/// meshes they count, the summary file last.
 constexpr outputs::MakeOutput kOutputs[] = {
-    outputs::make_particle_frames, outputs::make_printed_mesh, outputs::make_timing_table,
+    outputs::make_density_check,   outputs::make_particle_frames, outputs::make_printed_mesh, outputs::make_timing_table,
     outputs::make_run_figures,     outputs::make_progress_bar, outputs::make_summary_file,
 };
 }  // namespace
@@ -65,20 +66,45 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
   text += fmt::format("  particles   {} now ({} at rest, not simulated), {} emitted, {} left the bounds\n", summary.particles,
                       summary.particles_at_rest, summary.particles_emitted,
                       summary.particles_removed);
-  if (summary.blocked_layers > 0)
-    text += fmt::format("  nozzles     a due layer found no room in front of its nozzle in {} steps (material backing up "
-                        "under it; it left later)\n",
-                        summary.blocked_layers);
   text += fmt::format("  mass        {:.6g} kg initial + {:.6g} emitted - {:.6g} lost = {:.6g} kg\n", summary.mass_initial,
                       summary.mass_emitted, summary.mass_lost, summary.mass_final);
+  if (summary.density.checks > 0) {
+    const auto& last = summary.density.last.statistics;
+    const auto& worst = summary.density.worst_max;
+    text += fmt::format("  density     rho/rho0 - 1 of all {} particles at {:.3f} s: median {:+.2f} %, 99th percentile {:+.2f} %, "
+                        "max {:+.2f} % (worst max {:+.2f} % at {:.3f} s; {} checks)\n",
+                        last.particles, summary.density.last.time, 100 * last.median, 100 * last.p99, 100 * last.max,
+                        100 * worst.statistics.max, worst.time, summary.density.checks);
+  }
+  const auto& volume = summary.volume;
+  if (volume.commanded > 0 || volume.emitted > 0) {
+    constexpr double kCm3 = 1e6;  // cm³ per m³
+    text += fmt::format("  volume      {:.4g} cm3 commanded, {:.4g} emitted, {:.4g} lost at blocked nozzles, {:.4g} left the bounds",
+                        kCm3 * volume.commanded, kCm3 * volume.emitted, kCm3 * volume.lost_at_nozzles, kCm3 * volume.removed);
+    if (volume.last_mesh >= 0 && volume.emitted > 0)
+      text += fmt::format("; last mesh ({:.3f} s) {:.4g} cm3, {:.1f} % of the emitted", volume.last_mesh_time,
+                          kCm3 * volume.last_mesh, 100 * volume.last_mesh / volume.emitted);
+    text += "\n";
+  }
+  for (const auto& nozzle : summary.nozzles)
+    if (nozzle.longest_blockage.duration >= RunSummary::kLongBlockage) {
+      const Vec3& at = nozzle.longest_blockage.position;
+      text += fmt::format("  warning     nozzle {} was blocked for {:.2f} s from {:.3f} s at ({:.3f}, {:.3f}, {:.3f}) m (material in "
+                          "front of it); {:.2f} s blocked in all, {:.4g} cm3 of the flow asked for was never emitted\n",
+                          nozzle.name, nozzle.longest_blockage.duration, nozzle.longest_blockage.start, at.x(), at.y(), at.z(),
+                          nozzle.blocked_time, 1e6 * nozzle.volume_lost);
+    } else if (nozzle.steps_blocked > 0) {
+      text += fmt::format("  nozzle      {}: blocked in {} steps ({:.3f} s in all, at most {:.3f} s at a stretch); {:.4g} cm3 of the "
+                          "flow asked for was never emitted\n",
+                          nozzle.name, nozzle.steps_blocked, nozzle.blocked_time, nozzle.longest_blockage.duration,
+                          1e6 * nozzle.volume_lost);
+    }
   if (summary.granular)
     text += fmt::format("  solver      granular contacts (spring-dashpot), mean time step {:.3g} ms\n",
                         summary.steps > 0 ? 1e3 * summary.simulated_time / double(summary.steps) : 0.0);
   else
-    text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step, max mean "
-                        "density error {:.3f} %\n",
-                        summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations,
-                        100 * summary.max_density_error);
+    text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step\n",
+                        summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations);
   if (!output_directory.empty())
     text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
                         summary.frames_written);

@@ -10,6 +10,8 @@
 #include <vector>
 
 #include "m3dp/sim/meshing_worker.hpp"
+#include "m3dp/sph/measure.hpp"
+#include "m3dp/sph/state.hpp"
 #include "m3dp/world/world.hpp"
 
 namespace m3dp::sim {
@@ -44,7 +46,43 @@ struct RunSummary {
   std::uint64_t particles_removed = 0;
   std::uint64_t blocked_layers = 0;  // steps in which a due nozzle layer found no room (summed over nozzles)
   double mass_initial = 0, mass_emitted = 0, mass_lost = 0, mass_final = 0;  // kg
-  double max_density_error = 0;      // largest mean relative density error after a density solve
+
+  /// ρ/ρ0 − 1 over all particles, moving and resting, as measured from their positions at the end of a
+  /// step (Simulation::measured_density): what the particle frames hold.
+  struct DensityCheck {
+    double time = -1;  // s; < 0: never measured
+    sph::DensityStatistics statistics;
+  };
+  struct DensityReport {
+    std::size_t checks = 0;    // at every particle frame (or a hundred times a run without frames) and the end
+    DensityCheck last;         // at the end of the run
+    DensityCheck worst_p99;    // the check with the largest 99th percentile
+    DensityCheck worst_max;    // the check with the largest max
+  } density;
+
+  /// Where the printed volume went (m³): volume = mass / rest density, d³ a particle.
+  struct VolumeBalance {
+    double commanded = 0;        // the flow the paths or G-code asked of the nozzles: π D²/4 · U · flow scale · time
+    double emitted = 0;          // particles the nozzles emitted
+    double lost_at_nozzles = 0;  // asked for while a nozzle was blocked, never emitted
+    double removed = 0;          // particles that left the bounds
+    double in_particles = 0;     // particles at the end, at their rest density
+    double last_mesh = -1;       // the last surface mesh's enclosed volume; < 0: no mesh
+    double last_mesh_time = 0;   // s
+  } volume;
+
+  struct Nozzle {
+    std::string name;
+    std::uint64_t layers_emitted = 0, particles_emitted = 0, steps_blocked = 0;
+    double volume_commanded = 0, volume_emitted = 0, volume_lost = 0;  // m³
+    double blocked_time = 0;                                           // s in all
+    sph::NozzleState::Blockage longest_blockage;                       // duration 0: never blocked
+  };
+  std::vector<Nozzle> nozzles;
+  /// A nozzle blocked at least this long (s) at a stretch is a warning in the summary.
+  static constexpr double kLongBlockage = 0.2;
+
+  double solver_density_error = 0;   // the pressure solve's own largest mean error estimate (moving particles, mid-step)
   double mean_density_iterations = 0;
   double mean_divergence_iterations = 0;
   double mean_viscosity_iterations = 0;   // conjugate-gradient iterations of the implicit viscosity solve

@@ -101,6 +101,16 @@ const sph::StepStats& Simulation::step() {
   return stats;
 }
 
+const Simulation::DensityMeasurement& Simulation::measured_density() const {
+  if (density_measurement_.step != solver_.state().step) {
+    sph::measure_density(solver_, density_measurement_.density);
+    density_measurement_.statistics = sph::density_statistics(solver_, density_measurement_.density);
+    density_measurement_.step = solver_.state().step;
+    density_measurement_.time = solver_.time();
+  }
+  return density_measurement_;
+}
+
 void Simulation::set_printed_mesh(const TriangleMesh& mesh) { world_.set_static_mesh("printed_material", mesh); }
 
 }  // namespace m3dp::sim

@@ -8,6 +8,7 @@
 
 #include "m3dp/coupling/fluid_body_coupling.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sph/measure.hpp"
 #include "m3dp/sph/solver.hpp"
 #include "m3dp/world/world.hpp"
 
@@ -25,6 +26,20 @@ class Simulation {
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
   /// collision body "printed_material", replacing the previous one.
   void set_printed_mesh(const TriangleMesh& mesh);
+
+  /// Every fluid particle's density measured where the particles are now (sph::measure_density), with
+  /// its statistics: what the particle frames write and the run reports. Measured at most once a step.
+  struct DensityMeasurement {
+    std::int64_t step = -1;
+    double time = 0;                 // s
+    std::vector<Real> density;       // kg/m³, in the solver's particle order
+    sph::DensityStatistics statistics;
+  };
+  [[nodiscard]] const DensityMeasurement& measured_density() const;
+  /// The latest measurement, or null before the first.
+  [[nodiscard]] const DensityMeasurement* latest_density_measurement() const {
+    return density_measurement_.step >= 0 ? &density_measurement_ : nullptr;
+  }
 
   [[nodiscard]] const scene::Scene& scene() const { return scene_; }
   [[nodiscard]] sph::Solver& solver() { return solver_; }
@@ -58,6 +73,7 @@ class Simulation {
   std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;
   double last_coupling_ms_ = 0, last_world_ms_ = 0;
+  mutable DensityMeasurement density_measurement_;  // a cache of what the state is: observers share it
 };
 
 }  // namespace m3dp::sim

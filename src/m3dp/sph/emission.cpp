@@ -53,9 +53,13 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
     NozzleState& nozzle = state.nozzles[n];
     const NozzleSettings& settings = model.nozzles[n];
     const NozzleGeometry& geometry = model.nozzle_geometry[n];
-    if (!nozzle.extruding || geometry.layer_period <= 0) continue;
+    if (!nozzle.extruding || geometry.layer_period <= 0) {
+      nozzle.end_blockage(state.time);
+      continue;
+    }
     // Layers come at the nominal period scaled by the flow; they also leave faster or slower.
     nozzle.pending_time += step * nozzle.flow_scale;
+    nozzle.volume_commanded += step * nozzle.flow_scale * geometry.flux;
     const Real exit_speed = settings.exit_speed * nozzle.flow_scale;
     const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
     const Vec3 exit_velocity = exit_speed * axis + nozzle.velocity;
@@ -95,10 +99,19 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
       };
       if (blocked_by(fluid.position, fluid_clearance_squared) || blocked_by_boundary()) {
         ++nozzle.blocked_layers;
-        // Keep at most one layer pending so a blocked nozzle does not burst when it clears.
+        nozzle.blocked_time += step;
+        if (nozzle.blocked_since < 0) {
+          nozzle.blocked_since = state.time;
+          nozzle.blocked_at = nozzle.pose.position;
+        }
+        // At most one layer stays pending, so a blocked nozzle does not burst when it clears; the
+        // rest of the flow asked for is lost.
+        const double excess = nozzle.pending_time - geometry.layer_period;
+        if (excess > 0) nozzle.volume_lost += excess * geometry.flux;
         nozzle.pending_time = std::min(nozzle.pending_time, geometry.layer_period);
         break;
       }
+      nozzle.end_blockage(state.time);
       const std::size_t first = fluid.size();
       for (const Vec3& offset : geometry.disc_offsets)
         append_particle(model, state, centre + nozzle.pose.rotate(offset), exit_velocity, settings.phase);

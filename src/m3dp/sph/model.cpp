@@ -28,6 +28,7 @@ NozzleGeometry make_nozzle_geometry(const NozzleSettings& nozzle, Real spacing) 
   if (geometry.disc_offsets.empty()) geometry.disc_offsets.push_back(Vec3::Zero());
   const double particle_volume = std::pow(static_cast<double>(spacing), 3);
   const double flux = kPi * nozzle.inner_diameter * nozzle.inner_diameter / 4 * nozzle.exit_speed;  // m³/s
+  geometry.flux = flux;
   geometry.layer_period = flux > 0 ? geometry.disc_offsets.size() * particle_volume / flux : 0;
   return geometry;
 }

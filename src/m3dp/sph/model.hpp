@@ -42,6 +42,7 @@ struct GranularContact {
 struct NozzleGeometry {
   std::vector<Vec3> disc_offsets;  // in the nozzle frame, z = 0
   double layer_period = 0;         // s between layers at the set exit speed
+  double flux = 0;                 // m³/s: π D²/4 · U, the flow at flow scale 1
 };
 
 /// One thing wrong with the parameters. `field` is the setting's or material's field as the scene

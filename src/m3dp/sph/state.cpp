@@ -4,6 +4,13 @@
 
 namespace m3dp::sph {
 
+void NozzleState::end_blockage(double now) {
+  if (blocked_since < 0) return;
+  const double duration = now - blocked_since;
+  if (duration > longest_blockage.duration) longest_blockage = {blocked_since, duration, blocked_at};
+  blocked_since = -1;
+}
+
 double StageTimes::total() const { return std::accumulate(ms.begin(), ms.end(), 0.0); }
 
 StageTimes& StageTimes::operator+=(const StageTimes& other) {

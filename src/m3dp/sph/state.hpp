@@ -28,6 +28,19 @@ struct NozzleState {
   std::uint64_t layers_emitted = 0;
   std::uint64_t particles_emitted = 0;
   std::uint64_t blocked_layers = 0;   // steps in which a due layer was delayed: the space in front was occupied
+  double volume_commanded = 0;        // m³: the flow asked for, π D²/4 · U · flow scale over the extruding time
+  // Flow a blocked nozzle could not emit is lost (a nozzle keeps at most one layer pending): its
+  // volume, and when and where the nozzle was blocked.
+  double volume_lost = 0;             // m³
+  double blocked_time = 0;            // s in all
+  double blocked_since = -1;          // s: when the present blockage began; < 0 while it flows
+  Vec3 blocked_at = Vec3::Zero();     // m: where its exit was then
+  struct Blockage {
+    double start = 0, duration = 0;   // s
+    Vec3 position = Vec3::Zero();     // m, the nozzle's exit when it began
+  } longest_blockage;
+  /// Ends the present blockage at `now` (s), keeping it if it is the longest; nothing if it flows.
+  void end_blockage(double now);
 };
 
 /// The timed stages of a step, in the order they run (Solver::step). One table: the stage times,

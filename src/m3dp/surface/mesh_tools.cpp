@@ -1,6 +1,7 @@
 #include "m3dp/surface/mesh_tools.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <numeric>
 #include <vector>
@@ -19,6 +20,34 @@ double signed_volume(const TriangleMesh& mesh) {
   for (const auto& t : mesh.triangles)
     six_volume += as_double(mesh.vertices[t[0]]).dot(as_double(mesh.vertices[t[1]]).cross(as_double(mesh.vertices[t[2]])));
   return six_volume / 6;
+}
+
+double cross_section_area(const TriangleMesh& mesh, int axis, double coordinate) {
+  const int u = (axis + 1) % 3, v = (axis + 2) % 3;  // the plane's axes, u × v along the normal
+  const Eigen::Vector3d normal = Eigen::Vector3d::Unit(axis);
+  double twice_area = 0;
+  for (const auto& t : mesh.triangles) {
+    const std::array<Eigen::Vector3d, 3> corner = {as_double(mesh.vertices[t[0]]), as_double(mesh.vertices[t[1]]),
+                                                   as_double(mesh.vertices[t[2]])};
+    std::array<double, 3> height{};
+    for (int k = 0; k < 3; ++k) height[k] = corner[k][axis] - coordinate;
+    // A corner on the plane counts as below it, so that each cut edge is cut once.
+    std::array<Eigen::Vector3d, 2> cut;
+    int cuts = 0;
+    for (int k = 0; k < 3; ++k) {
+      const int next = (k + 1) % 3;
+      if ((height[k] > 0) == (height[next] > 0)) continue;
+      const double fraction = height[k] / (height[k] - height[next]);
+      if (cuts < 2) cut[cuts] = corner[k] + fraction * (corner[next] - corner[k]);
+      ++cuts;
+    }
+    if (cuts != 2) continue;
+    // The section's boundary runs along normal × (the face's outward normal): anticlockwise around it.
+    const Eigen::Vector3d face_normal = (corner[1] - corner[0]).cross(corner[2] - corner[0]);
+    if ((cut[1] - cut[0]).dot(normal.cross(face_normal)) < 0) std::swap(cut[0], cut[1]);
+    twice_area += cut[0][u] * cut[1][v] - cut[0][v] * cut[1][u];
+  }
+  return twice_area / 2;
 }
 
 double surface_area(const TriangleMesh& mesh) {

@@ -10,6 +10,9 @@ namespace m3dp::surface {
 
 /// Signed volume (m³) by the divergence theorem: positive when the triangles face outwards.
 [[nodiscard]] double signed_volume(const TriangleMesh& mesh);
+/// Area (m²) of a closed, outward-facing mesh's section by the plane where coordinate `axis` (0, 1, 2:
+/// x, y, z) equals `coordinate` (m): the shoelace sum over the segments the triangles cut from it.
+[[nodiscard]] double cross_section_area(const TriangleMesh& mesh, int axis, double coordinate);
 /// Total area (m²).
 [[nodiscard]] double surface_area(const TriangleMesh& mesh);
 

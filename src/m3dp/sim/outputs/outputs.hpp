@@ -11,6 +11,7 @@ namespace m3dp::sim::outputs {
 /// The output's observer for a run, or null where the scene or the options leave it out.
 using MakeOutput = std::unique_ptr<RunObserver> (*)(Simulation& simulation, const RunOptions& options);
 
+std::unique_ptr<RunObserver> make_density_check(Simulation& simulation, const RunOptions& options);    // the measured density (always)
 std::unique_ptr<RunObserver> make_particle_frames(Simulation& simulation, const RunOptions& options);  // particles/*.vtu, particles.pvd
 std::unique_ptr<RunObserver> make_printed_mesh(Simulation& simulation, const RunOptions& options);     // meshes/, the world's printed body
 std::unique_ptr<RunObserver> make_timing_table(Simulation& simulation, const RunOptions& options);     // timing.csv

@@ -17,18 +17,22 @@ class ParticleFrames final : public RunObserver {
     std::filesystem::create_directories(folder_);
   }
   [[nodiscard]] double period() const override { return period_; }
-  void start(const Simulation& simulation) override { write(simulation.solver()); }
-  void observe(const Simulation& simulation, const StepReport& /*report*/) override { write(simulation.solver()); }
+  void start(const Simulation& simulation) override { write(simulation); }
+  void observe(const Simulation& simulation, const StepReport& /*report*/) override { write(simulation); }
   void finish(const Simulation& /*simulation*/, RunSummary& summary) override { summary.frames_written = collection_.size(); }
 
  private:
-  void write(const sph::Solver& solver) {
+  void write(const Simulation& simulation) {
+    const auto& solver = simulation.solver();
     const auto& fluid = solver.fluid();
+    // The density measured where the particles are written (the density pass's own values are from
+    // before the step moved them, and stale for resting particles).
+    const auto& density = simulation.measured_density().density;
     pressure_.resize(fluid.size());
     for (std::size_t i = 0; i < fluid.size(); ++i) pressure_[i] = solver.pressure(i);
     const auto file = folder_ / fmt::format("particles_{:06}.vtu", collection_.size());
     io::write_vtu(file, fluid.position,
-                  {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", fluid.density),
+                  {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", density),
                    io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
                    io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time),
                    io::PointArray::of("viscosity", fluid.viscosity), io::PointArray::of("shear_rate", fluid.shear_rate),

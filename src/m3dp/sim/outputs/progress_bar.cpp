@@ -1,4 +1,5 @@
-// The progress line on the terminal (core/progress.hpp): simulated time, speed, particles, ETA.
+// The progress line on the terminal (core/progress.hpp): simulated time, speed, particles, the latest
+// measured density error, ETA.
 #include <chrono>
 #include <cstdio>
 
@@ -16,16 +17,28 @@ class Progress final : public RunObserver {
   [[nodiscard]] bool is_output() const override { return false; }
   void start(const Simulation& /*simulation*/) override { wall_start_ = std::chrono::steady_clock::now(); }
   void observe(const Simulation& simulation, const StepReport& /*report*/) override {
-    bar_.update({simulation.time(), end_time_, simulation.solver().state().step,
-                 static_cast<long long>(simulation.solver().fluid().size()),
-                 std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count()});
+    bar_.update(sample(simulation, static_cast<long long>(simulation.solver().fluid().size()),
+                       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count()));
   }
   void finish(const Simulation& simulation, RunSummary& summary) override {
-    bar_.finish({simulation.time(), end_time_, simulation.solver().state().step, static_cast<long long>(summary.particles),
-                 summary.wall_time});
+    bar_.finish(sample(simulation, static_cast<long long>(summary.particles), summary.wall_time));
   }
 
  private:
+  [[nodiscard]] ProgressSample sample(const Simulation& simulation, long long particles, double wall_time) const {
+    ProgressSample sample;
+    sample.simulated_time_s = simulation.time();
+    sample.end_time_s = end_time_;
+    sample.steps = simulation.solver().state().step;
+    sample.particles = particles;
+    sample.wall_time_s = wall_time;
+    if (const auto* density = simulation.latest_density_measurement()) {
+      sample.density_error_p99 = density->statistics.p99;
+      sample.density_error_max = density->statistics.max;
+    }
+    return sample;
+  }
+
   ProgressBar bar_{stderr, true};
   double end_time_;
   std::chrono::steady_clock::time_point wall_start_;

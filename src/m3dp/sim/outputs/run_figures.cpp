@@ -1,5 +1,6 @@
-// The summary's figures: sums over the steps (iterations, particle-steps, the largest density error)
-// and, when the run ends, the state's totals, the nozzles' and the robots' reports.
+// The summary's figures: sums over the steps (iterations, particle-steps, the solver's largest density
+// error estimate) and, when the run ends, the state's totals, the volume balance, the nozzles' and the
+// robots' reports. After the printed mesh's observer, whose meshes it reads.
 #include <algorithm>
 #include <chrono>
 
@@ -33,16 +34,39 @@ class RunFigures final : public RunObserver {
     summary.steps = state.step;
     summary.real_time_factor = summary.wall_time > 0 ? summary.simulated_time / summary.wall_time : 0;
     summary.particle_steps_per_second = summary.wall_time > 0 ? particle_steps_ / summary.wall_time : 0;
-    summary.max_density_error = max_density_error_;
+    summary.solver_density_error = max_density_error_;
     summary.particles = solver.fluid().size();
     summary.particles_at_rest = solver.fluid().size() - state.active_count;
     summary.particles_removed = state.particles_removed_total;
     summary.mass_emitted = state.mass_emitted_total;
     summary.mass_lost = state.mass_removed_total;
     summary.mass_final = solver.total_fluid_mass();
-    for (const auto& nozzle : state.nozzles) {
+    const double particle_volume = solver.model().particle_volume;
+    for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+      sph::NozzleState nozzle = state.nozzles[n];
+      nozzle.end_blockage(solver.time());  // one that lasts to the end counts too
       summary.particles_emitted += nozzle.particles_emitted;
       summary.blocked_layers += nozzle.blocked_layers;
+      RunSummary::Nozzle report;
+      report.name = solver.parameters().nozzles[n].name;
+      report.layers_emitted = nozzle.layers_emitted;
+      report.particles_emitted = nozzle.particles_emitted;
+      report.steps_blocked = nozzle.blocked_layers;
+      report.volume_commanded = nozzle.volume_commanded;
+      report.volume_emitted = double(nozzle.particles_emitted) * particle_volume;
+      report.volume_lost = nozzle.volume_lost;
+      report.blocked_time = nozzle.blocked_time;
+      report.longest_blockage = nozzle.longest_blockage;
+      summary.volume.commanded += report.volume_commanded;
+      summary.volume.emitted += report.volume_emitted;
+      summary.volume.lost_at_nozzles += report.volume_lost;
+      summary.nozzles.push_back(report);
+    }
+    summary.volume.removed = double(state.particles_removed_total) * particle_volume;
+    summary.volume.in_particles = double(solver.fluid().size()) * particle_volume;
+    if (!summary.meshes.empty()) {
+      summary.volume.last_mesh = summary.meshes.back().volume;
+      summary.volume.last_mesh_time = summary.meshes.back().time;
     }
     const auto& world = simulation.world();
     for (std::size_t r = 0; r < simulation.robots().size(); ++r) {

@@ -22,19 +22,37 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                         {"file", std::filesystem::relative(mesh.file, std::filesystem::path(summary.output_directory)).generic_string()},
                         {"particles", mesh.particles},
                         {"triangles", mesh.triangles},
+                        {"volume_m3", mesh.volume},
                         {"reused_particles", mesh.reused_particles},
                         {"tiles", mesh.tiles},
                         {"remeshed_tiles", mesh.remeshed_tiles},
                         {"seconds", mesh.seconds}});
   nlohmann::json nozzles = nlohmann::json::array();
-  const auto& solver = simulation.solver();
-  for (std::size_t n = 0; n < solver.state().nozzles.size(); ++n) {
-    const auto& nozzle = solver.state().nozzles[n];
-    nozzles.push_back({{"name", solver.parameters().nozzles[n].name},
-                       {"layers_emitted", nozzle.layers_emitted},
-                       {"particles_emitted", nozzle.particles_emitted},
-                       {"steps_blocked", nozzle.blocked_layers}});
+  for (const auto& nozzle : summary.nozzles) {
+    nlohmann::json entry = {{"name", nozzle.name},
+                            {"layers_emitted", nozzle.layers_emitted},
+                            {"particles_emitted", nozzle.particles_emitted},
+                            {"steps_blocked", nozzle.steps_blocked},
+                            {"volume_commanded_m3", nozzle.volume_commanded},
+                            {"volume_emitted_m3", nozzle.volume_emitted},
+                            {"volume_lost_m3", nozzle.volume_lost},
+                            {"blocked_time_s", nozzle.blocked_time}};
+    if (nozzle.longest_blockage.duration > 0) {
+      const Vec3& at = nozzle.longest_blockage.position;
+      entry["longest_blockage"] = {{"start_s", nozzle.longest_blockage.start},
+                                   {"duration_s", nozzle.longest_blockage.duration},
+                                   {"position_m", {at.x(), at.y(), at.z()}}};
+    }
+    nozzles.push_back(entry);
   }
+  const auto density_check = [](const RunSummary::DensityCheck& check) {
+    return nlohmann::json{{"time_s", check.time},           {"particles", check.statistics.particles},
+                          {"mean", check.statistics.mean},  {"median", check.statistics.median},
+                          {"p99", check.statistics.p99},    {"max", check.statistics.max}};
+  };
+  nlohmann::json materials = nlohmann::json::array();
+  for (const auto& phase : simulation.solver().parameters().phases)
+    materials.push_back({{"name", phase.name}, {"rest_density_kg_m3", phase.density}});
   nlohmann::json robots = nlohmann::json::array();
   for (const auto& robot : summary.robots)
     robots.push_back({{"name", robot.name},
@@ -67,7 +85,22 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"mass_emitted_kg", summary.mass_emitted},
       {"mass_lost_kg", summary.mass_lost},
       {"mass_final_kg", summary.mass_final},
-      {"max_density_error", summary.max_density_error},
+      {"density_error",
+       {{"definition", "rho/rho0 - 1 over all particles, measured from their positions at the end of a step, as in the "
+                       "particle frames"},
+        {"checks", summary.density.checks},
+        {"last", density_check(summary.density.last)},
+        {"worst_p99", density_check(summary.density.worst_p99)},
+        {"worst_max", density_check(summary.density.worst_max)}}},
+      {"volume_m3",
+       {{"commanded", summary.volume.commanded},
+        {"emitted", summary.volume.emitted},
+        {"lost_at_nozzles", summary.volume.lost_at_nozzles},
+        {"removed", summary.volume.removed},
+        {"in_particles", summary.volume.in_particles},
+        {"last_mesh", summary.volume.last_mesh >= 0 ? nlohmann::json(summary.volume.last_mesh) : nlohmann::json()},
+        {"last_mesh_time_s", summary.volume.last_mesh >= 0 ? nlohmann::json(summary.volume.last_mesh_time) : nlohmann::json()}}},
+      {"solver_density_error_estimate", summary.solver_density_error},
       {"mean_density_iterations", summary.mean_density_iterations},
       {"mean_divergence_iterations", summary.mean_divergence_iterations},
       {"mean_viscosity_iterations", summary.mean_viscosity_iterations},
@@ -75,6 +108,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"particles_at_rest", summary.particles_at_rest},
       {"frames_written", summary.frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
+      {"materials", materials},
       {"bodies", bodies},
       {"nozzles", nozzles},
       {"robots", robots},

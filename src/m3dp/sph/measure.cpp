@@ -1,0 +1,60 @@
+#include "m3dp/sph/measure.hpp"
+
+#include <algorithm>
+#include <numeric>
+
+#include "m3dp/core/parallel.hpp"
+
+namespace m3dp::sph {
+
+void measure_density(const Solver& solver, std::vector<Real>& density) {
+  const Model& model = solver.model();
+  const auto& fluid = solver.fluid();
+  const auto& boundary = solver.boundary();
+  density.assign(fluid.size(), Real(0));
+  if (fluid.size() == 0) return;
+  const Real support = model.support_radius, support_squared = support * support;
+  SpatialHashGrid fluid_grid, boundary_grid;
+  fluid_grid.build(fluid.position, support);
+  boundary_grid.build(boundary.position, support);
+  with_kernel(model.settings.kernel, support, [&](const auto& kernel) {
+    parallel_for_each_index(fluid.size(), [&](std::size_t i) {
+      const Vec3 position = fluid.position[i];
+      Real fluid_sum = 0, wall_volume_sum = 0;
+      fluid_grid.for_each_candidate(position, [&](Index, const Vec3& other) {
+        const Real distance_squared = (position - other).squaredNorm();
+        if (distance_squared < support_squared) fluid_sum += kernel.W(std::sqrt(distance_squared));
+      });
+      boundary_grid.for_each_candidate(position, [&](Index b, const Vec3& other) {
+        const Real distance_squared = (position - other).squaredNorm();
+        if (distance_squared < support_squared) wall_volume_sum += boundary.volume[b] * kernel.W(std::sqrt(distance_squared));
+      });
+      const Real rest_density = model.phases[fluid.phase[i]].density;
+      density[i] = rest_density * (model.particle_volume * fluid_sum + wall_volume_sum);
+    }, 512);
+  });
+}
+
+DensityStatistics density_statistics(const Solver& solver, const std::vector<Real>& density) {
+  DensityStatistics statistics;
+  statistics.particles = density.size();
+  if (density.empty()) return statistics;
+  const auto& fluid = solver.fluid();
+  std::vector<double> error(density.size());
+  for (std::size_t i = 0; i < density.size(); ++i)
+    error[i] = double(density[i]) / double(solver.model().phases[fluid.phase[i]].density) - 1;
+  statistics.mean = std::accumulate(error.begin(), error.end(), 0.0) / double(error.size());
+  statistics.max = *std::max_element(error.begin(), error.end());
+  std::sort(error.begin(), error.end());
+  const auto percentile = [&](double fraction) {
+    const double rank = fraction * double(error.size() - 1);
+    const auto below = static_cast<std::size_t>(rank);
+    const std::size_t above = std::min(below + 1, error.size() - 1);
+    return error[below] + (rank - double(below)) * (error[above] - error[below]);
+  };
+  statistics.median = percentile(0.5);
+  statistics.p99 = percentile(0.99);
+  return statistics;
+}
+
+}  // namespace m3dp::sph
