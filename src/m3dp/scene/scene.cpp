@@ -1141,7 +1141,8 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
                           "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
                           "warm_start", "end_time", "bounds", "viscosity_solver", "max_viscosity_error",
                           "max_viscosity_iterations", "xsph", "rest_detection", "rest_speed", "rest_duration",
-                          "wake_speed", "wake_on_load", "load_wake_duration", "surface_tension_model"});
+                          "wake_speed", "wake_on_load", "load_wake_duration", "surface_tension_model", "max_volume_error",
+                          "minimum_spacing", "shifting"});
   sph::SolverSettings& settings = scene_.solver;
   scene_.solver_fields.emplace_back("", where(solver));  // for settings the file does not name
 
@@ -1202,6 +1203,17 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
                                      Presence::optional)) {
     settings.density_tolerance = Real(*error);
   }
+  // The volume correction after the viscosity solve (sph::SolverSettings): its tolerance, and the
+  // least distance of two particles in particle diameters.
+  if (const auto error = read_scalar(solver, "max_volume_error", Quantity::fraction, Limits::any(), Presence::optional))
+    settings.volume_tolerance = Real(*error);
+  record_field(scene_.solver_fields, "volume_tolerance", solver, "max_volume_error");
+  if (const auto spacing = read_scalar(solver, "minimum_spacing", Quantity::plain_number, Limits::any(), Presence::optional))
+    settings.minimum_spacing = Real(*spacing);
+  record_field(scene_.solver_fields, "minimum_spacing", solver, "minimum_spacing");
+  if (const auto factor = read_scalar(solver, "shifting", Quantity::plain_number, Limits::any(), Presence::optional))
+    settings.shifting_factor = Real(*factor);
+  record_field(scene_.solver_fields, "shifting_factor", solver, "shifting");
   if (const auto error = read_scalar(solver, "max_divergence_error", Quantity::fraction, Limits::positive_up_to(1),
                                      Presence::optional)) {
     settings.divergence_tolerance = Real(*error);

@@ -42,6 +42,23 @@ void activate_appended(State& state, std::size_t first) {
   }
 }
 
+Vec3 without_push_into_nozzles(const Model& model, const State& state, const Vec3& position, Vec3 displacement) {
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+    const NozzleState& nozzle = state.nozzles[n];
+    if (!nozzle.extruding) continue;
+    const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
+    const Vec3 offset = position - nozzle.pose.position;
+    const Real axial = offset.dot(axis);
+    const Real radius = model.nozzles[n].inner_diameter / 2 + model.particle_diameter;
+    if (axial < -model.particle_diameter || axial > 2 * model.particle_diameter ||
+        (offset - axial * axis).squaredNorm() > radius * radius)
+      continue;
+    const Real backwards = displacement.dot(axis);
+    if (backwards < 0) displacement -= backwards * axis;
+  }
+  return displacement;
+}
+
 void emit_layers(const Model& model, State& state, Workspace& workspace) {
   auto& fluid = state.fluid;
   const Real diameter = model.particle_diameter;

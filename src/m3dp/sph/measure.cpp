@@ -16,7 +16,16 @@ void measure_density(const Solver& solver, std::vector<Real>& density) {
   const Real support = model.support_radius, support_squared = support * support;
   SpatialHashGrid fluid_grid, boundary_grid;
   fluid_grid.build(fluid.position, support);
-  boundary_grid.build(boundary.position, support);
+  // Only the wall particles within a support radius of the fluid's box: a bed or a robot is often
+  // far larger than the material on it.
+  Eigen::AlignedBox<Real, 3> reach;
+  for (const Vec3& position : fluid.position) reach.extend(position);
+  reach.min().array() -= support;
+  reach.max().array() += support;
+  std::vector<Index> near;
+  for (std::size_t b = 0; b < boundary.size(); ++b)
+    if (reach.contains(boundary.position[b])) near.push_back(static_cast<Index>(b));
+  boundary_grid.build(boundary.position, near, support);
   with_kernel(model.settings.kernel, support, [&](const auto& kernel) {
     parallel_for_each_index(fluid.size(), [&](std::size_t i) {
       const Vec3 position = fluid.position[i];

@@ -158,6 +158,8 @@ std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
     problems.push_back(settings_problem("volume_tolerance", fmt::format("must be in [0, 1), got {}", settings.volume_tolerance)));
   if (!(settings.minimum_spacing >= 0 && settings.minimum_spacing <= 1))
     problems.push_back(settings_problem("minimum_spacing", fmt::format("must be in [0, 1] particle diameters, got {}", settings.minimum_spacing)));
+  if (!(settings.shifting_factor >= 0 && settings.shifting_factor <= 10))
+    problems.push_back(settings_problem("shifting_factor", fmt::format("must be in [0, 10], got {}", settings.shifting_factor)));
   if (!(settings.neighbor_skin >= 0)) problems.push_back(settings_problem("neighbor_skin", fmt::format("must be >= 0 (support radii), got {}", settings.neighbor_skin)));
   if (settings.air_drag && !(settings.air_density > 0)) problems.push_back(settings_problem("air.density", fmt::format("must be > 0 kg/m^3, got {}", settings.air_density)));
   if (settings.air_drag && !(settings.air_viscosity > 0)) problems.push_back(settings_problem("air.viscosity", fmt::format("must be > 0 Pa*s, got {}", settings.air_viscosity)));

@@ -50,6 +50,9 @@ struct SolverSettings {
   Real volume_tolerance = Real(0.01);
   // The least distance between two particles the volume correction leaves, in particle diameters.
   Real minimum_spacing = Real(0.7);
+  // Particle shifting of viscous materials' moving particles (shift_particles): Skillen et al.'s A
+  // (they use 1 to 6); 0 leaves the particles where the solves put them.
+  Real shifting_factor = Real(4);
   Real divergence_tolerance = Real(0.001);    // mean relative density change per step of the divergence solve
   int min_density_iterations = 2;
   int max_density_iterations = 100;

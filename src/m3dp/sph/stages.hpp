@@ -72,6 +72,9 @@ void solve_implicit_viscosity(const Model& model, State& state, Workspace& works
 /// The volume correction: the compression the viscous velocities would leave, solved again with the
 /// density solve and taken out of the positions, not the velocities (pressure/dfsph_bender2017.cpp).
 void correct_volume(const Model& model, State& state, Workspace& workspace);
+/// Particle shifting (Lind et al. 2012, speed-scaled as Skillen et al. 2013) of the moving particles
+/// of viscous materials, where SolverSettings::shifting_factor > 0 (shifting/lind2012.cpp).
+void shift_particles(const Model& model, State& state, Workspace& workspace);
 /// XSPH velocity smoothing (Monaghan 1989) where SolverSettings::xsph_factor > 0 (forces/xsph_monaghan1989.cpp).
 void apply_xsph(const Model& model, State& state, Workspace& workspace);
 
@@ -115,6 +118,10 @@ inline std::vector<Wrench>& thread_body_wrenches(const State& state, Workspace& 
 /// Appends one particle of `phase` at rest density with every field initialised (emission.cpp), after
 /// the resting particles: call activate_appended once a batch is placed. Returns its index.
 std::size_t append_particle(const Model& model, State& state, const Vec3& position, const Vec3& velocity, std::uint16_t phase);
+/// `displacement` (m) of a particle at `position` without its part back into an extruding nozzle's
+/// exit (a diameter up it to two below it, a diameter wider): position corrections leave the pump's
+/// flow alone (emission.cpp).
+Vec3 without_push_into_nozzles(const Model& model, const State& state, const Vec3& position, Vec3 displacement);
 /// Moves the particles appended from `first` on into the active range (before the resting ones).
 void activate_appended(State& state, std::size_t first);
 /// A new particle's least distance to the boundary layer (m): its centre at least a radius in front

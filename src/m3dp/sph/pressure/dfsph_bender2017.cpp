@@ -479,19 +479,7 @@ void correct_volume(const Model& model, State& state, Workspace& workspace) {
       }
     }
     // The pump drives the material in a nozzle's exit: the correction never pushes it back in.
-    for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
-      const NozzleState& nozzle = state.nozzles[n];
-      if (!nozzle.extruding) continue;
-      const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
-      const Vec3 offset = fluid.position[i] - nozzle.pose.position;
-      const Real axial = offset.dot(axis);
-      const Real radius = model.nozzles[n].inner_diameter / 2 + model.particle_diameter;
-      if (axial < -model.particle_diameter || axial > 2 * model.particle_diameter ||
-          (offset - axial * axis).squaredNorm() > radius * radius)
-        continue;
-      const Real backwards = displacement.dot(axis);
-      if (backwards < 0) displacement -= backwards * axis;
-    }
+    displacement = without_push_into_nozzles(model, state, fluid.position[i], displacement);
     fluid.position[i] += displacement;
   }, 4096);
 }
