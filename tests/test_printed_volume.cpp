@@ -1,0 +1,166 @@
+// Printed material keeps its volume (issue 21): every preset material printed as a straight bead and
+// as a ring, then left to come to rest, must hold its rest density inside and its particles evenly
+// spaced. Liquids (water, honey, silicone) are printed into a tray so they pool rather than spread
+// into a film one particle thick. Each case prints what it measured next to the bound.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <string>
+#include <vector>
+
+#include <fmt/format.h>
+
+#include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/simulation.hpp"
+#include "m3dp/sph/measure.hpp"
+#include "m3dp/sph/neighbors/neighbor_search.hpp"
+
+namespace {
+
+using m3dp::Real;
+using m3dp::Vec3;
+
+struct Case {
+  const char* material;
+  bool liquid;  // printed into a tray
+  bool ring;    // a ring of radius 12 mm, else a straight bead 48 mm long
+};
+
+constexpr double kDiameter = 0.01;    // m, nozzle
+constexpr double kRadius = 0.0005;  // m, particle radius: ten particles across the nozzle
+constexpr double kSpeed = 0.05;       // m/s, nozzle and exit speed
+
+std::string scene_text(const Case& c) {
+  // A 5 mm plate 70 mm wide; the tray adds walls 20 mm high around a 36 × 36 mm floor (the ring) or a
+  // 54 × 12 mm one (the bead), so the liquid pools 4.5 to 6 mm deep.
+  const double inner_x = c.ring ? 0.036 : 0.054, inner_y = c.ring ? 0.036 : 0.012;
+  std::string collisions = R"(<collision name="plate"><pose>0 0 -0.0025 0 0 0</pose><geometry><box><size>0.07 0.07 0.005</size></box></geometry></collision>)";
+  if (c.liquid) {
+    const double wall = 0.005, height = 0.02;
+    collisions += fmt::format(R"(<collision name="wall_px"><pose>{} 0 {} 0 0 0</pose><geometry><box><size>{} {} {}</size></box></geometry></collision>)",
+                              (inner_x + wall) / 2, height / 2, wall, inner_y + 2 * wall, height);
+    collisions += fmt::format(R"(<collision name="wall_nx"><pose>{} 0 {} 0 0 0</pose><geometry><box><size>{} {} {}</size></box></geometry></collision>)",
+                              -(inner_x + wall) / 2, height / 2, wall, inner_y + 2 * wall, height);
+    collisions += fmt::format(R"(<collision name="wall_py"><pose>0 {} {} 0 0 0</pose><geometry><box><size>{} {} {}</size></box></geometry></collision>)",
+                              (inner_y + wall) / 2, height / 2, inner_x, wall, height);
+    collisions += fmt::format(R"(<collision name="wall_ny"><pose>0 {} {} 0 0 0</pose><geometry><box><size>{} {} {}</size></box></geometry></collision>)",
+                              -(inner_y + wall) / 2, height / 2, inner_x, wall, height);
+  }
+  const double gap = 0.008;
+  const std::string path = c.ring ? fmt::format("<circle><centre>0 0 {}</centre><radius>0.012</radius><turns>1</turns></circle>", gap)
+                                  : fmt::format("<line><start>-0.024 0 {0}</start><end>0.024 0 {0}</end></line>", gap);
+  return fmt::format(R"(<?xml version="1.0"?>
+<sdf version="1.9">
+  <world name="printed_volume">
+    <gravity>0 0 -9.81</gravity>
+    <model name="bed"><static>true</static><link name="bed">{}</link></model>
+    <plugin name="m3dp" filename="m3dp">
+      <solver>
+        <particle_radius>{}</particle_radius>
+        <max_time_step>0.002</max_time_step>
+        <bounds><min>-0.05 -0.05 -0.02</min><max>0.05 0.05 0.05</max></bounds>
+      </solver>
+      <material name="printed" preset="{}"/>
+      <print_head name="head" material="printed">
+        <nozzle><inner_diameter>{}</inner_diameter><exit_speed>{}</exit_speed><direction>0 0 -1</direction></nozzle>
+        <path start_time="0" speed="{}">{}</path>
+      </print_head>
+    </plugin>
+  </world>
+</sdf>)",
+                     collisions, kRadius, c.material, kDiameter, kSpeed, kSpeed, path);
+}
+
+double percentile(std::vector<double> values, double fraction) {
+  std::sort(values.begin(), values.end());
+  const double rank = fraction * double(values.size() - 1);
+  const auto low = static_cast<std::size_t>(rank);
+  const std::size_t high = std::min(low + 1, values.size() - 1);
+  return values[low] + (rank - double(low)) * (values[high] - values[low]);
+}
+
+class PrintedVolume : public ::testing::TestWithParam<Case> {};
+
+TEST_P(PrintedVolume, RestDensityInsideAndEvenSpacing) {
+  const Case c = GetParam();
+  const m3dp::scene::Scene scene = m3dp::scene::load_scene_from_string(scene_text(c), "printed_volume.sdf");
+  m3dp::sim::Simulation simulation(scene);
+  const double print_time = c.ring ? 2 * 3.14159265 * 0.012 / kSpeed : 0.048 / kSpeed;
+  // Printed, then a second to settle: pastes stop (and rest), liquids pool.
+  while (simulation.time() < print_time + 1.0) simulation.step();
+
+  const auto& solver = simulation.solver();
+  const auto& positions = solver.fluid().position;
+  const std::size_t count = positions.size();
+  ASSERT_GT(count, 1000u);
+  const Real d = solver.model().particle_diameter, support = solver.model().support_radius;
+  const std::vector<Real>& density = simulation.measured_density().density;
+  const Real rest_density = solver.model().phases[0].density;
+
+  // Fluid and wall particles in one grid: a particle whose neighbourhood (walls included) is lopsided
+  // is at the free surface; the interior is every particle farther than a support radius from one.
+  std::vector<Vec3> points(positions.begin(), positions.end());
+  points.insert(points.end(), solver.boundary().position.begin(), solver.boundary().position.end());
+  m3dp::sph::SpatialHashGrid grid;
+  grid.build(points, support);
+  std::vector<char> at_surface(count, 0);
+  std::vector<double> nearest(count, 1e9);
+  for (std::size_t i = 0; i < count; ++i) {
+    Vec3 sum = Vec3::Zero();
+    int neighbours = 0;
+    grid.for_each_candidate(positions[i], [&](std::size_t j, const Vec3& p) {
+      const Real distance = (p - positions[i]).norm();
+      if (j == i || distance >= support) return;
+      sum += p - positions[i];
+      ++neighbours;
+      if (j < count) nearest[i] = std::min(nearest[i], double(distance / d));
+    });
+    at_surface[i] = neighbours == 0 || (sum / Real(neighbours)).norm() > Real(0.2) * d;
+  }
+  m3dp::sph::SpatialHashGrid surface_grid;
+  std::vector<m3dp::Index> surface_subset;
+  for (std::size_t i = 0; i < count; ++i)
+    if (at_surface[i]) surface_subset.push_back(static_cast<m3dp::Index>(i));
+  surface_grid.build(positions, surface_subset, support);
+  std::vector<double> interior_error;
+  for (std::size_t i = 0; i < count; ++i) {
+    bool near_surface = false;
+    surface_grid.for_each_candidate(positions[i], [&](std::size_t, const Vec3& p) {
+      near_surface = near_surface || (p - positions[i]).norm() < support;
+    });
+    if (!near_surface) interior_error.push_back(double(density[i] / rest_density) - 1);
+  }
+
+  const double median = percentile(interior_error, 0.5), p99 = percentile(interior_error, 0.99);
+  // A paste comes to rest with the compression the volume correction leaves, its tolerance (1 % by
+  // default): its interior's median reads +1.00 to +1.07 %. A tolerance of 0.5 % halves that but lets
+  // unyielded columns creep (the slump and buildability tests fail), so the bound for a paste is the
+  // tolerance and a quarter of it; liquids flow until the density solve has them at ρ0.
+  const double tolerance = solver.parameters().settings.volume_tolerance;
+  const double median_bound = c.liquid ? 0.01 : 1.25 * tolerance;
+  const double nearest_median = percentile(nearest, 0.5), nearest_p1 = percentile(nearest, 0.01);
+  std::printf("%s %s: %zu particles, %zu inside: rho/rho0 - 1 median %+.2f %% (bound %.2f %%), p99 %+.2f %% (bound 3 %%); nearest "
+              "neighbour median %.3f d (bound 0.85), 1st percentile %.3f d (bound 0.5)\n",
+              c.material, c.ring ? "ring" : "bead", count, interior_error.size(), 100 * median, 100 * median_bound, 100 * p99, nearest_median,
+              nearest_p1);
+  ASSERT_GE(interior_error.size(), 100u) << "too few particles inside to measure";
+  EXPECT_LT(std::abs(median), median_bound);
+  EXPECT_LT(std::abs(p99), 0.03);
+  EXPECT_GE(nearest_median, 0.85);
+  EXPECT_GE(nearest_p1, 0.5);
+}
+
+std::string case_name(const ::testing::TestParamInfo<Case>& info) {
+  return std::string(info.param.material) + (info.param.ring ? "_ring" : "_bead");
+}
+
+INSTANTIATE_TEST_SUITE_P(Presets, PrintedVolume,
+                         ::testing::Values(Case{"water", true, false}, Case{"water", true, true}, Case{"honey", true, false},
+                                           Case{"honey", true, true}, Case{"silicone", true, false}, Case{"silicone", true, true},
+                                           Case{"clay_paste", false, false}, Case{"clay_paste", false, true},
+                                           Case{"printable_mortar", false, false}, Case{"printable_mortar", false, true},
+                                           Case{"printable_concrete", false, false}, Case{"printable_concrete", false, true}),
+                         case_name);
+
+}  // namespace
