@@ -79,10 +79,7 @@ std::string scene_text(const Case& c) {
 
 double percentile(std::vector<double> values, double fraction) {
   std::sort(values.begin(), values.end());
-  const double rank = fraction * double(values.size() - 1);
-  const auto low = static_cast<std::size_t>(rank);
-  const std::size_t high = std::min(low + 1, values.size() - 1);
-  return values[low] + (rank - double(low)) * (values[high] - values[low]);
+  return m3dp::sph::percentile_of_sorted(values, fraction);
 }
 
 class PrintedVolume : public ::testing::TestWithParam<Case> {};

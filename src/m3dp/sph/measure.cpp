@@ -44,6 +44,13 @@ void measure_density(const Solver& solver, std::vector<Real>& density) {
   });
 }
 
+double percentile_of_sorted(std::span<const double> sorted, double fraction) {
+  const double rank = fraction * double(sorted.size() - 1);
+  const auto below = static_cast<std::size_t>(rank);
+  const std::size_t above = std::min(below + 1, sorted.size() - 1);
+  return sorted[below] + (rank - double(below)) * (sorted[above] - sorted[below]);
+}
+
 DensityStatistics density_statistics(const Solver& solver, const std::vector<Real>& density) {
   DensityStatistics statistics;
   statistics.particles = density.size();
@@ -55,14 +62,8 @@ DensityStatistics density_statistics(const Solver& solver, const std::vector<Rea
   statistics.mean = std::accumulate(error.begin(), error.end(), 0.0) / double(error.size());
   statistics.max = *std::max_element(error.begin(), error.end());
   std::sort(error.begin(), error.end());
-  const auto percentile = [&](double fraction) {
-    const double rank = fraction * double(error.size() - 1);
-    const auto below = static_cast<std::size_t>(rank);
-    const std::size_t above = std::min(below + 1, error.size() - 1);
-    return error[below] + (rank - double(below)) * (error[above] - error[below]);
-  };
-  statistics.median = percentile(0.5);
-  statistics.p99 = percentile(0.99);
+  statistics.median = percentile_of_sorted(error, 0.5);
+  statistics.p99 = percentile_of_sorted(error, 0.99);
   return statistics;
 }
 

@@ -1,6 +1,7 @@
 #pragma once
 // Measurements of the engine's state that outputs and tests trust: computed afresh from positions,
 // not taken from what a stage estimated on the way.
+#include <span>
 #include <vector>
 
 #include "m3dp/sph/solver.hpp"
@@ -20,6 +21,9 @@ struct DensityStatistics {
   std::size_t particles = 0;
   double mean = 0, median = 0, p99 = 0, max = 0;
 };
+/// The `fraction` (0..1) percentile of `sorted` (ascending, not empty) as numpy's default computes it:
+/// linear between the order statistics around the rank.
+double percentile_of_sorted(std::span<const double> sorted, double fraction);
 /// Of `density` (kg/m³, one per particle) against each particle's phase's rest density.
 DensityStatistics density_statistics(const Solver& solver, const std::vector<Real>& density);
 

@@ -59,10 +59,7 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
     // while its shear stress μ γ̇ stays below its (aged) yield stress.
     bool resting = false;
     // An elastic material never rests: its stress depends on where its neighbours are.
-    if (material::has_yield_stress(phase.rheology.model) && !phase.elasticity.enabled && speed_squared < rest_speed_squared) {
-      const Real age = time - fluid.birth_time[i];
-      resting = fluid.viscosity[i] * fluid.shear_rate[i] < phase.ageing.yield_stress(phase.rheology.yield_stress, age);
-    }
+    if (!phase.elasticity.enabled && speed_squared < rest_speed_squared) resting = unyielded(phase, fluid, i, time);
     // A negative clock (woken by load) keeps counting from where it is; motion cannot shorten the hold.
     fluid.rest_time[i] = resting ? fluid.rest_time[i] + time_step : std::min(fluid.rest_time[i], Real(0));
     if (any_resting && speed_squared > wake_speed_squared)

@@ -115,6 +115,12 @@ inline std::vector<Wrench>& thread_body_wrenches(const State& state, Workspace& 
   if (wrenches.size() != state.bodies.size()) wrenches.assign(state.bodies.size(), Wrench{});
   return wrenches;
 }
+/// Whether particle i of a yield-stress material is unyielded at `time` (s): its shear stress μ γ̇
+/// below its yield stress, aged since its birth. False for materials without a yield stress.
+inline bool unyielded(const FluidPhase& phase, const FluidParticles& fluid, std::size_t i, Real time) {
+  return material::has_yield_stress(phase.rheology.model) &&
+         fluid.viscosity[i] * fluid.shear_rate[i] < phase.ageing.yield_stress(phase.rheology.yield_stress, time - fluid.birth_time[i]);
+}
 /// Appends one particle of `phase` at rest density with every field initialised (emission.cpp), after
 /// the resting particles: call activate_appended once a batch is placed. Returns its index.
 std::size_t append_particle(const Model& model, State& state, const Vec3& position, const Vec3& velocity, std::uint16_t phase);

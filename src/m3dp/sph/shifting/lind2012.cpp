@@ -41,9 +41,7 @@ void shift_particles(const Model& model, State& state, Workspace& workspace) {
       const FluidPhase& phase = model.phases[fluid.phase[i]];
       // An elastic material's stress is where its particles are; an unyielded paste moves as a solid.
       if (phase.elasticity.enabled) return;
-      if (material::has_yield_stress(phase.rheology.model) &&
-          fluid.viscosity[i] * fluid.shear_rate[i] < phase.ageing.yield_stress(phase.rheology.yield_stress, time - fluid.birth_time[i]))
-        return;
+      if (unyielded(phase, fluid, i, time)) return;
       // Only where viscosity rules the step (viscous diffusion number ν Δt / h² above 0.1) do the
       // particles move as a block and keep the pairs they were emitted with; water (1e-3 or less)
       // rearranges itself, and shifting its thin films shed them (a sessile drop lost 8 % of its rim).
