@@ -65,15 +65,36 @@ struct FluidParticles {
     for_each_field([&](auto& field) { field.reserve(capacity); });
   }
   void resize(std::size_t count) {
+    if (count < watched_end) watched_touched = true;
     for_each_field([&](auto& field) { field.resize(count); });
   }
   /// Moves particle `from` into slot `to` (used by swap-removal).
   void move(std::size_t from, std::size_t to) {
+    note_touched(from);
+    note_touched(to);
     for_each_field([&](auto& field) { field[to] = field[from]; });
   }
   /// Exchanges two particles (keeps the active ones first, see State::active_count).
   void swap(std::size_t a, std::size_t b) {
+    note_touched(a);
+    note_touched(b);
     for_each_field([&](auto& field) { std::swap(field[a], field[b]); });
+  }
+
+  // Watched slots: the neighbour stage keeps a grid of the settled resting particles, slots
+  // [watched_begin, watched_end); any swap, move or resize that reaches them marks that grid stale,
+  // so that it is built again only then and never compared particle by particle.
+  std::size_t watched_begin = 0, watched_end = 0;
+  bool watched_touched = false;
+  void watch_slots(std::size_t begin, std::size_t end) {
+    watched_begin = begin;
+    watched_end = end;
+    watched_touched = false;
+  }
+
+ private:
+  void note_touched(std::size_t slot) {
+    if (slot >= watched_begin && slot < watched_end) watched_touched = true;
   }
 };
 

@@ -76,9 +76,10 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
     // Where the surface is now and where it will be in two steps: a fast body must not reach resting
     // material before it has woken (it would land inside particles that do not push back).
     for (const Vec3& position : {state.boundary.position[b], Vec3(state.boundary.position[b] + 2 * time_step * velocity)})
-      workspace.resting_grid.for_each_candidate(position, [&](Index j, const Vec3& p) {
-        if (j >= active && (p - position).squaredNorm() < support_squared) wake(j);
-      });
+      for (const SpatialHashGrid* grid : {&workspace.resting_grid, &workspace.recent_resting_grid})
+        grid->for_each_candidate(position, [&](Index j, const Vec3& p) {
+          if (j >= active && (p - position).squaredNorm() < support_squared) wake(j);
+        });
   }, 64);
 }
 

@@ -32,8 +32,9 @@ void Workspace::reserve(std::size_t capacity) {
   solver_velocity.reserve(capacity);
   solver_wall_sums.reserve(capacity);
   resting_grid_subset.reserve(capacity);
-  resting_grid_ids.reserve(capacity);
-  resting_grid_positions.reserve(capacity);
+  recent_resting_slots.reserve(capacity);
+  recent_resting_ids.reserve(capacity);
+  recent_resting_positions.reserve(capacity);
   sort_keys.reserve(capacity);
   permutation.reserve(capacity);
   scratch_vec3.reserve(capacity);

@@ -135,14 +135,19 @@ class CoarseViscosityLevelHolder {
 /// What the stages rebuild or cache; nothing here is needed to continue a run.
 struct Workspace {
   SpatialHashGrid fluid_grid;    // the active particles, every step
-  // The resting particles (neighbours too, but fixed): rebuilt only when the resting range, its
-  // particles or their positions changed (first index, ids and positions as built).
+  // The resting particles (neighbours too, but fixed), in two grids: the settled ones, slots
+  // [settled_begin, settled_end) when built, watched by the fluid (FluidParticles::watch_slots) and
+  // built again only when one of them changed slot or the recent ones grew too many; and the recent
+  // ones (come to rest or moved to the end by an emission since: slots [active_count, settled_begin)
+  // and [settled_end, n)), built again whenever they changed (ids and positions as built).
   SpatialHashGrid resting_grid;
+  SpatialHashGrid recent_resting_grid;
   bool resting_grid_dirty = true;                // built from another state, or never
-  std::size_t resting_grid_first = 0;            // the first resting index when it was built
+  std::size_t settled_begin = 0, settled_end = 0;
   std::vector<Index> resting_grid_subset;
-  std::vector<std::uint64_t> resting_grid_ids;
-  std::vector<Vec3> resting_grid_positions;
+  std::vector<Index> recent_resting_slots;        // the recent grid's particles as built: slots,
+  std::vector<std::uint64_t> recent_resting_ids;  // ids
+  std::vector<Vec3> recent_resting_positions;     // and positions
   // Boundary particles in two grids: static bodies' sorted once (a large floor costs nothing per
   // step), moving bodies' every step, and only those bodies near the fluid or a nozzle (a robot
   // arm's upper links usually are not).

@@ -433,8 +433,8 @@ bool SkinnedNeighborSearch::update(const Inputs& inputs, Real radius, Real skin,
   const std::size_t active = inputs.active_count;
   const std::span<const Vec3> positions = inputs.fluid_positions;
   const Real cell_size = radius + skin;
-  for (const SpatialHashGrid* grid : {inputs.resting_grid, inputs.static_boundary_grid, inputs.moving_boundary_grid})
-    if (grid->point_count() > 0 && grid->cell_size() != cell_size)
+  for (const SpatialHashGrid* grid : {inputs.resting_grid, inputs.recent_resting_grid, inputs.static_boundary_grid, inputs.moving_boundary_grid})
+    if (grid != nullptr && grid->point_count() > 0 && grid->cell_size() != cell_size)
       throw Error(fmt::format("SkinnedNeighborSearch: a grid's cells are {} m, not radius + skin = {} m", grid->cell_size(), cell_size));
   const bool same_setup = valid_ && radius == radius_ && skin == skin_ && inputs.fixed_grids_version == fixed_grids_version_;
   const bool same_particles = same_setup && active == active_count_ && ids_.size() == inputs.fluid_ids.size() &&
@@ -485,8 +485,8 @@ void SkinnedNeighborSearch::search(const Inputs& inputs, Real radius, Real skin)
   const std::span<const Vec3> active_positions = inputs.fluid_positions.first(active);
   active_grid_.build(active_positions, radius + skin);
   const std::span<const Index> query_order = active_grid_.points_in_grid_order();
-  const SpatialHashGrid* fluid_grids[] = {&active_grid_, inputs.resting_grid};
-  find_neighbors(fluid_grids, active_positions, radius + skin, true, fluid_superset_, false, query_order);
+  const SpatialHashGrid* fluid_grids[] = {&active_grid_, inputs.resting_grid, inputs.recent_resting_grid};
+  find_neighbors(std::span(fluid_grids, inputs.recent_resting_grid ? 3 : 2), active_positions, radius + skin, true, fluid_superset_, false, query_order);
   const SpatialHashGrid* static_grids[] = {inputs.static_boundary_grid};
   find_neighbors(static_grids, active_positions, radius + skin, false, boundary_superset_, false, query_order);
   reference_positions_.assign(active_positions.begin(), active_positions.end());
@@ -516,8 +516,8 @@ void SkinnedNeighborSearch::find_mover_lists(const Inputs& inputs, Real radius_s
       ++found;
     };
     const auto cell = active_grid_.cell_of(position);
-    for (const SpatialHashGrid* grid : {static_cast<const SpatialHashGrid*>(&active_grid_), inputs.resting_grid})
-      grid->for_each_point_around_cell(cell, [&](Index j, const Vec3&) {
+    for (const SpatialHashGrid* grid : {static_cast<const SpatialHashGrid*>(&active_grid_), inputs.resting_grid, inputs.recent_resting_grid})
+      if (grid != nullptr) grid->for_each_point_around_cell(cell, [&](Index j, const Vec3&) {
         if (!is_mover_[j]) keep(j);
       });
     for (const Index other : movers_)

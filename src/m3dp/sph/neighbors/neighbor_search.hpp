@@ -172,6 +172,7 @@ class SkinnedNeighborSearch {
     std::span<const std::uint64_t> fluid_ids;       // to notice added, removed and reordered particles
     std::size_t active_count = 0;
     const SpatialHashGrid* resting_grid = nullptr;  // fixed fluid neighbours that do not query
+    const SpatialHashGrid* recent_resting_grid = nullptr;  // more of them (optional)
     const SpatialHashGrid* static_boundary_grid = nullptr;
     const SpatialHashGrid* moving_boundary_grid = nullptr;
     std::span<const Vec3> boundary_positions;

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <bit>
+#include <cmath>
 #include <functional>
 #include <numeric>
 
@@ -17,6 +18,11 @@ namespace {
 /// itself and all of them pairwise, so a few hundred cost less than a new search of every particle.
 std::size_t most_movers(std::size_t active_count) {
   return std::clamp<std::size_t>(active_count / 64, 32, 1024);
+}
+/// Recent resting particles kept in a grid of their own before both resting grids are built again as
+/// one: a full build costs every resting particle, a recent one its own count at each change, so ~√n.
+std::size_t most_recent_resting(std::size_t resting_count) {
+  return std::max<std::size_t>(256, 2 * static_cast<std::size_t>(std::sqrt(static_cast<double>(resting_count))));
 }
 }  // namespace
 
@@ -70,40 +76,76 @@ void choose_neighbor_search(const Model& model, State& state, Workspace& workspa
   }
 }
 
+namespace {
+/// Keeps the two resting grids current (see Workspace::resting_grid).
+void update_resting_grids(State& state, Workspace& workspace, Real cell_size) {
+  auto& fluid = state.fluid;
+  const std::size_t count = fluid.size();
+  const std::size_t active_count = state.active_count;
+  const std::size_t resting_count = count - active_count;
+  const std::size_t most_recent = most_recent_resting(resting_count);
+  // The settled grid holds while none of its slots changed and the recent ones stay few.
+  bool settled_valid = !workspace.resting_grid_dirty && !fluid.watched_touched && workspace.resting_grid.cell_size() == cell_size &&
+                       active_count <= workspace.settled_begin && workspace.settled_end <= count;
+  if (settled_valid && (workspace.settled_begin - active_count) + (count - workspace.settled_end) > most_recent) settled_valid = false;
+  bool changed = false;
+  if (!settled_valid) {
+    // The lowest resting slots stay recent: an emission moves the first resting particle to the end,
+    // and would otherwise touch the settled slots at once.
+    workspace.settled_begin = active_count + std::min(resting_count, most_recent / 2);
+    workspace.settled_end = count;
+    workspace.resting_grid_subset.resize(count - workspace.settled_begin);
+    std::iota(workspace.resting_grid_subset.begin(), workspace.resting_grid_subset.end(), static_cast<Index>(workspace.settled_begin));
+    workspace.resting_grid.build(fluid.position, workspace.resting_grid_subset, cell_size);
+    fluid.watch_slots(workspace.settled_begin, workspace.settled_end);
+    workspace.resting_grid_dirty = false;
+    changed = true;
+  }
+  // The recent ones: compared particle by particle (a few hundred), built again when they differ.
+  auto& subset = workspace.resting_grid_subset;
+  subset.clear();
+  for (std::size_t i = active_count; i < workspace.settled_begin; ++i) subset.push_back(static_cast<Index>(i));
+  for (std::size_t i = workspace.settled_end; i < count; ++i) subset.push_back(static_cast<Index>(i));
+  // Slots too: an emission of n particles moves the n lowest resting ones, in order, n slots up.
+  bool recent_changed = changed || subset.size() != workspace.recent_resting_ids.size() ||
+                        workspace.recent_resting_grid.cell_size() != cell_size ||
+                        !std::equal(subset.begin(), subset.end(), workspace.recent_resting_slots.begin());
+  for (std::size_t k = 0; k < subset.size() && !recent_changed; ++k)
+    recent_changed = fluid.id[subset[k]] != workspace.recent_resting_ids[k] || fluid.position[subset[k]] != workspace.recent_resting_positions[k];
+  if (recent_changed) {
+    workspace.recent_resting_slots.assign(subset.begin(), subset.end());
+    workspace.recent_resting_ids.resize(subset.size());
+    workspace.recent_resting_positions.resize(subset.size());
+    for (std::size_t k = 0; k < subset.size(); ++k) {
+      workspace.recent_resting_ids[k] = fluid.id[subset[k]];
+      workspace.recent_resting_positions[k] = fluid.position[subset[k]];
+    }
+    workspace.recent_resting_grid.build(fluid.position, subset, cell_size);
+  }
+  // Kept neighbour lists hold resting neighbours by slot: any change searches anew (an empty set that
+  // stays empty is no change, so a nozzle's first layers keep their lists).
+  if (changed || recent_changed) ++workspace.fixed_grids_version;
+}
+}  // namespace
+
 void search_neighbors(const Model& model, State& state, Workspace& workspace) {
   const Real support = model.support_radius;
   const Real cell_size = workspace.search_cell_size;
   const auto& fluid = state.fluid;
   const std::size_t active_count = state.active_count;
-  // The active particles in one grid, every step; the resting ones (neighbours too) in another, built
-  // again only when they changed (in a 20-layer wall print, 24.6k resting particles against 185
+  // The active particles in one grid, every step; the resting ones (neighbours too) in two others,
+  // built again only when they changed (in a 20-layer wall print, 24.6k resting particles against 185
   // active ones, their grid had been most of the neighbour stage). Only the active ones query.
   // Lists stay in grid order, which is as deterministic; sorted by index they made the sweeps no faster.
   const std::span<const Vec3> active(fluid.position.data(), active_count);
-  const std::size_t resting_count = fluid.size() - active_count;
-  // With none resting, the (empty) grid stays as it is when the active range grows (an emitted layer).
-  const bool resting_changed =
-      workspace.resting_grid_dirty || workspace.resting_grid_ids.size() != resting_count || workspace.resting_grid.cell_size() != cell_size ||
-      (resting_count > 0 && workspace.resting_grid_first != active_count) ||
-      !std::equal(workspace.resting_grid_ids.begin(), workspace.resting_grid_ids.end(), fluid.id.begin() + std::ptrdiff_t(active_count)) ||
-      !std::equal(workspace.resting_grid_positions.begin(), workspace.resting_grid_positions.end(),
-                  fluid.position.begin() + std::ptrdiff_t(active_count));
-  if (resting_changed) {
-    ++workspace.fixed_grids_version;
-    workspace.resting_grid_dirty = false;
-    workspace.resting_grid_first = active_count;  // the grid holds indices, not ids
-    workspace.resting_grid_ids.assign(fluid.id.begin() + std::ptrdiff_t(active_count), fluid.id.end());
-    workspace.resting_grid_positions.assign(fluid.position.begin() + std::ptrdiff_t(active_count), fluid.position.end());
-    workspace.resting_grid_subset.resize(resting_count);
-    std::iota(workspace.resting_grid_subset.begin(), workspace.resting_grid_subset.end(), static_cast<Index>(active_count));
-    workspace.resting_grid.build(fluid.position, workspace.resting_grid_subset, cell_size);
-  }
+  update_resting_grids(state, workspace, cell_size);
   if (state.skin_in_use) {
     SkinnedNeighborSearch::Inputs inputs;
     inputs.fluid_positions = fluid.position;
     inputs.fluid_ids = fluid.id;
     inputs.active_count = active_count;
     inputs.resting_grid = &workspace.resting_grid;
+    inputs.recent_resting_grid = &workspace.recent_resting_grid;
     inputs.static_boundary_grid = &workspace.static_boundary_grid;
     inputs.moving_boundary_grid = &workspace.moving_boundary_grid;
     inputs.boundary_positions = state.boundary.position;
@@ -120,7 +162,7 @@ void search_neighbors(const Model& model, State& state, Workspace& workspace) {
   // Queries in the active grid's order: a cell's particles come together and share one candidate
   // gather (in index order they drift apart between reorderings).
   const std::span<const Index> query_order = workspace.fluid_grid.points_in_grid_order();
-  const SpatialHashGrid* fluid_grids[] = {&workspace.fluid_grid, &workspace.resting_grid};
+  const SpatialHashGrid* fluid_grids[] = {&workspace.fluid_grid, &workspace.resting_grid, &workspace.recent_resting_grid};
   find_neighbors(fluid_grids, active, support, true, workspace.fluid_neighbors, false, query_order);
   const SpatialHashGrid* boundary_grids[] = {&workspace.static_boundary_grid, &workspace.moving_boundary_grid};
   find_neighbors(boundary_grids, active, support, false, workspace.boundary_neighbors, false, query_order);
