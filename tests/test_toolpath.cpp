@@ -77,7 +77,22 @@ TEST(Toolpath, WaypointFileBecomesStraightMoves) {
   } catch (const m3dp::InputError& error) {
     const std::string message = error.what();
     EXPECT_NE(message.find("bad.csv:2: error: field 3 ('oops') is not a number"), std::string::npos) << message;
-    EXPECT_NE(message.find("bad.csv:3: error: the speed must be > 0 m/s, got -1"), std::string::npos) << message;
+    EXPECT_NE(message.find("bad.csv:3: error: the speed must be > 0 m/s and at most 100 m/s, got -1"), std::string::npos) << message;
     EXPECT_NE(message.find("bad.csv:4: error: expected 5 fields"), std::string::npos) << message;
+  }
+  // nan, inf and a float's overflow are no places or speeds; a first waypoint with a typo is no header.
+  try {
+    m3dp::toolpath::parse_waypoints("x y z speed extrude\nO.1 0 0 0.1 1\n0 nan 0 0.1 1\n0 0 inf 0.1 1\n1e308 0 0 0.1 1\n"
+                                    "0 0 0 nan 1\n0 0 0 1e300 1\n",
+                                    "odd.csv");
+    FAIL() << "no error";
+  } catch (const m3dp::InputError& error) {
+    const std::string message = error.what();
+    EXPECT_NE(message.find("odd.csv:2: error: field 1 ('O.1') is not a number"), std::string::npos) << message;
+    EXPECT_NE(message.find("odd.csv:3: error: field 2 ('nan') must be a finite coordinate within ±10000 m"), std::string::npos) << message;
+    EXPECT_NE(message.find("odd.csv:4: error: field 3 ('inf') must be a finite coordinate"), std::string::npos) << message;
+    EXPECT_NE(message.find("odd.csv:5: error: field 1 ('1e308') must be a finite coordinate"), std::string::npos) << message;
+    EXPECT_NE(message.find("odd.csv:6: error: the speed must be > 0 m/s and at most 100 m/s, got nan"), std::string::npos) << message;
+    EXPECT_NE(message.find("odd.csv:7: error: the speed must be > 0 m/s and at most 100 m/s, got 1e300"), std::string::npos) << message;
   }
 }

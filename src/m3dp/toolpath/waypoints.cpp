@@ -2,7 +2,9 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <charconv>
+#include <cmath>
 #include <optional>
 
 #include "m3dp/core/text.hpp"
@@ -22,6 +24,11 @@ PolylineCurve rectangle_wall(const Vec3& corner, Real size_x, Real size_y, int l
 }
 
 namespace {
+// The largest coordinate (m) and speed (m/s) a waypoint may hold: far beyond any printer, far inside
+// float (a millimetre file read as metres stays inside, nan and inf do not).
+constexpr double kLargestCoordinate = 1e4;
+constexpr double kLargestSpeed = 100;
+
 std::optional<double> number_of(std::string_view field) {
   double value = 0;
   const auto [end, error] = std::from_chars(field.data(), field.data() + field.size(), value);
@@ -44,8 +51,9 @@ std::vector<PathSegment> parse_waypoints(std::string_view text, const std::files
     const auto fields = split_words(line, " \t\r,;");
     if (fields.empty()) return;
     auto problem = [&](std::string message) { problems.push_back(Diagnostic{SourceLocation{file.string(), line_number}, std::move(message)}); };
-    // A header of words before the first waypoint.
-    if (!seen_data && !number_of(fields[0])) {
+    // A header of words before the first waypoint: no field of it a number (a first waypoint with a
+    // typo is an error at its line, not a header).
+    if (!seen_data && std::none_of(fields.begin(), fields.end(), [](std::string_view field) { return number_of(field).has_value(); })) {
       seen_data = true;
       return;
     }
@@ -62,9 +70,14 @@ std::vector<PathSegment> parse_waypoints(std::string_view text, const std::files
         return;
       }
       values[k] = *value;
+      // from_chars reads "nan" and "inf": numbers, but not places.
+      if (k < 3 && !(std::abs(*value) <= kLargestCoordinate)) {
+        problem(fmt::format("field {} ('{}') must be a finite coordinate within ±{:g} m", k + 1, fields[std::size_t(k)], kLargestCoordinate));
+        return;
+      }
     }
-    if (!(values[3] > 0)) {
-      problem(fmt::format("the speed must be > 0 m/s, got {}", values[3]));
+    if (!(values[3] > 0) || !(values[3] <= kLargestSpeed)) {
+      problem(fmt::format("the speed must be > 0 m/s and at most {:g} m/s, got {}", kLargestSpeed, fields[3]));
       return;
     }
     const std::string_view flag = fields[4];
