@@ -2,6 +2,7 @@
 // Particle frames as VTK XML UnstructuredGrid (.vtu, one vertex cell per particle; every array
 // inline as base64, zlib-compressed by default) and a ParaView time-series collection (.pvd). Both
 // open in ParaView as a time series. Inline base64, not appended data: see docs/architecture.md.
+#include <array>
 #include <cstdint>
 #include <filesystem>
 #include <span>
@@ -24,12 +25,19 @@ struct PointArray {
   static PointArray of(std::string name, std::span<const Vec3> values);
   static PointArray of(std::string name, std::span<const std::uint16_t> values);
   static PointArray of(std::string name, std::span<const std::uint64_t> values);
+  static PointArray of(std::string name, std::span<const std::uint8_t> values);
 };
 
 /// A single number stored with the whole dataset (VTK FieldData), e.g. the particle radius.
 struct FieldValue {
   std::string name;
   double value = 0;
+};
+
+/// Numbers stored with the whole dataset as one tuple, e.g. a body's position (x, y, z).
+struct FieldTuple {
+  std::string name;
+  std::vector<double> values;
 };
 
 /// How the arrays' bytes are stored: base64 text, deflated by zlib at `zlib_level` (1 fastest,
@@ -41,6 +49,29 @@ struct VtuEncoding {
 /// Writes `points` and `arrays` (each with points.size() tuples) to `file`, atomically.
 void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays,
                const std::vector<FieldValue>& field_data = {}, const VtuEncoding& encoding = {});
+
+/// Surfaces and lines as VTK XML PolyData (.vtp): `points`, triangles indexing them, and polylines
+/// given as their points' indices (`line_points`) and where each line ends in that list
+/// (`line_ends`, VTK's offsets). Point arrays have points.size() tuples.
+struct PolyData {
+  std::span<const Vec3> points;
+  std::span<const std::array<Index, 3>> triangles;
+  std::span<const Index> line_points;
+  std::span<const Index> line_ends;
+  std::vector<PointArray> point_arrays;
+  std::vector<FieldTuple> field_data;
+};
+
+/// Writes `poly_data` to `file`, atomically, inline base64 as write_vtu.
+void write_vtp(const std::filesystem::path& file, const PolyData& poly_data, const VtuEncoding& encoding = {});
+
+/// A VTK XML MultiBlockDataSet (.vtm): one named block for each file (stored relative to the
+/// .vtm's folder), in order. ParaView shows the names in its block hierarchy.
+struct Block {
+  std::string name;
+  std::filesystem::path file;
+};
+void write_vtm(const std::filesystem::path& file, const std::vector<Block>& blocks);
 
 /// A .pvd collection that is rewritten (atomically) each time a frame is added.
 class PvdCollection {

@@ -94,6 +94,37 @@ Trajectory::Trajectory(std::vector<PathSegment> segments, double start_time) : s
 
 double Trajectory::end_time() const { return pieces_.empty() ? start_time_ : pieces_.back().begin_time + pieces_.back().duration; }
 
+std::vector<PathVertex> Trajectory::polyline(Real max_chord) const {
+  std::vector<PathVertex> vertices;
+  for (const Piece& piece : pieces_) {
+    if (piece.length <= 0) continue;
+    const bool straight = std::holds_alternative<LineCurve>(piece.curve);
+    const bool polyline = std::holds_alternative<PolylineCurve>(piece.curve);
+    std::vector<Real> arcs;
+    if (polyline) {
+      // Its own corners, so that no corner is cut.
+      const auto& points = std::get<PolylineCurve>(piece.curve).points;
+      Real arc = 0;
+      arcs.push_back(0);
+      for (std::size_t p = 1; p < points.size(); ++p) arcs.push_back(arc += (points[p] - points[p - 1]).norm());
+    } else {
+      const auto chords = straight ? 1 : std::max<std::size_t>(1, static_cast<std::size_t>(std::ceil(piece.length / max_chord)));
+      for (std::size_t c = 0; c <= chords; ++c) arcs.push_back(piece.length * static_cast<Real>(c) / static_cast<Real>(chords));
+    }
+    for (std::size_t a = 0; a < arcs.size(); ++a) {
+      const Vec3 position = curve_point(piece.curve, arcs[a]);
+      const double time = piece.begin_time + arcs[a] / piece.speed;
+      // A piece's first vertex is the previous piece's last one: it takes over its extrusion flag.
+      if (a == 0 && !vertices.empty() && (vertices.back().position - position).norm() < Real(1e-9)) {
+        vertices.back().extruding = piece.extrude;
+        continue;
+      }
+      vertices.push_back({position, time, a + 1 < arcs.size() && piece.extrude});
+    }
+  }
+  return vertices;
+}
+
 TrajectorySample Trajectory::sample(double time) const {
   TrajectorySample sample;
   if (pieces_.empty()) return sample;

@@ -48,6 +48,14 @@ struct TrajectorySample {
   Real volume_rate = 0;          // m³/s asked of the nozzle; 0 = its nominal flow
 };
 
+/// A vertex of a path drawn as a polyline: where the head is at `time` and whether it extrudes on
+/// the way from this vertex to the next.
+struct PathVertex {
+  Vec3 position = Vec3::Zero();  // m
+  double time = 0;               // s
+  bool extruding = false;
+};
+
 /// Arc length of a curve (m) and the point at arc length s.
 Real curve_length(const Curve& curve);
 Vec3 curve_point(const Curve& curve, Real arc_length);
@@ -62,6 +70,9 @@ class Trajectory {
   [[nodiscard]] double start_time() const { return start_time_; }
   [[nodiscard]] double end_time() const;
   [[nodiscard]] bool empty() const { return pieces_.empty(); }
+  /// The whole path as a polyline: lines as their end points, arcs in chords no longer than
+  /// `max_chord` (m); pauses leave no vertex. Viewers draw it, outputs write it.
+  [[nodiscard]] std::vector<PathVertex> polyline(Real max_chord) const;
 
  private:
   struct Piece {

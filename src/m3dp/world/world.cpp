@@ -699,17 +699,34 @@ double World::tool_tracking_max(ToolIndex tool) const { return impl_->tools.at(t
 
 std::size_t World::link_count() const { return impl_->links.size(); }
 
-LinkShapes World::link_shapes(LinkIndex link) const {
-  const auto& record = impl_->links.at(link);
+namespace {
+LinkShapes shapes_of(const BodyNode& node, std::string name) {
   LinkShapes result;
-  result.name = record.name;
-  for (const ShapeNode* shape_node : record.node->getShapeNodesWith<dart::dynamics::CollisionAspect>()) {
+  result.name = std::move(name);
+  for (const ShapeNode* shape_node : node.getShapeNodesWith<dart::dynamics::CollisionAspect>()) {
     if (auto shape = m3dp_shape_of(*shape_node->getShape())) {
       result.shapes.push_back(std::move(*shape));
       result.poses.push_back(pose_of(shape_node->getRelativeTransform()));
     }
   }
   return result;
+}
+}  // namespace
+
+LinkShapes World::link_shapes(LinkIndex link) const {
+  const auto& record = impl_->links.at(link);
+  return shapes_of(*record.node, record.name);
+}
+
+std::vector<std::pair<LinkShapes, Pose>> World::fixed_robot_links() const {
+  std::vector<std::pair<LinkShapes, Pose>> links;
+  for (const auto& robot : impl_->robots)
+    for (std::size_t b = 0; b < robot.skeleton->getNumBodyNodes(); ++b) {
+      const BodyNode* node = robot.skeleton->getBodyNode(b);
+      if (node->getNumDependentGenCoords() != 0 || node->getShapeNodesWith<dart::dynamics::CollisionAspect>().empty()) continue;
+      links.emplace_back(shapes_of(*node, robot.name + "/" + node->getName()), pose_of(node->getWorldTransform()));
+    }
+  return links;
 }
 
 Pose World::link_pose(LinkIndex link) const { return pose_of(impl_->links.at(link).node->getWorldTransform()); }

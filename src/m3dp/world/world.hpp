@@ -152,6 +152,9 @@ class World {
   [[nodiscard]] std::size_t link_count() const;
   [[nodiscard]] LinkShapes link_shapes(LinkIndex link) const;
   [[nodiscard]] Pose link_pose(LinkIndex link) const;
+  /// Robot links welded to the world (a fixed base) with collision shapes: not movable, so not
+  /// among the links above, but drawn by the outputs. Each with its pose in the world.
+  [[nodiscard]] std::vector<std::pair<LinkShapes, Pose>> fixed_robot_links() const;
   [[nodiscard]] Vec3 link_linear_velocity(LinkIndex link) const;   // m/s of the link frame's origin, world
   [[nodiscard]] Vec3 link_angular_velocity(LinkIndex link) const;  // rad/s, world
   /// A force (N, world) at the link origin and a torque (N·m, world) applied in every world step
