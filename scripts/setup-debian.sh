@@ -15,6 +15,11 @@ packages=(
   libdart-dev libdart-collision-bullet-dev libdart-external-ikfast-dev libdart-utils-urdf-dev
   # ParaView's pvpython reads our .pvd/.vtu files back in the end-to-end tests.
   paraview python3-paraview python3
+  # Recordings: Foxglove's messages as protobuf (protoc makes the code and the schemas' descriptors),
+  # MCAP chunks compressed with zstd; the live stream's WebSocket server (websocketpp on asio).
+  protobuf-compiler libprotobuf-dev libzstd-dev libwebsocketpp-dev libasio-dev
+  # Node for the readers we did not write (the MCAP reader, the Foxglove schemas; npm ci below).
+  nodejs
 )
 # Kept at the candidate version: ParaView and the XML parser under its readers. Debian 12's expat
 # security update 2.5.0-1+deb12u5 made ParaView 5.11 unable to read raw appended VTK data; a machine
@@ -57,11 +62,23 @@ for package in "${current[@]}"; do
   fi
 done
 
+# npm: Debian's package, unless the installed Node brings its own (NodeSource's does, and conflicts with it).
+command -v npm > /dev/null || [ -n "$(installed_version npm)" ] || wanted+=(npm)
+
 if [ ${#wanted[@]} -eq 0 ]; then
   echo "setup: all ${#packages[@]} Debian packages installed, ${current[*]} at Debian's current versions"
-  exit 0
+else
+  echo "setup: installing ${wanted[*]}"
+  $lists_refreshed || "${sudo_cmd[@]}" apt-get update -qq
+  "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${wanted[@]}"
 fi
 
-echo "setup: installing ${wanted[*]}"
-$lists_refreshed || "${sudo_cmd[@]}" apt-get update -qq
-"${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${wanted[@]}"
+# The npm packages the tests read our files with, exactly as package-lock.json pins them; again
+# only when the lockfile changed since the last install (npm ci removes node_modules first).
+cd "$(dirname "$0")/.."
+if [ node_modules/.m3dp-installed -nt package-lock.json ]; then
+  echo "setup: npm packages installed as package-lock.json pins them"
+else
+  npm ci --no-audit --no-fund --loglevel=error
+  touch node_modules/.m3dp-installed
+fi

@@ -1,0 +1,83 @@
+#pragma once
+// The run's messages in Foxglove's schemas (docs.foxglove.dev/docs/sdk/schemas), encoded as
+// protobuf: scene entities (triangles and lines in a frame), frame transforms, point clouds, and
+// M3DP's own run statistics and joint states. Every way out of a run (run.mcap, the live stream)
+// sends these bytes; protobuf's headers stay in this module.
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "m3dp/core/geometry.hpp"
+#include "m3dp/core/types.hpp"
+
+namespace m3dp::record {
+
+/// The schema names M3DP writes ("foxglove.SceneUpdate", …, "m3dp.RunStats", "m3dp.JointStates").
+[[nodiscard]] std::vector<std::string> schema_names();
+/// A schema's protobuf FileDescriptorSet (its file and every file it imports): what MCAP schema
+/// records and Foxglove WebSocket advertisements carry. Throws m3dp::Error for an unknown name.
+[[nodiscard]] std::string schema_descriptor_set(std::string_view schema_name);
+
+struct Color {
+  double r = 0.6, g = 0.6, b = 0.6, a = 1;
+};
+
+/// One foxglove.SceneEntity: triangles and line strips in `frame_id` (frame-locked: it moves with the frame).
+struct SceneEntity {
+  std::string id;
+  std::string frame_id = "world";
+  Color color;
+  const TriangleMesh* triangles = nullptr;           // in the frame (m); null: none
+  std::vector<std::vector<Vec3>> line_strips;        // in the frame (m)
+  double line_thickness = 0.003;                     // m
+  std::vector<std::pair<std::string, std::string>> metadata;
+};
+/// foxglove.SceneUpdate: these entities added or replaced, and the ids given deleted, at `time` (s).
+[[nodiscard]] std::string encode_scene_update(double time, std::span<const SceneEntity> entities,
+                                              std::span<const std::string> deleted_ids = {});
+
+struct FrameTransform {
+  std::string parent;
+  std::string child;
+  Pose pose;  // of the child in the parent (m)
+};
+/// foxglove.FrameTransforms at `time` (s).
+[[nodiscard]] std::string encode_frame_transforms(double time, std::span<const FrameTransform> transforms);
+
+/// A field of a foxglove.PointCloud's packed points.
+struct PointField {
+  enum class Type : int { uint8 = 1, uint16 = 3, uint32 = 5, float32 = 7, float64 = 8 };
+  std::string name;
+  std::uint32_t offset = 0;  // bytes into the point
+  Type type = Type::float32;
+};
+/// foxglove.PointCloud at `time` (s) in `frame_id`: `point_count` points of `stride` bytes each,
+/// which `pack(bytes)` writes into the message's data (point_count · stride bytes) in place.
+void encode_point_cloud(double time, std::string_view frame_id, std::span<const PointField> fields, std::uint32_t stride,
+                        std::size_t point_count, const std::function<void(char* bytes)>& pack, std::string& out);
+
+struct NozzleStatus {
+  std::string name;
+  bool extruding = false;
+  double volume_rate = 0;  // m³/s
+  Vec3 position = Vec3::Zero();
+};
+struct RunStats {
+  double time = 0, real_time_factor = 0;
+  std::uint64_t particles = 0, resting_particles = 0;
+  double density_error_mean = 0, density_error_max = 0, time_step = 0;
+  std::uint32_t pressure_iterations = 0;
+  double step_ms = 0, neighbor_ms = 0, pressure_ms = 0, world_ms = 0;
+  std::vector<NozzleStatus> nozzles;
+};
+[[nodiscard]] std::string encode_run_stats(const RunStats& stats);
+
+/// m3dp.JointStates: a robot's joints (rad or m) at `time` (s).
+[[nodiscard]] std::string encode_joint_states(double time, std::string_view robot, std::span<const std::string> names,
+                                              std::span<const double> positions);
+
+}  // namespace m3dp::record
