@@ -207,6 +207,19 @@ TEST(Scene, ValidSceneLoadsInSiUnits) {
   EXPECT_TRUE(scene.output.write_particles);
 }
 
+TEST(Scene, OutputRecordsAndServes) {
+  const std::string text = replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles><mcap>true</mcap><serve>0</serve>");
+  const auto scene = load_scene_from_string(text, "scenes/valid.sdf");
+  EXPECT_TRUE(scene.output.mcap);
+  ASSERT_TRUE(scene.output.serve_port.has_value());
+  EXPECT_EQ(*scene.output.serve_port, 0);
+  EXPECT_FALSE(load_scene_from_string(valid_scene(), "scenes/valid.sdf").output.serve_port.has_value());
+  expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<serve>70000</serve>"),
+                  "<serve>", "<serve> is a TCP port, 0 (any free one) to 65535, got 70000");
+  expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<mcap>yes</mcap>"),
+                  "<mcap>", "<mcap> must be true or false (or 1 or 0), got 'yes'");
+}
+
 TEST(Scene, NegativeParticleRadius) {
   const std::string text = replaced(valid_scene(), R"(<particle_radius unit="mm">5</particle_radius>)",
                                     "<particle_radius>-0.01</particle_radius>");

@@ -1,5 +1,5 @@
 // m3dp — command-line front end.
-//   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N]
+//   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N] [--record] [--serve [PORT]] [--pace F]
 //   m3dp validate SCENE
 //   m3dp bench [--particles N] [--steps S] ...
 //   m3dp mesh INPUT -o OUT [--method M] ...
@@ -28,8 +28,8 @@ std::atomic<bool> g_stop_requested{false};
 
 extern "C" void request_stop(int) { g_stop_requested.store(true); }
 
-int run_command(const std::filesystem::path& scene_file, std::filesystem::path output, std::optional<double> until,
-                int threads, bool quiet) {
+/// `m3dp run`: `options` holds what the command line set (until, progress, record, live stream, pace).
+int run_command(const std::filesystem::path& scene_file, std::filesystem::path output, int threads, m3dp::sim::RunOptions options) {
   using namespace m3dp;
   ThreadLimit thread_limit(threads);
   const scene::Scene scene = scene::load_scene(scene_file);
@@ -43,10 +43,7 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
 
   std::signal(SIGINT, request_stop);
   std::signal(SIGTERM, request_stop);
-  sim::RunOptions options;
   options.output_directory = output;
-  options.until = until;
-  options.show_progress = !quiet;
   options.stop_requested = &g_stop_requested;
   const sim::RunSummary summary = sim::run_simulation(simulation, options);
   std::signal(SIGINT, SIG_DFL);
@@ -81,16 +78,26 @@ int main(int argc, char** argv) {
   app.require_subcommand(1);
 
   std::filesystem::path scene_file, output;
-  std::optional<double> until;
   int threads = 0;
   bool quiet = false;
+  m3dp::sim::RunOptions run_options;
+  std::optional<int> serve_port;
   auto* run = app.add_subcommand("run", "Run a scene and write its results folder");
   run->add_option("scene", scene_file, "Scene file (.sdf)")->required()->check(CLI::ExistingFile);
   run->add_option("-o,--output", output, "Output folder (default out/<scene name>)");
-  run->add_option("--until", until, "Stop at this simulated time in seconds (default: the scene's end_time)")
+  run->add_option("--until", run_options.until, "Stop at this simulated time in seconds (default: the scene's end_time)")
       ->check(CLI::PositiveNumber);
   run->add_option("--threads", threads, "Worker threads (default: all cores)")->check(CLI::NonNegativeNumber);
   run->add_flag("-q,--quiet", quiet, "No progress bar");
+  run->add_flag("--record", run_options.record, "Also write run.mcap: the run in Foxglove's messages (Foxglove, Lichtblick, Rerun)");
+  run->add_option("--serve", serve_port, "Stream the run live: a Foxglove WebSocket server on localhost at PORT (default 8765; 0: any free port)")
+      ->expected(0, 1)
+      ->default_str("8765")
+      ->check(CLI::Range(0, 65535));
+  run->add_option("--live-rate", run_options.live_rate, "Frames per second the live stream sends at most (default 20)")
+      ->check(CLI::PositiveNumber);
+  run->add_option("--pace", run_options.pace, "Run at most this many times real time (1: real time, to watch it live)")
+      ->check(CLI::PositiveNumber);
 
   std::filesystem::path validate_file;
   auto* validate = app.add_subcommand("validate", "Check a scene file and list every problem with file:line");
@@ -106,7 +113,11 @@ int main(int argc, char** argv) {
 
   CLI11_PARSE(app, argc, argv);
   try {
-    if (run->parsed()) return run_command(scene_file, output, until, threads, quiet);
+    if (run->parsed()) {
+      run_options.show_progress = !quiet;
+      if (run->count("--serve") > 0) run_options.serve_port = static_cast<std::uint16_t>(serve_port.value_or(8765));
+      return run_command(scene_file, output, threads, run_options);
+    }
     if (validate->parsed()) return validate_command(validate_file);
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);
     if (mesh->parsed()) return m3dp::app::mesh_command(mesh_options);

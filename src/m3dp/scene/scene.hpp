@@ -108,6 +108,8 @@ struct PrintHead {
 struct OutputSettings {
   Real particles_period = Real(0.02);  // s of simulated time between particle frames; 0 = none
   bool write_particles = true;
+  bool mcap = false;                   // run.mcap: the run in Foxglove's messages (also `m3dp run --record`)
+  std::optional<std::uint16_t> serve_port;  // a live Foxglove WebSocket stream on this port (0: any free one)
 };
 
 /// Surface meshes made during the run (issue 4): every `period` seconds of simulated time the fluid

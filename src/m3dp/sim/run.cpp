@@ -14,8 +14,9 @@ namespace {
 /// line shows it), the printed mesh after the frames (as the step's files), the figures after the
 /// meshes they count, the summary file last.
 constexpr outputs::MakeOutput kOutputs[] = {
-    outputs::make_density_check,   outputs::make_particle_frames, outputs::make_printed_mesh, outputs::make_timing_table,
-    outputs::make_run_figures,     outputs::make_progress_bar, outputs::make_summary_file,
+    outputs::make_density_check, outputs::make_particle_frames, outputs::make_world_frames, outputs::make_printed_mesh,
+    outputs::make_run_messages,  outputs::make_timing_table,    outputs::make_run_figures,  outputs::make_progress_bar,
+    outputs::make_summary_file,  outputs::make_pace,
 };
 }  // namespace
 
@@ -105,9 +106,18 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
   else
     text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step\n",
                         summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations);
-  if (!output_directory.empty())
-    text += fmt::format("  output      {} ({} particle frames; open particles.pvd in ParaView)\n", output_directory.string(),
-                        summary.frames_written);
+  if (!output_directory.empty()) {
+    text += fmt::format("  output      {} ({} particle frames; open particles.pvd{} in ParaView)\n", output_directory.string(),
+                        summary.frames_written, summary.world_frames_written > 0 ? " and world.pvd" : "");
+  }
+  if (!summary.recording.file.empty())
+    text += fmt::format("  recording   {}: {} messages, {:.1f} MB (Foxglove or Lichtblick: open the file; {:.2f} s to make and write)\n",
+                        summary.recording.file, summary.recording.messages, 1e-6 * double(summary.recording.bytes),
+                        summary.recording.encode_seconds);
+  if (summary.live.port != 0)
+    text += fmt::format("  live        ws://127.0.0.1:{}: {} clients, {} messages sent ({:.1f} MB), {} dropped for slow clients\n",
+                        summary.live.port, summary.live.clients, summary.live.messages_sent, 1e-6 * double(summary.live.bytes_sent),
+                        summary.live.messages_dropped);
   for (const auto& robot : summary.robots)
     text += fmt::format("  robot       {}: nozzle {:.2f} mm rms from its path (max {:.2f} mm); contacts: {} with robots, {} "
                         "with printed material, {} other\n",

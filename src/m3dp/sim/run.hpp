@@ -27,6 +27,13 @@ struct RunOptions {
   /// speed. True: the solver waits for each mesh, which then joins the world at the step it was asked
   /// for: reproducible runs (tests, comparisons), at the cost of the meshing time.
   bool wait_for_meshes = false;
+  bool record = false;  // run.mcap even where the scene's <output><mcap> does not ask for it
+  /// The live stream's port (a Foxglove WebSocket server on localhost; 0: any free port), where the
+  /// scene's <output><serve> does not give one or to override it; none: no live stream.
+  std::optional<std::uint16_t> serve_port;
+  double live_rate = 20;  // frames per wall second the live stream sends at most
+  /// At most this many simulated seconds per wall second (1: real time, to watch a run live); 0: as fast as it can.
+  double pace = 0;
 };
 
 enum class RunStatus { completed, interrupted, failed };
@@ -88,6 +95,19 @@ struct RunSummary {
   double mean_viscosity_iterations = 0;   // conjugate-gradient iterations of the implicit viscosity solve
   bool granular = false;                  // the materials are discrete spheres: no pressure or viscosity solve
   std::size_t frames_written = 0;
+  std::size_t world_frames_written = 0;   // world/*.vtm in world.pvd
+  struct Recording {
+    std::string file;                     // run.mcap; empty: not recorded
+    std::uint64_t messages = 0, bytes = 0;
+    std::uint32_t chunks = 0;
+    double encode_seconds = 0;            // wall s spent making and sending the run's messages (file and live)
+  } recording;
+  struct Live {
+    std::uint16_t port = 0;               // 0: no live stream
+    std::size_t clients = 0;              // connected over the run
+    std::uint64_t messages_sent = 0, bytes_sent = 0;
+    std::uint64_t messages_dropped = 0;   // unsent when newer ones came (slow clients)
+  } live;
   std::vector<MeshingWorker::Mesh> meshes;  // surface meshes in meshes/ (scene <meshing>)
   std::size_t meshes_written = 0;
   std::size_t meshes_skipped = 0;    // requests that came while the mesher was still busy

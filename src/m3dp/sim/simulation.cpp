@@ -61,24 +61,31 @@ void Simulation::add_robots() {
   head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter());
 }
 
+Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
+  const auto& head = scene_.print_heads.at(head_index);
+  const auto sample = head.trajectory.sample(solver_.time());
+  NozzleState state;
+  state.pose.position = sample.position;
+  state.pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
+  state.velocity = sample.velocity;
+  if (head_tools_[head_index]) {
+    // A robot carries it: material leaves where the nozzle really is, along the tool's z axis
+    // (the solver emits along its pose's −z: turn the tool frame over its x axis).
+    state.pose = world_.tool_pose(*head_tools_[head_index]) * Pose{Vec3::Zero(), Quat(Eigen::AngleAxis<Real>(Real(kPi), Vec3::UnitX()))};
+    state.velocity = world_.tool_linear_velocity(*head_tools_[head_index]);
+  }
+  // A G-code move asks for its own flow (E over time); other paths use the nozzle's nominal one.
+  const Real nominal_flow = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed;
+  state.flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
+  state.extruding = sample.extruding;
+  state.volume_rate = sample.extruding ? nominal_flow * state.flow_scale : Real(0);
+  return state;
+}
+
 void Simulation::update_print_heads() {
   for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
-    const auto& head = scene_.print_heads[i];
-    const auto sample = head.trajectory.sample(solver_.time());
-    Pose pose;
-    pose.position = sample.position;
-    pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
-    Vec3 velocity = sample.velocity;
-    if (head_tools_[i]) {
-      // A robot carries it: material leaves where the nozzle really is, along the tool's z axis
-      // (the solver emits along its pose's −z: turn the tool frame over its x axis).
-      pose = world_.tool_pose(*head_tools_[i]) * Pose{Vec3::Zero(), Quat(Eigen::AngleAxis<Real>(Real(kPi), Vec3::UnitX()))};
-      velocity = world_.tool_linear_velocity(*head_tools_[i]);
-    }
-    // A G-code move asks for its own flow (E over time); other paths use the nozzle's nominal one.
-    const Real nominal_flow = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed;
-    const Real flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
-    solver_.set_nozzle(static_cast<Index>(i), pose, velocity, sample.extruding, flow_scale);
+    const NozzleState state = nozzle_state(i);
+    solver_.set_nozzle(static_cast<Index>(i), state.pose, state.velocity, state.extruding, state.flow_scale);
   }
 }
 
@@ -111,6 +118,10 @@ const Simulation::DensityMeasurement& Simulation::measured_density() const {
   return density_measurement_;
 }
 
-void Simulation::set_printed_mesh(const TriangleMesh& mesh) { world_.set_static_mesh("printed_material", mesh); }
+void Simulation::set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh) {
+  world_.set_static_mesh("printed_material", *mesh);
+  printed_mesh_ = std::move(mesh);
+  ++printed_mesh_version_;
+}
 
 }  // namespace m3dp::sim

@@ -2,6 +2,7 @@
 // Simulation: owns one of each module for a scene and runs the step of the architecture. The run
 // around it (its observers and summary) is run.hpp's.
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -23,9 +24,23 @@ class Simulation {
   /// world is stepped to the fluid's clock.
   const sph::StepStats& step();
 
+  /// Where a print head's nozzle is and what it does now: its exit frame (material leaves along the
+  /// pose's −z), velocity (m/s), whether it extrudes, and the flow it is asked for (m³/s).
+  struct NozzleState {
+    Pose pose;
+    Vec3 velocity = Vec3::Zero();
+    bool extruding = false;
+    Real volume_rate = 0;
+    Real flow_scale = 1;  // volume_rate over the nozzle's nominal π D²/4 · U
+  };
+  [[nodiscard]] NozzleState nozzle_state(std::size_t head) const;
+
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
   /// collision body "printed_material", replacing the previous one.
-  void set_printed_mesh(const TriangleMesh& mesh);
+  void set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh);
+  /// The printed material's mesh in the world now (null before the first), and how many were set.
+  [[nodiscard]] const std::shared_ptr<const TriangleMesh>& printed_mesh() const { return printed_mesh_; }
+  [[nodiscard]] std::size_t printed_mesh_version() const { return printed_mesh_version_; }
 
   /// Every fluid particle's density measured where the particles are now (sph::measure_density), with
   /// its statistics: what the particle frames write and the run reports. Measured at most once a step.
@@ -72,6 +87,8 @@ class Simulation {
   std::vector<std::optional<world::ToolIndex>> head_tools_;
   std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;
+  std::shared_ptr<const TriangleMesh> printed_mesh_;
+  std::size_t printed_mesh_version_ = 0;
   double last_coupling_ms_ = 0, last_world_ms_ = 0;
   mutable DensityMeasurement density_measurement_;  // a cache of what the state is: observers share it
 };

@@ -35,7 +35,7 @@ class PrintedMesh final : public RunObserver {
     }
     auto newest = worker_.latest_mesh();
     if (newest && newest != inserted_) {
-      simulation_.set_printed_mesh(*newest);
+      simulation_.set_printed_mesh(newest);
       inserted_ = std::move(newest);
       ++inserted_count_;
     }

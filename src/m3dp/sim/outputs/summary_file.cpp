@@ -68,6 +68,20 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                            {"tracking_max_m", base->tracking_max},
                            {"odometry_error_m", base->odometry_error},
                            {"distance_m", base->distance}};
+  nlohmann::json recording;  // null: not recorded
+  if (!summary.recording.file.empty())
+    recording = {{"file", std::filesystem::relative(summary.recording.file, summary.output_directory).generic_string()},
+                 {"messages", summary.recording.messages},
+                 {"bytes", summary.recording.bytes},
+                 {"chunks", summary.recording.chunks},
+                 {"encode_seconds", summary.recording.encode_seconds}};
+  nlohmann::json live;  // null: no live stream
+  if (summary.live.port != 0)
+    live = {{"port", summary.live.port},
+            {"clients", summary.live.clients},
+            {"messages_sent", summary.live.messages_sent},
+            {"bytes_sent", summary.live.bytes_sent},
+            {"messages_dropped", summary.live.messages_dropped}};
   return {
       {"scene", simulation.scene().file.string()},
       {"status", to_string(summary.status)},
@@ -107,6 +121,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"granular", summary.granular},
       {"particles_at_rest", summary.particles_at_rest},
       {"frames_written", summary.frames_written},
+      {"world_frames_written", summary.world_frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"materials", materials},
       {"bodies", bodies},
@@ -114,6 +129,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"robots", robots},
       {"meshes", meshes},
       {"meshes_skipped", summary.meshes_skipped},
+      {"recording", recording},
+      {"live", live},
   };
 }
 

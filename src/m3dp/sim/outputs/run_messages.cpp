@@ -1,0 +1,318 @@
+// The run as messages in Foxglove's schemas, made once and sent two ways: run.mcap (scene
+// <output><mcap>true</mcap> or `m3dp run --record`), written as the run goes, and the live stream
+// (<output><serve>PORT</serve> or `m3dp run --serve`), a Foxglove WebSocket server.
+// Topics: /scene (every body, link and nozzle as frame-locked triangles in its own frame, the
+// commanded paths; later the nozzles' extrusion colour and the printed material's newest mesh),
+// /tf (world → every link, body and nozzle frame), /particles (the fluid with its fields),
+// /printed (the part of each path printed so far), /joints (each robot's), /run (the run's numbers).
+// The file gets a frame every <output><particles_period> of simulated time; the live stream at most
+// RunOptions::live_rate frames per wall second, and only the topics someone is subscribed to.
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cstring>
+
+#include "m3dp/record/foxglove_messages.hpp"
+#include "m3dp/record/foxglove_server.hpp"
+#include "m3dp/record/mcap_writer.hpp"
+#include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/simulation.hpp"
+#include "m3dp/sim/world_view.hpp"
+
+namespace m3dp::sim::outputs {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+std::uint64_t nanoseconds(double time) { return static_cast<std::uint64_t>(std::llround(std::max(0.0, time) * 1e9)); }
+
+/// The particles' packed point: position, velocity and fields as float32, id and material as integers.
+struct PackedParticle {
+  float x, y, z, vx, vy, vz, density, pressure, viscosity, shear_rate, rest_time, birth_time;
+  std::uint32_t id;
+  std::uint16_t material;
+  std::uint16_t padding;
+};
+static_assert(sizeof(PackedParticle) == 56);
+
+std::vector<record::PointField> particle_fields() {
+  using Type = record::PointField::Type;
+  std::vector<record::PointField> fields;
+  const char* names[] = {"x", "y", "z", "vx", "vy", "vz", "density", "pressure", "viscosity", "shear_rate", "rest_time", "birth_time"};
+  for (std::uint32_t f = 0; f < 12; ++f) fields.push_back({names[f], 4 * f, Type::float32});
+  fields.push_back({"id", offsetof(PackedParticle, id), Type::uint32});
+  fields.push_back({"material", offsetof(PackedParticle, material), Type::uint16});
+  return fields;
+}
+
+record::Color kind_color(BodyKind kind) {
+  switch (kind) {
+    case BodyKind::static_body: return {0.55, 0.55, 0.58, 1};
+    case BodyKind::free_body: return {0.85, 0.55, 0.2, 1};
+    case BodyKind::robot_link: return {0.35, 0.5, 0.75, 1};
+  }
+  return {};
+}
+constexpr record::Color kPathColor{0.6, 0.6, 0.6, 0.6}, kPrintedColor{0.9, 0.3, 0.1, 1}, kMaterialColor{0.72, 0.6, 0.48, 1};
+constexpr record::Color kNozzleIdle{0.3, 0.3, 0.3, 1}, kNozzleExtruding{0.9, 0.3, 0.1, 1};
+
+/// The topics, in channel order; how the live stream treats each.
+enum Topic : std::size_t { scene, transforms, particles, printed, joints, run, topic_count };
+struct TopicInfo {
+  const char* topic;
+  const char* schema;
+  record::Delivery delivery;
+};
+constexpr TopicInfo kTopics[topic_count] = {
+    {"/scene", "foxglove.SceneUpdate", record::Delivery::latched},
+    {"/tf", "foxglove.FrameTransforms", record::Delivery::latest},
+    {"/particles", "foxglove.PointCloud", record::Delivery::latest},
+    {"/printed", "foxglove.SceneUpdate", record::Delivery::latest},
+    {"/joints", "m3dp.JointStates", record::Delivery::queued},
+    {"/run", "m3dp.RunStats", record::Delivery::queued},
+};
+
+class RunMessages final : public RunObserver {
+ public:
+  RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate)
+      : period_(period), live_interval_(live_rate > 0 ? 1 / live_rate : 0) {
+    if (!mcap_file.empty()) {
+      mcap_file_ = mcap_file;
+      mcap_.emplace(mcap_file);
+      std::map<std::string, std::uint16_t> schema_ids;
+      for (const TopicInfo& topic : kTopics) {
+        auto found = schema_ids.find(topic.schema);
+        if (found == schema_ids.end())
+          found = schema_ids.emplace(topic.schema, mcap_->add_schema(topic.schema, "protobuf", record::schema_descriptor_set(topic.schema))).first;
+        mcap_channels_.push_back(mcap_->add_channel(topic.topic, "protobuf", found->second));
+      }
+    }
+    if (serve_port) {
+      std::vector<record::ServerChannel> channels;
+      for (const TopicInfo& topic : kTopics)
+        channels.push_back({topic.topic, topic.schema, record::schema_descriptor_set(topic.schema), topic.delivery});
+      live_ = std::make_unique<record::FoxgloveServer>(std::move(channels), record::ServerOptions{.port = *serve_port});
+      fmt::print("m3dp: live at ws://127.0.0.1:{} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)\n", live_->port());
+      std::fflush(stdout);
+    }
+  }
+  [[nodiscard]] double period() const override { return period_; }
+
+  void start(const Simulation& simulation) override {
+    const auto began = Clock::now();
+    wall_start_ = began;
+    time_start_ = simulation.time();
+    layout_ = world_layout(simulation);
+    nozzle_extruding_.assign(layout_.nozzles.size(), -1);
+
+    // The scene: bodies in their frames (frame-locked, so /tf moves them), nozzles, whole paths.
+    std::vector<record::SceneEntity> entities;
+    for (const auto& body : layout_.bodies) {
+      record::SceneEntity entity{body.name, body.own_frame() ? body.name : "world", kind_color(body.kind), &body.triangles, {}, 0, {}};
+      entity.metadata = {{"kind", body_kind_name(body.kind)}};
+      if (!body.robot.empty()) entity.metadata.emplace_back("robot", body.robot);
+      entities.push_back(std::move(entity));
+    }
+    for (const auto& path : layout_.paths) {
+      record::SceneEntity entity{(path.base_path ? "base_path/" : "path/") + path.name, "world", kPathColor, nullptr, {}, 0.002, {}};
+      std::vector<Vec3> strip;
+      for (const auto& vertex : path.vertices) strip.push_back(vertex.position);
+      entity.line_strips.push_back(std::move(strip));
+      entities.push_back(std::move(entity));
+    }
+    const Sinks sinks{mcap_.has_value(), live_ != nullptr};
+    send(sinks, Topic::scene, nanoseconds(simulation.time()), record::encode_scene_update(simulation.time(), entities), "scene");
+    write_frame(simulation, nullptr, sinks);
+    encode_seconds_ += seconds_since(began);
+  }
+
+  void observe(const Simulation& simulation, const StepReport& report) override {
+    const auto began = Clock::now();
+    Sinks sinks{mcap_.has_value(), false};
+    if (live_ && began - last_live_frame_ >= std::chrono::duration<double>(live_interval_)) {
+      sinks.live = true;
+      last_live_frame_ = began;
+    }
+    if (sinks.file || sinks.live) write_frame(simulation, &report.stats, sinks);
+    encode_seconds_ += seconds_since(began);
+  }
+
+  void finish(const Simulation& simulation, RunSummary& summary) override {
+    const auto began = Clock::now();
+    if (last_time_ < simulation.time()) write_frame(simulation, nullptr, Sinks{mcap_.has_value(), live_ != nullptr});
+    if (mcap_) {
+      mcap_->close();
+      summary.recording = {mcap_file_.string(), mcap_->message_count(), mcap_->bytes_written(), mcap_->chunk_count(), 0};
+    }
+    if (live_) {
+      live_->stop();
+      const auto statistics = live_->statistics();
+      summary.live = {live_->port(), statistics.clients, statistics.messages_sent, statistics.bytes_sent, statistics.messages_dropped};
+    }
+    encode_seconds_ += seconds_since(began);
+    summary.recording.encode_seconds = encode_seconds_;
+  }
+
+ private:
+  struct Sinks {
+    bool file = false, live = false;
+  };
+
+  static double seconds_since(Clock::time_point began) { return std::chrono::duration<double>(Clock::now() - began).count(); }
+
+  /// Whether a message on `topic` would go anywhere (nobody subscribed: not made at all).
+  bool wanted(const Sinks& sinks, Topic topic) const { return sinks.file || (sinks.live && live_->subscribed(topic)); }
+
+  void send(const Sinks& sinks, Topic topic, std::uint64_t stamp, std::string&& bytes, std::string_view key = {}) {
+    if (sinks.file) mcap_->write(mcap_channels_[topic], stamp, bytes);
+    // The scene is kept by the server for late clients even when nobody listens now.
+    if (sinks.live && (live_->subscribed(topic) || kTopics[topic].delivery == record::Delivery::latched))
+      live_->publish(topic, stamp, std::make_shared<const std::string>(std::move(bytes)), key);
+  }
+
+  void write_frame(const Simulation& simulation, const sph::StepStats* stats, const Sinks& sinks) {
+    const double time = simulation.time();
+    const std::uint64_t stamp = nanoseconds(time);
+    if (sinks.file) last_time_ = time;
+    const WorldPoses poses = world_poses(simulation, layout_);
+    if (sinks.live) live_->publish_time(stamp);
+
+    if (wanted(sinks, Topic::transforms)) {
+      // Frames: every link and free body in the world, each nozzle in what carries it.
+      transforms_list_.clear();
+      std::map<std::string, Pose> body_pose;
+      for (std::size_t b = 0; b < layout_.bodies.size(); ++b) {
+        if (!layout_.bodies[b].own_frame()) continue;
+        transforms_list_.push_back({"world", layout_.bodies[b].name, poses.bodies[b]});
+        body_pose[layout_.bodies[b].name] = poses.bodies[b];
+      }
+      for (std::size_t n = 0; n < layout_.nozzles.size(); ++n) {
+        const auto& nozzle = layout_.nozzles[n];
+        const Pose& pose = poses.nozzles[n].pose;
+        if (nozzle.parent_frame == "world") {
+          transforms_list_.push_back({"world", "nozzle/" + nozzle.name, pose});
+        } else {
+          const Pose& parent = body_pose.at(nozzle.parent_frame);
+          const Quat to_parent = parent.orientation.conjugate();
+          transforms_list_.push_back({nozzle.parent_frame, "nozzle/" + nozzle.name,
+                                      Pose{to_parent * (pose.position - parent.position), (to_parent * pose.orientation).normalized()}});
+        }
+      }
+      send(sinks, Topic::transforms, stamp, record::encode_frame_transforms(time, transforms_list_));
+    }
+
+    // A nozzle's entity again when it starts or stops extruding (its colour says which); the
+    // printed material's newest mesh when there is a new one. Each kept under its id for late clients.
+    for (std::size_t n = 0; n < layout_.nozzles.size(); ++n) {
+      const int extruding = poses.nozzles[n].extruding ? 1 : 0;
+      if (extruding == nozzle_extruding_[n]) continue;
+      nozzle_extruding_[n] = extruding;
+      const auto& nozzle = layout_.nozzles[n];
+      const std::string id = "nozzle/" + nozzle.name;
+      const record::SceneEntity entity{id, id, extruding ? kNozzleExtruding : kNozzleIdle, &nozzle.triangles, {}, 0,
+                                       {{"extruding", extruding ? "true" : "false"}}};
+      send(Sinks{mcap_.has_value(), live_ != nullptr}, Topic::scene, stamp, record::encode_scene_update(time, {&entity, 1}), id);
+    }
+    if (simulation.printed_mesh() && simulation.printed_mesh_version() != mesh_version_) {
+      mesh_version_ = simulation.printed_mesh_version();
+      const record::SceneEntity entity{"printed_material", "world", kMaterialColor, simulation.printed_mesh().get(), {}, 0,
+                                       {{"kind", "printed_material"}}};
+      send(Sinks{mcap_.has_value(), live_ != nullptr}, Topic::scene, stamp, record::encode_scene_update(time, {&entity, 1}),
+           "printed_material");
+    }
+
+    if (wanted(sinks, Topic::printed)) {
+      std::vector<record::SceneEntity> printed;
+      for (const auto& path : layout_.paths)
+        if (!path.base_path) printed.push_back({"printed/" + path.name, "world", kPrintedColor, nullptr, printed_runs(path, time), 0.004, {}});
+      if (!printed.empty()) send(sinks, Topic::printed, stamp, record::encode_scene_update(time, printed));
+    }
+
+    if (wanted(sinks, Topic::particles)) send(sinks, Topic::particles, stamp, particle_cloud(simulation));
+
+    if (wanted(sinks, Topic::joints))
+      for (const auto robot : simulation.robots()) {
+        const auto names = simulation.world().joint_names(robot);
+        const auto positions = simulation.world().joint_positions(robot);
+        send(sinks, Topic::joints, stamp, record::encode_joint_states(time, simulation.world().robot_name(robot), names, positions));
+      }
+
+    if (wanted(sinks, Topic::run)) send(sinks, Topic::run, stamp, record::encode_run_stats(run_stats(simulation, stats, poses)));
+    // Each file frame ends a chunk, so a reader of a killed run sees every frame before it.
+    if (sinks.file) mcap_->flush();
+  }
+
+  std::string particle_cloud(const Simulation& simulation) const {
+    const auto& solver = simulation.solver();
+    const auto& fluid = solver.fluid();
+    const auto& density = simulation.measured_density().density;
+    const std::size_t count = fluid.size();
+    std::string message;
+    record::encode_point_cloud(simulation.time(), "world", fields_, sizeof(PackedParticle), count, [&](char* bytes) {
+      for (std::size_t i = 0; i < count; ++i) {
+        const PackedParticle point{static_cast<float>(fluid.position[i].x()), static_cast<float>(fluid.position[i].y()),
+                                   static_cast<float>(fluid.position[i].z()), static_cast<float>(fluid.velocity[i].x()),
+                                   static_cast<float>(fluid.velocity[i].y()), static_cast<float>(fluid.velocity[i].z()),
+                                   static_cast<float>(density[i]),            static_cast<float>(solver.pressure(i)),
+                                   static_cast<float>(fluid.viscosity[i]),    static_cast<float>(fluid.shear_rate[i]),
+                                   static_cast<float>(fluid.rest_time[i]),    static_cast<float>(fluid.birth_time[i]),
+                                   static_cast<std::uint32_t>(fluid.id[i]),   fluid.phase[i],
+                                   0};
+        std::memcpy(bytes + i * sizeof(PackedParticle), &point, sizeof(PackedParticle));
+      }
+    }, message);
+    return message;
+  }
+
+  record::RunStats run_stats(const Simulation& simulation, const sph::StepStats* stats, const WorldPoses& poses) const {
+    record::RunStats run;
+    run.time = simulation.time();
+    const double wall = seconds_since(wall_start_);
+    run.real_time_factor = wall > 0 ? (run.time - time_start_) / wall : 0;
+    run.particles = simulation.solver().fluid().size();
+    run.resting_particles = run.particles - simulation.solver().state().active_count;
+    const auto& density = simulation.measured_density().statistics;
+    run.density_error_mean = density.mean;
+    run.density_error_max = density.max;
+    if (stats) {
+      run.time_step = stats->time_step;
+      run.pressure_iterations = static_cast<std::uint32_t>(stats->density_iterations + stats->divergence_iterations);
+      run.step_ms = stats->stage_ms.total();
+      run.neighbor_ms = stats->stage_ms[sph::Stage::neighbors];
+      run.pressure_ms = stats->stage_ms[sph::Stage::pressure] + stats->stage_ms[sph::Stage::divergence];
+      run.world_ms = simulation.last_world_ms();
+    }
+    for (std::size_t n = 0; n < layout_.nozzles.size(); ++n)
+      run.nozzles.push_back({layout_.nozzles[n].name, poses.nozzles[n].extruding, poses.nozzles[n].volume_rate, poses.nozzles[n].pose.position});
+    return run;
+  }
+
+  double period_, live_interval_;  // s simulated; s wall
+  std::filesystem::path mcap_file_;
+  std::optional<record::McapWriter> mcap_;
+  std::vector<std::uint16_t> mcap_channels_;  // per topic
+  std::unique_ptr<record::FoxgloveServer> live_;
+  WorldLayout layout_;
+  std::vector<int> nozzle_extruding_;  // -1 before the first frame
+  std::size_t mesh_version_ = 0;
+  std::vector<record::PointField> fields_ = particle_fields();
+  std::vector<record::FrameTransform> transforms_list_;
+  Clock::time_point wall_start_, last_live_frame_{};
+  double time_start_ = 0, last_time_ = -1, encode_seconds_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<RunObserver> make_run_messages(Simulation& simulation, const RunOptions& options) {
+  const auto& output = simulation.scene().output;
+  const bool record = !options.output_directory.empty() && (options.record || output.mcap);
+  const std::optional<std::uint16_t> serve_port = options.serve_port ? options.serve_port : output.serve_port;
+  if (!record && !serve_port) return nullptr;
+  if (record) std::filesystem::create_directories(options.output_directory);
+  // Frames at the particle period; a scene without particle frames is recorded 20 times a second.
+  return std::make_unique<RunMessages>(record ? options.output_directory / "run.mcap" : std::filesystem::path(), serve_port,
+                                       output.particles_period > 0 ? output.particles_period : 0.05, options.live_rate);
+}
+
+}  // namespace m3dp::sim::outputs
