@@ -3,11 +3,13 @@
 // added, messages into chunks compressed with zstd, each chunk followed by its message indexes and
 // flushed when it is full, so a killed run leaves a file readable up to its last chunk. close() adds
 // the data-end CRC and the summary (schemas, channels, statistics, chunk indexes, summary offsets)
-// that indexed readers seek with.
+// that indexed readers seek with. Messages stream into the compressor as they come (a chunk is
+// never copied uncompressed), on zstd's own threads.
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <span>
 #include <string>
 #include <string_view>
@@ -18,6 +20,7 @@ namespace m3dp::record {
 struct McapOptions {
   std::size_t chunk_bytes = 4 << 20;  // uncompressed bytes at which a chunk is closed
   int zstd_level = 1;                 // 1 fastest … 19; 0 stores chunks uncompressed
+  int zstd_threads = 0;               // zstd's compression threads (0: as many as the run's threads)
   std::string profile;                // the Header's profile ("" = none)
 };
 
@@ -47,6 +50,7 @@ class McapWriter {
 
  private:
   void write_bytes(std::string_view bytes);
+  void add_to_chunk(std::string_view bytes);  // uncompressed bytes of the open chunk's records
   void close_chunk();
 
   struct ChunkIndex {
@@ -65,12 +69,16 @@ class McapWriter {
   std::vector<std::uint32_t> sequence_;  // per channel
   std::map<std::uint16_t, std::uint64_t> channel_message_counts_;
   std::uint64_t message_count_ = 0, first_time_ = 0, last_time_ = 0;
-  // The open chunk: its records uncompressed, each channel's (log time, offset) pairs, its times.
+  // The open chunk: its records as stored (compressed as they come, or as they are), their
+  // uncompressed size and CRC, each channel's (log time, offset) pairs, its times.
   std::string chunk_;
+  std::uint64_t chunk_size_ = 0;
+  std::uint32_t chunk_crc_ = 0;
   std::map<std::uint16_t, std::vector<std::pair<std::uint64_t, std::uint64_t>>> chunk_messages_;
   std::uint64_t chunk_start_time_ = 0, chunk_end_time_ = 0;
   std::vector<ChunkIndex> chunk_indexes_;
-  std::string compressed_;
+  struct ZstdContext;
+  std::unique_ptr<ZstdContext> zstd_;  // null: chunks stored uncompressed
 };
 
 }  // namespace m3dp::record

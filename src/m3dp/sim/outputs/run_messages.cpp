@@ -10,12 +10,12 @@
 #include <fmt/format.h>
 
 #include <chrono>
-#include <cstring>
 
 #include "m3dp/record/foxglove_messages.hpp"
 #include "m3dp/record/foxglove_server.hpp"
 #include "m3dp/record/mcap_writer.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/particle_cloud.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/sim/world_view.hpp"
 
@@ -26,25 +26,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 std::uint64_t nanoseconds(double time) { return static_cast<std::uint64_t>(std::llround(std::max(0.0, time) * 1e9)); }
-
-/// The particles' packed point: position, velocity and fields as float32, id and material as integers.
-struct PackedParticle {
-  float x, y, z, vx, vy, vz, density, pressure, viscosity, shear_rate, rest_time, birth_time;
-  std::uint32_t id;
-  std::uint16_t material;
-  std::uint16_t padding;
-};
-static_assert(sizeof(PackedParticle) == 56);
-
-std::vector<record::PointField> particle_fields() {
-  using Type = record::PointField::Type;
-  std::vector<record::PointField> fields;
-  const char* names[] = {"x", "y", "z", "vx", "vy", "vz", "density", "pressure", "viscosity", "shear_rate", "rest_time", "birth_time"};
-  for (std::uint32_t f = 0; f < 12; ++f) fields.push_back({names[f], 4 * f, Type::float32});
-  fields.push_back({"id", offsetof(PackedParticle, id), Type::uint32});
-  fields.push_back({"material", offsetof(PackedParticle, material), Type::uint16});
-  return fields;
-}
 
 record::Color kind_color(BodyKind kind) {
   switch (kind) {
@@ -229,7 +210,11 @@ class RunMessages final : public RunObserver {
       if (!printed.empty()) send(sinks, Topic::printed, stamp, record::encode_scene_update(time, printed));
     }
 
-    if (wanted(sinks, Topic::particles)) send(sinks, Topic::particles, stamp, particle_cloud(simulation));
+    if (wanted(sinks, Topic::particles)) {
+      std::string cloud;
+      encode_particle_cloud(simulation, cloud);
+      send(sinks, Topic::particles, stamp, std::move(cloud));
+    }
 
     if (wanted(sinks, Topic::joints))
       for (const auto robot : simulation.robots()) {
@@ -241,28 +226,6 @@ class RunMessages final : public RunObserver {
     if (wanted(sinks, Topic::run)) send(sinks, Topic::run, stamp, record::encode_run_stats(run_stats(simulation, stats, poses)));
     // Each file frame ends a chunk, so a reader of a killed run sees every frame before it.
     if (sinks.file) mcap_->flush();
-  }
-
-  std::string particle_cloud(const Simulation& simulation) const {
-    const auto& solver = simulation.solver();
-    const auto& fluid = solver.fluid();
-    const auto& density = simulation.measured_density().density;
-    const std::size_t count = fluid.size();
-    std::string message;
-    record::encode_point_cloud(simulation.time(), "world", fields_, sizeof(PackedParticle), count, [&](char* bytes) {
-      for (std::size_t i = 0; i < count; ++i) {
-        const PackedParticle point{static_cast<float>(fluid.position[i].x()), static_cast<float>(fluid.position[i].y()),
-                                   static_cast<float>(fluid.position[i].z()), static_cast<float>(fluid.velocity[i].x()),
-                                   static_cast<float>(fluid.velocity[i].y()), static_cast<float>(fluid.velocity[i].z()),
-                                   static_cast<float>(density[i]),            static_cast<float>(solver.pressure(i)),
-                                   static_cast<float>(fluid.viscosity[i]),    static_cast<float>(fluid.shear_rate[i]),
-                                   static_cast<float>(fluid.rest_time[i]),    static_cast<float>(fluid.birth_time[i]),
-                                   static_cast<std::uint32_t>(fluid.id[i]),   fluid.phase[i],
-                                   0};
-        std::memcpy(bytes + i * sizeof(PackedParticle), &point, sizeof(PackedParticle));
-      }
-    }, message);
-    return message;
   }
 
   record::RunStats run_stats(const Simulation& simulation, const sph::StepStats* stats, const WorldPoses& poses) const {
@@ -296,7 +259,6 @@ class RunMessages final : public RunObserver {
   WorldLayout layout_;
   std::vector<int> nozzle_extruding_;  // -1 before the first frame
   std::size_t mesh_version_ = 0;
-  std::vector<record::PointField> fields_ = particle_fields();
   std::vector<record::FrameTransform> transforms_list_;
   Clock::time_point wall_start_, last_live_frame_{};
   double time_start_ = 0, last_time_ = -1, encode_seconds_ = 0;
