@@ -31,6 +31,9 @@ void add_bench_options(CLI::App& command, BenchOptions& options) {
   command.add_option("--scene", options.scene_file, "ur10_wall: scene file to run instead of the project's");
   command.add_option("--particles", options.particles, "Fluid particles in the dam-break column or the clay slab")
       ->capture_default_str();
+  command.add_option("--record", options.record, "ur10_wall: record run.mcap as the scene says (scene), or on, or off")
+      ->check(CLI::IsMember({"scene", "on", "off"}))
+      ->capture_default_str();
   command.add_option("--layers", options.layers, "wall_layers: layers of the wall")->capture_default_str();
   command.add_option("--max-viscosity", options.max_viscosity, "clay_print: cap of the clay's effective viscosity (Pa*s)")
       ->capture_default_str();
@@ -48,6 +51,7 @@ int bench_ur10_wall(const BenchOptions& options) {
       options.scene_file.empty() ? std::filesystem::path(M3DP_PROJECT_SCENES) / "ur10_wall.sdf" : std::filesystem::path(options.scene_file);
   scene::Scene scene = scene::load_scene(file);
   scene.output.write_particles = false;  // meshing stays: it is part of the goal
+  if (options.record != "scene") scene.output.mcap = options.record == "on";
   sim::Simulation simulation(scene);
   sim::RunOptions run;
   run.output_directory = std::filesystem::temp_directory_path() / fmt::format("m3dp_bench_ur10_wall_{}", ::getpid());
@@ -75,6 +79,10 @@ int bench_ur10_wall(const BenchOptions& options) {
              1e3 * summary.simulated_time / double(summary.steps), summary.particles, summary.particle_steps_per_second);
   fmt::print("meshes: {} written, {} skipped while busy; density iterations {:.2f}, divergence {:.2f} per step\n",
              summary.meshes_written, summary.meshes_skipped, summary.mean_density_iterations, summary.mean_divergence_iterations);
+  if (!summary.recording.file.empty())
+    fmt::print("recording: {} messages, {:.1f} MB in {} chunks, {:.3f} s wall to make and write ({:.1f} % of the run)\n",
+               summary.recording.messages, 1e-6 * double(summary.recording.bytes), summary.recording.chunks,
+               summary.recording.encode_seconds, 100 * summary.recording.encode_seconds / summary.wall_time);
   for (const auto& robot : summary.robots)
     fmt::print("robot {}: nozzle {:.3f} mm rms from the path (max {:.3f} mm), {} contacts with robots\n", robot.name,
                1e3 * robot.tracking_rms, 1e3 * robot.tracking_max, robot.contacts.with_robots);

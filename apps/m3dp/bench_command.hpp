@@ -15,6 +15,7 @@ struct BenchOptions {
   std::string kernel = "cubic_spline";
   double max_viscosity = 1e4;         // Pa·s, clay_print and wall_layers
   int layers = 20;                    // wall_layers
+  std::string record = "scene";       // ur10_wall: run.mcap as the scene says, or "on" or "off"
 };
 
 void add_bench_options(CLI::App& command, BenchOptions& options);

@@ -254,7 +254,7 @@ struct FoxgloveServer::Impl {
           client.told_at = Clock::now();
         }
       }
-      if (sends.empty() && !more) drained.notify_all();
+      if (!more) drained.notify_all();  // every queue handed to its socket (stop() waits for it)
     }
     std::uint64_t messages = 0, bytes = 0;
     for (const Send& send : sends) {
