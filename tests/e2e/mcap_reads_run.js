@@ -8,7 +8,8 @@
 //   and Rerun read), and the foxglove.* ones decode the same against @foxglove/schemas' own
 //   definitions;
 // - the content: every UR10 link of the URDF in /scene and on /tf in every frame, the particles'
-//   point cloud well formed and as many as the run's summary says, times that advance.
+//   point cloud well formed and as many as the run's summary says, times that advance, the joints'
+//   positions, velocities and efforts (the shoulder holding the arm up).
 // With --killed the file is what a run killed by SIGKILL left: no summary, and every record up to
 // the cut must still read and decode.
 "use strict";
@@ -135,6 +136,13 @@ for (const topic of ["/tf", "/particles", "/joints"]) assert.ok(Math.abs(byTopic
 const joints = byTopic("/joints").at(-1).value;
 assert.equal(joints.robot, "ur10");
 assert.equal(joints.names.length, 6, `joints ${joints.names}`);
+for (const field of ["positions", "velocities", "efforts"]) {
+  assert.equal(joints[field].length, 6, `${field}: ${joints[field]}`);
+  assert.ok(joints[field].every(Number.isFinite), `${field}: ${joints[field]}`);
+}
+// The shoulder's servo holds the arm up against gravity: tens of N·m.
+const shoulderEffort = joints.efforts[joints.names.indexOf("shoulder_lift_joint")];
+assert.ok(Math.abs(shoulderEffort) > 5, `the shoulder lift exerts ${shoulderEffort} N·m`);
 
 if (killed) {
   assert.ok(!records.some((record) => record.type === "Footer"), "a killed run's file has a footer");

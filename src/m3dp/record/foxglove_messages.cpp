@@ -205,12 +205,15 @@ std::string encode_run_stats(const RunStats& stats) {
 }
 
 std::string encode_joint_states(double time, std::string_view robot, std::span<const std::string> names,
-                                std::span<const double> positions) {
+                                std::span<const double> positions, std::span<const double> velocities,
+                                std::span<const double> efforts) {
   m3dp::JointStates message;
   set_timestamp(*message.mutable_timestamp(), time);
   message.set_robot(std::string(robot));
   for (const auto& name : names) message.add_names(name);
   for (const double position : positions) message.add_positions(position);
+  for (const double velocity : velocities) message.add_velocities(velocity);
+  for (const double effort : efforts) message.add_efforts(effort);
   return serialized(message);
 }
 

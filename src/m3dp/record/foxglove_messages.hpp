@@ -76,8 +76,10 @@ struct RunStats {
 };
 [[nodiscard]] std::string encode_run_stats(const RunStats& stats);
 
-/// m3dp.JointStates: a robot's joints (rad or m) at `time` (s).
+/// m3dp.JointStates: a robot's joints at `time` (s): positions (rad or m), velocities (rad/s or m/s)
+/// and efforts (N·m or N), each in the order of `names`.
 [[nodiscard]] std::string encode_joint_states(double time, std::string_view robot, std::span<const std::string> names,
-                                              std::span<const double> positions);
+                                              std::span<const double> positions, std::span<const double> velocities,
+                                              std::span<const double> efforts);
 
 }  // namespace m3dp::record

@@ -685,6 +685,19 @@ std::vector<double> World::joint_positions(RobotIndex robot) const {
   return positions;
 }
 
+std::vector<double> World::joint_velocities(RobotIndex robot) const {
+  std::vector<double> velocities;
+  for (const auto* dof : impl_->robots.at(robot).joint_dofs) velocities.push_back(dof->getVelocity());
+  return velocities;
+}
+
+std::vector<double> World::joint_efforts(RobotIndex robot) const {
+  std::vector<double> efforts;
+  const double step = impl_->world->getTimeStep();
+  for (const auto* dof : impl_->robots.at(robot).joint_dofs) efforts.push_back(dof->getForce() + dof->getConstraintImpulse() / step);
+  return efforts;
+}
+
 Pose World::tool_pose(ToolIndex tool) const { return pose_of(impl_->tools.at(tool).end_effector->getWorldTransform()); }
 
 Vec3 World::tool_linear_velocity(ToolIndex tool) const {

@@ -140,6 +140,9 @@ class World {
   [[nodiscard]] std::vector<std::string> joint_names(RobotIndex robot) const;
   [[nodiscard]] std::vector<std::string> link_names(RobotIndex robot) const;
   [[nodiscard]] std::vector<double> joint_positions(RobotIndex robot) const;
+  [[nodiscard]] std::vector<double> joint_velocities(RobotIndex robot) const;  // rad/s (or m/s)
+  /// What each joint's servo exerted over the last world step (N·m or N): its constraint impulse over the step.
+  [[nodiscard]] std::vector<double> joint_efforts(RobotIndex robot) const;
   [[nodiscard]] Pose tool_pose(ToolIndex tool) const;
   [[nodiscard]] Vec3 tool_linear_velocity(ToolIndex tool) const;
   [[nodiscard]] const RobotContacts& robot_contacts(RobotIndex robot) const;

@@ -219,8 +219,10 @@ class RunMessages final : public RunObserver {
     if (wanted(sinks, Topic::joints))
       for (const auto robot : simulation.robots()) {
         const auto names = simulation.world().joint_names(robot);
-        const auto positions = simulation.world().joint_positions(robot);
-        send(sinks, Topic::joints, stamp, record::encode_joint_states(time, simulation.world().robot_name(robot), names, positions));
+        const auto& world = simulation.world();
+        send(sinks, Topic::joints, stamp,
+             record::encode_joint_states(time, world.robot_name(robot), names, world.joint_positions(robot), world.joint_velocities(robot),
+                                         world.joint_efforts(robot)));
       }
 
     if (wanted(sinks, Topic::run)) send(sinks, Topic::run, stamp, record::encode_run_stats(run_stats(simulation, stats, poses)));
