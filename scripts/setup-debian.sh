@@ -20,6 +20,9 @@ packages=(
   protobuf-compiler libprotobuf-dev libzstd-dev libwebsocketpp-dev libasio-dev
   # Node for the readers we did not write (the MCAP reader, the Foxglove schemas; npm ci below).
   nodejs
+  # Cameras: Embree ray casting; images as PNG (libpng), read back in the tests by PIL, numpy and
+  # ImageMagick's identify.
+  libembree-dev libpng-dev python3-pil python3-numpy imagemagick
 )
 # Kept at the candidate version: ParaView and the XML parser under its readers. Debian 12's expat
 # security update 2.5.0-1+deb12u5 made ParaView 5.11 unable to read raw appended VTK data; a machine
