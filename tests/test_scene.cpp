@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
@@ -218,6 +219,55 @@ TEST(Scene, OutputRecordsAndServes) {
                   "<serve>", "<serve> is a TCP port, 0 (any free one) to 65535, got 70000");
   expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<mcap>yes</mcap>"),
                   "<mcap>", "<mcap> must be true or false (or 1 or 0), got 'yes'");
+}
+
+TEST(Scene, CamerasInGazeboSyntaxAndInThePlugin) {
+  // A Gazebo sensor in the static link (pose relative to the link, the link's to the model's), and a
+  // plugin camera fixed in the world.
+  std::string text = replaced(valid_scene(), R"(<inertial><mass>1</mass></inertial>)", R"(<inertial><mass>1</mass></inertial>
+        <sensor name="overview" type="depth_camera">
+          <pose>0.5 0 2 0 1.5708 0</pose>
+          <update_rate unit="Hz">4</update_rate>
+          <always_on>1</always_on>
+          <camera>
+            <horizontal_fov unit="deg">60</horizontal_fov>
+            <image><width>640</width><height>480</height><format>R8G8B8</format></image>
+            <clip><near>0.1</near><far>5</far></clip>
+            <noise><type>gaussian</type><mean>0</mean><stddev>0.007</stddev></noise>
+          </camera>
+        </sensor>
+        <sensor name="imu" type="imu"/>)");
+  text = replaced(text, "<output>", R"(<camera name="side" type="camera"><pose>2 0 1 0 0 3.1416</pose><shadows>false</shadows></camera>
+      <output>)");
+  const auto scene = load_scene_from_string(text, "scenes/valid.sdf");
+  ASSERT_EQ(scene.cameras.size(), 2u);
+  const auto& overview = scene.cameras[0].settings;
+  EXPECT_EQ(overview.name, "overview");
+  EXPECT_EQ(overview.type, m3dp::sensors::CameraType::depth_camera);
+  EXPECT_EQ(overview.width, 640);
+  EXPECT_EQ(overview.height, 480);
+  EXPECT_NEAR(overview.horizontal_fov, std::acos(-1.0) / 3, 1e-9);
+  EXPECT_DOUBLE_EQ(overview.near, 0.1);
+  EXPECT_DOUBLE_EQ(overview.far, 5);
+  EXPECT_DOUBLE_EQ(overview.update_rate, 4);
+  EXPECT_DOUBLE_EQ(overview.noise.stddev, 0.007);
+  EXPECT_TRUE(overview.robot.empty());
+  // The model at x = 1 turned 90° about z, the link 1 m along the model's y: the link at (0, 0, 0) … plus
+  // the sensor's 0.5 m along the model's x, which is the world's y.
+  EXPECT_TRUE(overview.pose.position.isApprox(Vec3(0, 0.5f, 2), 1e-5f)) << overview.pose.position.transpose();
+  EXPECT_EQ(scene.cameras[1].settings.type, m3dp::sensors::CameraType::camera);
+  EXPECT_FALSE(scene.cameras[1].settings.shadows);
+  ASSERT_EQ(scene.warnings.size(), 1u);
+  EXPECT_NE(scene.warnings[0].message.find("<sensor type=\"imu\">"), std::string::npos) << scene.warnings[0].message;
+
+  expect_error_at(replaced(text, "<clip><near>0.1</near><far>5</far></clip>", "<clip><near>0.1</near>\n<far>0.05</far></clip>"), "<clip>",
+                  "<far> (0.05 m) must be beyond <near> (0.1 m)");
+  expect_error_at(replaced(text, R"(<camera name="side" type="camera">)", R"(<camera name="overview" type="camera">)"),
+                  R"(<camera name="overview" type="camera">)", "a camera 'overview' is already defined at line");
+  expect_error_at(replaced(text, R"(<camera name="side" type="camera">)", R"(<camera name="side" type="thermal">)"),
+                  R"(<camera name="side" type="thermal">)", "camera type 'thermal' is not one M3DP renders");
+  expect_error_at(replaced(text, "<type>gaussian</type>", "<type>gaussian_quantized</type>"), "<noise>",
+                  "camera noise 'gaussian_quantized' is not simulated; expected gaussian (or none)");
 }
 
 TEST(Scene, NegativeParticleRadius) {

@@ -9,7 +9,8 @@
 //   definitions;
 // - the content: every UR10 link of the URDF in /scene and on /tf in every frame, the particles'
 //   point cloud well formed and as many as the run's summary says, times that advance, the joints'
-//   positions, velocities and efforts (the shoulder holding the arm up).
+//   positions, velocities and efforts (the shoulder holding the arm up), the cameras' images sized as
+//   their calibrations say, in their optical frames.
 // With --killed the file is what a run killed by SIGKILL left: no summary, and every record up to
 // the cut must still read and decode.
 "use strict";
@@ -143,6 +144,39 @@ for (const field of ["positions", "velocities", "efforts"]) {
 // The shoulder's servo holds the arm up against gravity: tens of N·m.
 const shoulderEffort = joints.efforts[joints.names.indexOf("shoulder_lift_joint")];
 assert.ok(Math.abs(shoulderEffort) > 5, `the shoulder lift exerts ${shoulderEffort} N·m`);
+
+// Cameras (the scene's wrist and overview cameras): each image as big as its calibration says, in
+// its optical frame, and the frame on /tf.
+const cameraNames = [...topics].filter((topic) => /^\/camera\/[^/]+\/calibration$/.test(topic)).map((topic) => topic.split("/")[2]);
+assert.deepEqual(cameraNames.sort(), ["overview", "wrist"], `cameras ${cameraNames}`);
+for (const name of cameraNames) {
+  const calibrations = byTopic(`/camera/${name}/calibration`);
+  assert.ok(calibrations.length >= 2, `${name}: ${calibrations.length} calibrations`);
+  const { width, height, K, frame_id } = calibrations[0].value;
+  assert.equal(frame_id, `camera/${name}/optical`);
+  assert.ok(K[0] > 0 && K[4] === K[0] && Math.abs(K[2] - width / 2) < 1e-9 && Math.abs(K[5] - height / 2) < 1e-9, `${name}: K ${K}`);
+  for (const [topic, encoding, bytesPerPixel] of [["image", "rgb8", 3], ["depth", "32FC1", 4], ["segmentation", "16UC1", 2]]) {
+    const images = byTopic(`/camera/${name}/${topic}`);
+    assert.equal(images.length, calibrations.length, `${name}/${topic}: ${images.length} images for ${calibrations.length} calibrations`);
+    for (const { value } of images) {
+      assert.equal(value.encoding, encoding);
+      assert.equal(value.width, width);
+      assert.equal(value.height, height);
+      assert.equal(value.data.length, width * height * bytesPerPixel, `${name}/${topic}: ${value.data.length} bytes`);
+      assert.equal(value.frame_id, `camera/${name}/optical`);
+    }
+  }
+  const clouds = byTopic(`/camera/${name}/points`);
+  const cloud = clouds.at(-1).value;
+  assert.equal(cloud.frame_id, `camera/${name}/optical`);
+  const points = cloud.data.length / cloud.point_stride;
+  assert.ok(points > 0 && points <= width * height, `${name}: ${points} points`);
+  const view = new DataView(cloud.data.buffer, cloud.data.byteOffset, cloud.data.byteLength);
+  const zOffset = cloud.fields.find((field) => field.name === "z").offset;
+  for (let i = 0; i < points; ++i) assert.ok(view.getFloat32(i * cloud.point_stride + zOffset, true) > 0, `${name}: a point behind the camera`);
+  assert.ok(transforms.every(({ value }) => value.transforms.some((t) => t.child_frame_id === `camera/${name}/optical`)),
+    `${name}'s optical frame is not on /tf`);
+}
 
 if (killed) {
   assert.ok(!records.some((record) => record.type === "Footer"), "a killed run's file has a footer");

@@ -10,12 +10,13 @@ rm -rf "$out"
 "$m3dp" run "$scene" -o "$out/whole" --until 2.5 --record --quiet > /dev/null
 node "$here/mcap_reads_run.js" "$out/whole" "$urdf"
 
-# Killed: wait for a few frames (each frame ends a chunk), then SIGKILL; the run must still be going.
+# Killed: wait until the print has begun (22 particle frames, 2.1 s; each frame ends a chunk), then
+# SIGKILL; the run must still be going.
 "$m3dp" run "$scene" -o "$out/killed" --record --quiet --pace 4 > /dev/null 2>&1 &
 pid=$!
 for _ in $(seq 1 600); do
-  size=$(stat -c %s "$out/killed/run.mcap" 2>/dev/null || echo 0)
-  [ "$size" -gt 40000 ] && break
+  frames=$(grep -c '<DataSet' "$out/killed/particles.pvd" 2>/dev/null || true)
+  [ "${frames:-0}" -ge 22 ] && break
   sleep 0.05
 done
 kill -0 $pid 2>/dev/null || { echo "FAIL: the run ended before it could be killed"; exit 1; }

@@ -177,6 +177,34 @@ void encode_point_cloud(double time, std::string_view frame_id, std::span<const 
   pack(out.data() + start);
 }
 
+std::string encode_raw_image(double time, std::string_view frame_id, std::uint32_t width, std::uint32_t height,
+                             std::string_view encoding, std::uint32_t step, std::string_view data) {
+  foxglove::RawImage image;
+  set_timestamp(*image.mutable_timestamp(), time);
+  image.set_frame_id(std::string(frame_id));
+  image.set_width(width);
+  image.set_height(height);
+  image.set_encoding(std::string(encoding));
+  image.set_step(step);
+  image.set_data(std::string(data));
+  return serialized(image);
+}
+
+std::string encode_camera_calibration(double time, std::string_view frame_id, std::uint32_t width, std::uint32_t height, double fx,
+                                      double fy, double cx, double cy) {
+  foxglove::CameraCalibration calibration;
+  set_timestamp(*calibration.mutable_timestamp(), time);
+  calibration.set_frame_id(std::string(frame_id));
+  calibration.set_width(width);
+  calibration.set_height(height);
+  calibration.set_distortion_model("plumb_bob");
+  for (int d = 0; d < 5; ++d) calibration.add_d(0);
+  for (const double k : {fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0}) calibration.add_k(k);
+  for (const double r : {1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0}) calibration.add_r(r);
+  for (const double p : {fx, 0.0, cx, 0.0, 0.0, fy, cy, 0.0, 0.0, 0.0, 1.0, 0.0}) calibration.add_p(p);
+  return serialized(calibration);
+}
+
 std::string encode_run_stats(const RunStats& stats) {
   m3dp::RunStats message;
   set_timestamp(*message.mutable_timestamp(), stats.time);

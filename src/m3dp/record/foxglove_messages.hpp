@@ -60,6 +60,14 @@ struct PointField {
 void encode_point_cloud(double time, std::string_view frame_id, std::span<const PointField> fields, std::uint32_t stride,
                         std::size_t point_count, const std::function<void(char* bytes)>& pack, std::string& out);
 
+/// foxglove.RawImage at `time` (s) in `frame_id`: `height` rows of `step` bytes in `encoding`
+/// ("rgb8", "32FC1" metres of depth, "16UC1").
+[[nodiscard]] std::string encode_raw_image(double time, std::string_view frame_id, std::uint32_t width, std::uint32_t height,
+                                           std::string_view encoding, std::uint32_t step, std::string_view data);
+/// foxglove.CameraCalibration of a pinhole without distortion: fx, fy, cx, cy in pixels.
+[[nodiscard]] std::string encode_camera_calibration(double time, std::string_view frame_id, std::uint32_t width, std::uint32_t height,
+                                                    double fx, double fy, double cx, double cy);
+
 struct NozzleStatus {
   std::string name;
   bool extruding = false;

@@ -21,7 +21,7 @@ struct McapOptions {
   std::size_t chunk_bytes = 4 << 20;  // uncompressed bytes at which a chunk is closed
   int zstd_level = 1;                 // 1 fastest … 19; 0 stores chunks uncompressed
   int zstd_threads = 0;               // zstd's compression threads (0: as many as the run's threads)
-  std::string profile;                // the Header's profile ("" = none)
+  std::string profile = {};           // the Header's profile ("" = none)
 };
 
 class McapWriter {

@@ -63,7 +63,7 @@ QuantityInfo quantity_info(Quantity quantity) {
   static constexpr Unit kMass[] = {{"kg", 1}, {"g", 1e-3}};
   static constexpr Unit kStress[] = {{"Pa", 1}, {"kPa", 1e3}};
   static constexpr Unit kStressRate[] = {{"Pa/s", 1}, {"Pa/min", 1.0 / 60}};
-  static constexpr Unit kRate[] = {{"1/s", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
+  static constexpr Unit kRate[] = {{"1/s", 1}, {"Hz", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
   static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
   static constexpr Unit kSurfaceTension[] = {{"N/m", 1}, {"mN/m", 1e-3}, {"J/m^2", 1}, {"J/m2", 1}};
   static constexpr Unit kStiffness[] = {{"N/m", 1}, {"N/mm", 1e3}, {"kN/m", 1e3}};
@@ -293,6 +293,16 @@ class SceneReader {
   std::optional<fs::path> resolve_model_uri(const pugi::xml_node& uri_element);
   void read_robot_settings(const pugi::xml_node& element);
   std::optional<NozzleMount> read_mount(const pugi::xml_node& element);
+  /// Whether the world includes robot `robot_name` with link `link`; reported at `element` if not.
+  bool check_robot_link(const pugi::xml_node& element, const std::string& robot_name, const std::string& link);
+  /// An SDF <sensor> in a static link at `link_pose`: a camera, or a warning that it is not simulated.
+  void read_sensor(const pugi::xml_node& sensor, const Pose& link_pose, const std::string& link_name);
+  /// The plugin's <camera name=… type=…>: on a robot link (<mount>) or in the world (<pose>).
+  void read_plugin_camera(const pugi::xml_node& element);
+  /// A camera's name and type attributes, and its intrinsics from `intrinsics` (SDF <camera>'s
+  /// children: horizontal_fov, image, clip, noise) into `settings`.
+  bool read_camera_settings(const pugi::xml_node& named, const pugi::xml_node& intrinsics, sensors::CameraSettings& settings);
+  std::optional<std::array<float, 3>> read_color(const pugi::xml_node& parent);
   void read_link(const pugi::xml_node& link, const Pose& model_pose, const std::string& model_name,
                  StaticBody& body);
   std::optional<Shape> read_geometry(const pugi::xml_node& geometry);
@@ -936,19 +946,151 @@ std::optional<NozzleMount> SceneReader::read_mount(const pugi::xml_node& element
   mount.offset = read_pose(element);
   if (const auto radius = read_scalar(element, "barrel_radius", Quantity::length, Limits::non_negative(), Presence::optional))
     mount.barrel_radius = Real(*radius);
-  if (!robot_name || !link) return std::nullopt;
-  const RobotInclude* robot = scene_.find_robot(*robot_name);
-  if (!robot) {
-    report(element, fmt::format("<mount robot=\"{}\">: no robot of that name is included in the world", *robot_name));
-    return std::nullopt;
-  }
-  if (std::find(robot->link_names.begin(), robot->link_names.end(), *link) == robot->link_names.end()) {
-    report(element, fmt::format("robot '{}' has no link '{}'; its links: {}", robot->name, *link, fmt::join(robot->link_names, ", ")));
-    return std::nullopt;
-  }
+  if (!robot_name || !link || !check_robot_link(element, *robot_name, *link)) return std::nullopt;
   mount.robot = *robot_name;
   mount.link = *link;
   return mount;
+}
+
+bool SceneReader::check_robot_link(const pugi::xml_node& element, const std::string& robot_name, const std::string& link) {
+  const RobotInclude* robot = scene_.find_robot(robot_name);
+  if (!robot) {
+    report(element, fmt::format("<mount robot=\"{}\">: no robot of that name is included in the world", robot_name));
+    return false;
+  }
+  if (std::find(robot->link_names.begin(), robot->link_names.end(), link) == robot->link_names.end()) {
+    report(element, fmt::format("robot '{}' has no link '{}'; its links: {}", robot->name, link, fmt::join(robot->link_names, ", ")));
+    return false;
+  }
+  return true;
+}
+
+// ---- cameras ----
+
+bool SceneReader::read_camera_settings(const pugi::xml_node& named, const pugi::xml_node& intrinsics,
+                                       sensors::CameraSettings& settings) {
+  bool valid = true;
+  if (const auto name = read_attribute(named, "name", Presence::required)) {
+    settings.name = *name;
+    const auto earlier = std::find_if(scene_.cameras.begin(), scene_.cameras.end(),
+                                      [&](const CameraEntry& camera) { return camera.settings.name == *name; });
+    if (earlier != scene_.cameras.end()) {
+      report(named, fmt::format("a camera '{}' is already defined at line {}", *name, earlier->where.line));
+      valid = false;
+    }
+  } else {
+    valid = false;
+  }
+  const auto type = read_attribute(named, "type", Presence::required).value_or("");
+  if (type == "camera") settings.type = sensors::CameraType::camera;
+  else if (type == "depth_camera" || type == "depth") settings.type = sensors::CameraType::depth_camera;
+  else if (type == "rgbd_camera" || type == "rgbd") settings.type = sensors::CameraType::rgbd_camera;
+  else {
+    if (!type.empty()) report(named, fmt::format("camera type '{}' is not one M3DP renders; expected camera, depth_camera or rgbd_camera", type));
+    valid = false;
+  }
+  if (const auto rate = read_scalar(named, "update_rate", Quantity::rate, Limits::positive(), Presence::optional))
+    settings.update_rate = *rate;
+  if (!intrinsics) return valid;
+  if (const auto fov = read_scalar(intrinsics, "horizontal_fov", Quantity::angle, Limits{0.0, std::nullopt, 3.1}, Presence::optional))
+    settings.horizontal_fov = *fov;
+  if (const pugi::xml_node image = intrinsics.child("image")) {
+    check_children(image, {"width", "height", "format", "anti_aliasing"});
+    if (const auto width = read_int(image, "width", 1)) settings.width = *width;
+    if (const auto height = read_int(image, "height", 1)) settings.height = *height;
+    for (const char* side : {"width", "height"})
+      if (const auto pixels = read_int(image, side, 1); pixels && *pixels > 8192) {
+        report(image.child(side), fmt::format("<{}> of a camera image is at most 8192 pixels, got {}", side, *pixels));
+        valid = false;
+      }
+  }
+  if (const pugi::xml_node clip = intrinsics.child("clip")) {
+    check_children(clip, {"near", "far"});
+    if (const auto near = read_scalar(clip, "near", Quantity::length, Limits::positive(), Presence::optional)) settings.near = *near;
+    if (const auto far = read_scalar(clip, "far", Quantity::length, Limits::positive(), Presence::optional)) settings.far = *far;
+    if (settings.far <= settings.near) {
+      report(clip, fmt::format("<far> ({} m) must be beyond <near> ({} m)", settings.far, settings.near));
+      valid = false;
+    }
+  }
+  if (const pugi::xml_node noise = intrinsics.child("noise")) {
+    check_attributes(noise, {"type"});
+    check_children(noise, {"type", "mean", "stddev"});
+    const std::string kind = noise.attribute("type") ? noise.attribute("type").value() : std::string(trim(noise.child_value("type")));
+    if (kind != "gaussian" && kind != "none") {
+      report(noise, fmt::format("camera noise '{}' is not simulated; expected gaussian (or none)", kind));
+      valid = false;
+    } else if (kind == "gaussian") {
+      if (const auto mean = read_scalar(noise, "mean", Quantity::plain_number, Limits::any(), Presence::optional)) settings.noise.mean = *mean;
+      if (const auto stddev = read_scalar(noise, "stddev", Quantity::plain_number, Limits::non_negative(), Presence::optional))
+        settings.noise.stddev = *stddev;
+    }
+  }
+  return valid;
+}
+
+void SceneReader::read_sensor(const pugi::xml_node& sensor, const Pose& link_pose, const std::string& link_name) {
+  const std::string type = sensor.attribute("type").value();
+  if (type != "camera" && type != "depth_camera" && type != "depth" && type != "rgbd_camera" && type != "rgbd") {
+    scene_.warnings.push_back({where(sensor), fmt::format("<sensor type=\"{}\"> in link '{}' is not simulated (M3DP renders "
+                                                          "camera, depth_camera and rgbd_camera); ignored", type, link_name)});
+    return;
+  }
+  check_attributes(sensor, {"name", "type"});
+  // SDF's children of a sensor M3DP reads, and those it accepts with no effect on the images.
+  check_children(sensor, {"pose", "update_rate", "camera", "always_on", "visualize", "topic", "enable_metrics", "frame", "plugin"},
+                 {"plugin"});
+  const pugi::xml_node camera = sensor.child("camera");
+  if (camera)
+    check_children(camera, {"horizontal_fov", "image", "clip", "noise", "save", "depth_camera", "distortion", "lens",
+                            "visibility_mask", "optical_frame_id", "camera_info_topic", "trigger_topic", "triggered", "pose"});
+  CameraEntry entry;
+  entry.where = where(sensor);
+  if (!read_camera_settings(sensor, camera, entry.settings)) return;
+  entry.settings.pose = link_pose * read_pose(sensor) * (camera ? read_pose(camera) : Pose{});
+  scene_.cameras.push_back(std::move(entry));
+}
+
+void SceneReader::read_plugin_camera(const pugi::xml_node& element) {
+  check_attributes(element, {"name", "type"});
+  check_children(element, {"mount", "pose", "update_rate", "horizontal_fov", "image", "clip", "noise", "shadows"});
+  CameraEntry entry;
+  entry.where = where(element);
+  bool valid = read_camera_settings(element, element, entry.settings);
+  if (const auto shadows = read_bool(element, "shadows")) entry.settings.shadows = *shadows;
+  if (const pugi::xml_node mount = element.child("mount")) {
+    check_attributes(mount, {"robot", "link"});
+    check_children(mount, {"pose"});
+    if (element.child("pose")) {
+      report(element.child("pose"), "a mounted camera's <pose> goes inside its <mount> (in the link's frame)");
+      valid = false;
+    }
+    const auto robot = read_attribute(mount, "robot", Presence::required);
+    const auto link = read_attribute(mount, "link", Presence::required);
+    if (!robot || !link || !check_robot_link(mount, *robot, *link)) return;
+    entry.settings.robot = *robot;
+    entry.settings.link = *link;
+    entry.settings.pose = read_pose(mount);
+  } else {
+    entry.settings.pose = read_pose(element);
+  }
+  if (valid) scene_.cameras.push_back(std::move(entry));
+}
+
+std::optional<std::array<float, 3>> SceneReader::read_color(const pugi::xml_node& parent) {
+  const pugi::xml_node element = parent.child("color");
+  if (!element) return std::nullopt;
+  const auto values = parse_numbers(element, leaf_text(element, {}), 3, "r g b");
+  if (!values) return std::nullopt;
+  std::array<float, 3> color{};
+  for (std::size_t c = 0; c < 3; ++c) {
+    if (!((*values)[c] >= 0 && (*values)[c] <= 1)) {
+      report(element, fmt::format("<color> is red, green and blue in [0, 1], got '{}'", leaf_text(element, {})));
+      return std::nullopt;
+    }
+    color[c] = static_cast<float>((*values)[c]);
+  }
+  return color;
 }
 
 void SceneReader::read_link(const pugi::xml_node& link, const Pose& model_pose, const std::string& model_name,
@@ -965,7 +1107,8 @@ void SceneReader::read_link(const pugi::xml_node& link, const Pose& model_pose, 
                                                std::move(*shape), collision_pose, where(collision)});
     }
   }
-  // <visual>, <inertial>, <sensor> ... are valid SDF that the fluid does not see.
+  for (const auto& sensor : child_elements(link, "sensor")) read_sensor(sensor, link_pose, fmt::format("{}/{}", model_name, link_name));
+  // <visual>, <inertial> ... are valid SDF that the fluid does not see.
 }
 
 std::optional<Shape> SceneReader::read_geometry(const pugi::xml_node& geometry) {
@@ -1100,8 +1243,8 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
 // ---- the m3dp plugin ----
 
 void SceneReader::read_plugin(const pugi::xml_node& plugin) {
-  check_children(plugin, {"solver", "air", "material", "fluid_block", "print_head", "robot", "output", "meshing"},
-                 {"material", "fluid_block", "print_head", "robot"});
+  check_children(plugin, {"solver", "air", "material", "fluid_block", "print_head", "robot", "output", "meshing", "camera"},
+                 {"material", "fluid_block", "print_head", "robot", "camera"});
   // The solver comes first: other checks need the particle radius and the bounds.
   if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
   if (const pugi::xml_node air = plugin.child("air")) read_air(air);
@@ -1111,6 +1254,7 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
   for (const auto& head : child_elements(plugin, "print_head")) read_print_head(head);
   if (const pugi::xml_node output = plugin.child("output")) read_output(output);
   if (const pugi::xml_node meshing = plugin.child("meshing")) read_meshing(meshing);
+  for (const auto& camera : child_elements(plugin, "camera")) read_plugin_camera(camera);
 
   if (!plugin.child("fluid_block") && !plugin.child("print_head")) {
     report(plugin, "the scene has no fluid: add a <fluid_block> or a <print_head>");
@@ -1273,13 +1417,15 @@ void SceneReader::read_material(const pugi::xml_node& element) {
   if (!material) return;
   material->name = *name;
   if (preset) material->preset = preset->material.name;
-  scene_.materials.push_back(MaterialEntry{std::move(*material), where(element), std::move(fields)});
+  auto color = read_color(element);
+  if (!color && preset) color = preset->color;
+  scene_.materials.push_back(MaterialEntry{std::move(*material), where(element), std::move(fields), color});
 }
 
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base, FieldLocations& fields) {
   check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
-                           "granular", "micropolar", "elasticity", "source"});
+                           "granular", "micropolar", "elasticity", "source", "color"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
@@ -1502,7 +1648,7 @@ std::vector<MaterialEntry> SceneReader::read_material_library() {
     auto material = read_material_values(element, nullptr, fields);
     if (!name || !material) continue;
     material->name = *name;
-    entries.push_back(MaterialEntry{std::move(*material), where(element), std::move(fields)});
+    entries.push_back(MaterialEntry{std::move(*material), where(element), std::move(fields), read_color(element)});
   }
   // Each preset as the one material of default settings: what the engine would refuse in any scene.
   for (const MaterialEntry& entry : entries) {

@@ -1,6 +1,7 @@
 #pragma once
 // A scene as loaded from an SDF world file: validated, immutable parameters and nothing else.
 // Every entry remembers where in the file it came from, for later messages.
+#include <array>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -9,6 +10,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/geometry.hpp"
 #include "m3dp/material/material.hpp"
+#include "m3dp/sensors/camera.hpp"
 #include "m3dp/sph/settings.hpp"
 #include "m3dp/surface/surface.hpp"
 #include "m3dp/toolpath/parametric.hpp"
@@ -80,6 +82,14 @@ struct MaterialEntry {
   material::Material material;
   SourceLocation where;
   FieldLocations fields = {};  // the material's own elements, or its preset's
+  std::optional<std::array<float, 3>> color = {};  // linear RGB in [0, 1] (<color>, or its preset's): how cameras draw it
+};
+
+/// A camera: an SDF <sensor type="camera|depth_camera|rgbd_camera"> in a static model's link (fixed
+/// in the world), or the plugin's <camera> on a robot link (<mount>) or in the world (<pose>).
+struct CameraEntry {
+  sensors::CameraSettings settings;
+  SourceLocation where;
 };
 
 /// Particles on a lattice of spacing 2·particle_radius filling a box [min, max] or, when `cylinder_radius`
@@ -138,6 +148,7 @@ struct Scene {
   std::vector<PrintHead> print_heads;
   OutputSettings output;
   MeshingSettings meshing;
+  std::vector<CameraEntry> cameras;
   std::vector<Diagnostic> warnings;  // not errors: e.g. G-code commands that were skipped (file:line)
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;

@@ -15,8 +15,8 @@ namespace {
 /// meshes they count, the summary file last.
 constexpr outputs::MakeOutput kOutputs[] = {
     outputs::make_density_check, outputs::make_particle_frames, outputs::make_world_frames, outputs::make_printed_mesh,
-    outputs::make_run_messages,  outputs::make_timing_table,    outputs::make_run_figures,  outputs::make_progress_bar,
-    outputs::make_summary_file,  outputs::make_pace,
+    outputs::make_camera_files,  outputs::make_run_messages,    outputs::make_timing_table, outputs::make_run_figures,
+    outputs::make_progress_bar,  outputs::make_summary_file,    outputs::make_pace,
 };
 }  // namespace
 
@@ -114,6 +114,9 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
     text += fmt::format("  recording   {}: {} messages, {:.1f} MB (Foxglove or Lichtblick: open the file; {:.2f} s to make and write)\n",
                         summary.recording.file, summary.recording.messages, 1e-6 * double(summary.recording.bytes),
                         summary.recording.encode_seconds);
+  for (const auto& camera : summary.cameras)
+    text += fmt::format("  camera      {}: {} frames in cameras/{}/, {:.2f} s rendering ({:.3g} rays/s)\n", camera.name, camera.frames_written,
+                        camera.name, camera.render_seconds, camera.render_seconds > 0 ? double(camera.rays) / camera.render_seconds : 0.0);
   if (summary.live.port != 0)
     text += fmt::format("  live        ws://127.0.0.1:{}: {} clients, {} messages sent ({:.1f} MB), {} dropped for slow clients\n",
                         summary.live.port, summary.live.clients, summary.live.messages_sent, 1e-6 * double(summary.live.bytes_sent),

@@ -102,6 +102,14 @@ struct RunSummary {
     std::uint32_t chunks = 0;
     double encode_seconds = 0;            // wall s spent making and sending the run's messages (file and live)
   } recording;
+  struct Camera {
+    std::string name;
+    std::size_t frames_written = 0;       // image sets in cameras/NAME/
+    std::size_t frames_rendered = 0;      // by the rig (files and recording share each)
+    double render_seconds = 0;            // wall s rendering
+    std::uint64_t rays = 0;
+  };
+  std::vector<Camera> cameras;
   struct Live {
     std::uint16_t port = 0;               // 0: no live stream
     std::size_t clients = 0;              // connected over the run

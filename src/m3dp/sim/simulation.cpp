@@ -5,6 +5,7 @@
 #include <chrono>
 #include <cmath>
 
+#include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/robots.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 
@@ -116,6 +117,13 @@ const Simulation::DensityMeasurement& Simulation::measured_density() const {
     density_measurement_.time = solver_.time();
   }
   return density_measurement_;
+}
+
+Simulation::~Simulation() = default;
+
+CameraRig& Simulation::cameras() const {
+  if (!cameras_) cameras_ = std::make_unique<CameraRig>(*this);
+  return *cameras_;
 }
 
 void Simulation::set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh) {

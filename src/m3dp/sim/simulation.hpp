@@ -15,9 +15,14 @@
 
 namespace m3dp::sim {
 
+class CameraRig;
+
 class Simulation {
  public:
   explicit Simulation(const scene::Scene& scene);
+  ~Simulation();
+  Simulation(const Simulation&) = delete;
+  Simulation& operator=(const Simulation&) = delete;
 
   /// One step: print heads follow their paths (robots through their controllers), the links' motion
   /// goes to the fluid, the fluid advances (adaptive dt), its forces go back to the links, and the
@@ -38,6 +43,10 @@ class Simulation {
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
   /// collision body "printed_material", replacing the previous one.
   void set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh);
+
+  /// The scene's cameras (camera_rig.hpp), made on first use: each renders the simulation as it is,
+  /// once a step, when asked. Observers share it, as they share the measured density.
+  [[nodiscard]] CameraRig& cameras() const;
   /// The printed material's mesh in the world now (null before the first), and how many were set.
   [[nodiscard]] const std::shared_ptr<const TriangleMesh>& printed_mesh() const { return printed_mesh_; }
   [[nodiscard]] std::size_t printed_mesh_version() const { return printed_mesh_version_; }
@@ -90,7 +99,8 @@ class Simulation {
   std::shared_ptr<const TriangleMesh> printed_mesh_;
   std::size_t printed_mesh_version_ = 0;
   double last_coupling_ms_ = 0, last_world_ms_ = 0;
-  mutable DensityMeasurement density_measurement_;  // a cache of what the state is: observers share it
+  mutable DensityMeasurement density_measurement_;
+  mutable std::unique_ptr<CameraRig> cameras_;  // a cache of what the state is: observers share it
 };
 
 }  // namespace m3dp::sim

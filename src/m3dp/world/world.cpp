@@ -731,6 +731,12 @@ LinkShapes World::link_shapes(LinkIndex link) const {
   return shapes_of(*record.node, record.name);
 }
 
+std::optional<Pose> World::robot_link_pose(RobotIndex robot, const std::string& link) const {
+  const BodyNode* node = impl_->robots.at(robot).skeleton->getBodyNode(link);
+  if (!node) return std::nullopt;
+  return pose_of(node->getWorldTransform());
+}
+
 std::vector<std::pair<LinkShapes, Pose>> World::fixed_robot_links() const {
   std::vector<std::pair<LinkShapes, Pose>> links;
   for (const auto& robot : impl_->robots)

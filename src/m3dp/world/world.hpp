@@ -158,6 +158,9 @@ class World {
   /// Robot links welded to the world (a fixed base) with collision shapes: not movable, so not
   /// among the links above, but drawn by the outputs. Each with its pose in the world.
   [[nodiscard]] std::vector<std::pair<LinkShapes, Pose>> fixed_robot_links() const;
+  /// Any link of a robot by its URDF name (with collision shapes or a bare frame like tool0): its
+  /// pose in the world now; none if the robot has no such link.
+  [[nodiscard]] std::optional<Pose> robot_link_pose(RobotIndex robot, const std::string& link) const;
   [[nodiscard]] Vec3 link_linear_velocity(LinkIndex link) const;   // m/s of the link frame's origin, world
   [[nodiscard]] Vec3 link_angular_velocity(LinkIndex link) const;  // rad/s, world
   /// A force (N, world) at the link origin and a torque (N·m, world) applied in every world step

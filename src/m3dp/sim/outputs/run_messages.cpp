@@ -3,17 +3,22 @@
 // (<output><serve>PORT</serve> or `m3dp run --serve`), a Foxglove WebSocket server.
 // Topics: /scene (every body, link and nozzle as frame-locked triangles in its own frame, the
 // commanded paths; later the nozzles' extrusion colour and the printed material's newest mesh),
-// /tf (world → every link, body and nozzle frame), /particles (the fluid with its fields),
-// /printed (the part of each path printed so far), /joints (each robot's), /run (the run's numbers).
-// The file gets a frame every <output><particles_period> of simulated time; the live stream at most
-// RunOptions::live_rate frames per wall second, and only the topics someone is subscribed to.
+// /tf (world → every link, body, nozzle and camera frame), /particles (the fluid with its fields),
+// /printed (the part of each path printed so far), /joints (each robot's), /run (the run's numbers),
+// and per camera /camera/NAME/image, depth, segmentation, points and calibration (optical frame).
+// The file gets a frame every <output><particles_period> of simulated time and each camera's images
+// at its rate; the live stream the same at most RunOptions::live_rate per wall second each, and
+// only on the topics someone is subscribed to.
 #include <fmt/format.h>
 
 #include <chrono>
+#include <cmath>
+#include <cstring>
 
 #include "m3dp/record/foxglove_messages.hpp"
 #include "m3dp/record/foxglove_server.hpp"
 #include "m3dp/record/mcap_writer.hpp"
+#include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/particle_cloud.hpp"
 #include "m3dp/sim/simulation.hpp"
@@ -38,31 +43,59 @@ record::Color kind_color(BodyKind kind) {
 constexpr record::Color kPathColor{0.6, 0.6, 0.6, 0.6}, kPrintedColor{0.9, 0.3, 0.1, 1}, kMaterialColor{0.72, 0.6, 0.48, 1};
 constexpr record::Color kNozzleIdle{0.3, 0.3, 0.3, 1}, kNozzleExtruding{0.9, 0.3, 0.1, 1};
 
-/// The topics, in channel order; how the live stream treats each.
-enum Topic : std::size_t { scene, transforms, particles, printed, joints, run, topic_count };
+/// The run's topics, in channel order, then each camera's; how the live stream treats each.
+enum Topic : std::size_t { scene, transforms, particles, printed, joints, run, run_topic_count };
 struct TopicInfo {
-  const char* topic;
-  const char* schema;
+  std::string topic;
+  std::string schema;
   record::Delivery delivery;
 };
-constexpr TopicInfo kTopics[topic_count] = {
-    {"/scene", "foxglove.SceneUpdate", record::Delivery::latched},
-    {"/tf", "foxglove.FrameTransforms", record::Delivery::latest},
-    {"/particles", "foxglove.PointCloud", record::Delivery::latest},
-    {"/printed", "foxglove.SceneUpdate", record::Delivery::latest},
-    {"/joints", "m3dp.JointStates", record::Delivery::queued},
-    {"/run", "m3dp.RunStats", record::Delivery::queued},
+std::vector<TopicInfo> run_topics() {
+  return {{"/scene", "foxglove.SceneUpdate", record::Delivery::latched},
+          {"/tf", "foxglove.FrameTransforms", record::Delivery::latest},
+          {"/particles", "foxglove.PointCloud", record::Delivery::latest},
+          {"/printed", "foxglove.SceneUpdate", record::Delivery::latest},
+          {"/joints", "m3dp.JointStates", record::Delivery::queued},
+          {"/run", "m3dp.RunStats", record::Delivery::queued}};
+}
+constexpr std::size_t kNoTopic = ~std::size_t(0);
+/// A camera's topics (kNoTopic: its type has none): /camera/NAME/image, depth, segmentation, points, calibration.
+struct CameraTopics {
+  std::size_t image = kNoTopic, depth = kNoTopic, segmentation = kNoTopic, points = kNoTopic, calibration = kNoTopic;
 };
+constexpr double kTimeSlack = 1e-9;  // s
+
+std::vector<record::PointField> camera_point_fields() {
+  using Type = record::PointField::Type;
+  return {{"x", 0, Type::float32},     {"y", 4, Type::float32},      {"z", 8, Type::float32},       {"red", 12, Type::uint8},
+          {"green", 13, Type::uint8},  {"blue", 14, Type::uint8},    {"alpha", 15, Type::uint8},    {"segment", 16, Type::uint16}};
+}
 
 class RunMessages final : public RunObserver {
  public:
-  RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate)
-      : period_(period), live_interval_(live_rate > 0 ? 1 / live_rate : 0) {
+  RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate,
+              const std::vector<scene::CameraEntry>& cameras)
+      : period_(period), live_interval_(live_rate > 0 ? 1 / live_rate : 0), topics_(run_topics()) {
+    for (const auto& camera : cameras) {
+      const auto& settings = camera.settings;
+      const std::string prefix = "/camera/" + settings.name + "/";
+      auto add = [&](const std::string& name, const std::string& schema) {
+        topics_.push_back({prefix + name, schema, record::Delivery::latest});
+        return topics_.size() - 1;
+      };
+      CameraTopics ids;
+      if (sensors::has_color(settings.type)) ids.image = add("image", "foxglove.RawImage");
+      if (sensors::has_depth(settings.type)) ids.depth = add("depth", "foxglove.RawImage");
+      ids.segmentation = add("segmentation", "foxglove.RawImage");
+      if (sensors::has_depth(settings.type)) ids.points = add("points", "foxglove.PointCloud");
+      ids.calibration = add("calibration", "foxglove.CameraCalibration");
+      camera_topics_.push_back(ids);
+    }
     if (!mcap_file.empty()) {
       mcap_file_ = mcap_file;
       mcap_.emplace(mcap_file);
       std::map<std::string, std::uint16_t> schema_ids;
-      for (const TopicInfo& topic : kTopics) {
+      for (const TopicInfo& topic : topics_) {
         auto found = schema_ids.find(topic.schema);
         if (found == schema_ids.end())
           found = schema_ids.emplace(topic.schema, mcap_->add_schema(topic.schema, "protobuf", record::schema_descriptor_set(topic.schema))).first;
@@ -71,14 +104,15 @@ class RunMessages final : public RunObserver {
     }
     if (serve_port) {
       std::vector<record::ServerChannel> channels;
-      for (const TopicInfo& topic : kTopics)
+      for (const TopicInfo& topic : topics_)
         channels.push_back({topic.topic, topic.schema, record::schema_descriptor_set(topic.schema), topic.delivery});
       live_ = std::make_unique<record::FoxgloveServer>(std::move(channels), record::ServerOptions{.port = *serve_port});
       fmt::print("m3dp: live at ws://127.0.0.1:{} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)\n", live_->port());
       std::fflush(stdout);
     }
   }
-  [[nodiscard]] double period() const override { return period_; }
+  // Every step: the frames have their period, each camera its rate.
+  [[nodiscard]] double period() const override { return 0; }
 
   void start(const Simulation& simulation) override {
     const auto began = Clock::now();
@@ -104,18 +138,31 @@ class RunMessages final : public RunObserver {
     }
     const Sinks sinks{mcap_.has_value(), live_ != nullptr};
     send(sinks, Topic::scene, nanoseconds(simulation.time()), record::encode_scene_update(simulation.time(), entities), "scene");
+    next_frame_time_ = next_multiple(simulation.time(), period_);
     write_frame(simulation, nullptr, sinks);
+    last_camera_live_.assign(camera_topics_.size(), Clock::time_point{});
+    for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
+      next_camera_time_.push_back(next_multiple(simulation.time(), 1 / simulation.cameras().settings(c).update_rate));
+      write_camera(simulation, c, sinks);
+    }
     encode_seconds_ += seconds_since(began);
   }
 
   void observe(const Simulation& simulation, const StepReport& report) override {
     const auto began = Clock::now();
-    Sinks sinks{mcap_.has_value(), false};
-    if (live_ && began - last_live_frame_ >= std::chrono::duration<double>(live_interval_)) {
-      sinks.live = true;
-      last_live_frame_ = began;
+    const double time = simulation.time();
+    if (time + kTimeSlack >= next_frame_time_) {
+      while (next_frame_time_ <= time + kTimeSlack) next_frame_time_ += period_;
+      const Sinks sinks{mcap_.has_value(), live_due(began, last_live_frame_)};
+      if (sinks.file || sinks.live) write_frame(simulation, &report.stats, sinks);
     }
-    if (sinks.file || sinks.live) write_frame(simulation, &report.stats, sinks);
+    for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
+      if (time + kTimeSlack < next_camera_time_[c]) continue;
+      const double camera_period = 1 / simulation.cameras().settings(c).update_rate;
+      while (next_camera_time_[c] <= time + kTimeSlack) next_camera_time_[c] += camera_period;
+      const Sinks sinks{mcap_.has_value(), live_due(began, last_camera_live_[c])};
+      if (sinks.file || sinks.live) write_camera(simulation, c, sinks);
+    }
     encode_seconds_ += seconds_since(began);
   }
 
@@ -141,14 +188,24 @@ class RunMessages final : public RunObserver {
   };
 
   static double seconds_since(Clock::time_point began) { return std::chrono::duration<double>(Clock::now() - began).count(); }
+  /// The first multiple of `period` after `time`.
+  static double next_multiple(double time, double period) { return period * (std::floor((time + kTimeSlack) / period) + 1); }
+  /// Whether the live stream may have another frame now (at most live_rate a wall second); marks it sent.
+  bool live_due(Clock::time_point now, Clock::time_point& last) const {
+    if (!live_ || now - last < std::chrono::duration<double>(live_interval_)) return false;
+    last = now;
+    return true;
+  }
 
   /// Whether a message on `topic` would go anywhere (nobody subscribed: not made at all).
-  bool wanted(const Sinks& sinks, Topic topic) const { return sinks.file || (sinks.live && live_->subscribed(topic)); }
+  bool wanted(const Sinks& sinks, std::size_t topic) const {
+    return topic != kNoTopic && (sinks.file || (sinks.live && live_->subscribed(topic)));
+  }
 
-  void send(const Sinks& sinks, Topic topic, std::uint64_t stamp, std::string&& bytes, std::string_view key = {}) {
+  void send(const Sinks& sinks, std::size_t topic, std::uint64_t stamp, std::string&& bytes, std::string_view key = {}) {
     if (sinks.file) mcap_->write(mcap_channels_[topic], stamp, bytes);
     // The scene is kept by the server for late clients even when nobody listens now.
-    if (sinks.live && (live_->subscribed(topic) || kTopics[topic].delivery == record::Delivery::latched))
+    if (sinks.live && (live_->subscribed(topic) || topics_[topic].delivery == record::Delivery::latched))
       live_->publish(topic, stamp, std::make_shared<const std::string>(std::move(bytes)), key);
   }
 
@@ -179,6 +236,12 @@ class RunMessages final : public RunObserver {
           transforms_list_.push_back({nozzle.parent_frame, "nozzle/" + nozzle.name,
                                       Pose{to_parent * (pose.position - parent.position), (to_parent * pose.orientation).normalized()}});
         }
+      }
+      // Each camera's frame in the world (x forward, z up), and its optical frame (z forward) on it.
+      for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
+        const std::string frame = "camera/" + simulation.cameras().settings(c).name;
+        transforms_list_.push_back({"world", frame, simulation.cameras().pose(simulation, c)});
+        transforms_list_.push_back({frame, frame + "/optical", Pose{Vec3::Zero(), sensors::optical_to_camera()}});
       }
       send(sinks, Topic::transforms, stamp, record::encode_frame_transforms(time, transforms_list_));
     }
@@ -230,6 +293,43 @@ class RunMessages final : public RunObserver {
     if (sinks.file) mcap_->flush();
   }
 
+  /// A camera's image, depth, segmentation, point cloud and calibration, in its optical frame.
+  void write_camera(const Simulation& simulation, std::size_t c, const Sinks& sinks) {
+    const CameraTopics& ids = camera_topics_[c];
+    if (!wanted(sinks, ids.image) && !wanted(sinks, ids.depth) && !wanted(sinks, ids.segmentation) && !wanted(sinks, ids.points) &&
+        !wanted(sinks, ids.calibration))
+      return;
+    CameraRig& rig = simulation.cameras();
+    const sensors::CameraImage& image = rig.image(simulation, c);
+    const double time = simulation.time();
+    const std::uint64_t stamp = nanoseconds(time);
+    const std::string frame = "camera/" + rig.settings(c).name + "/optical";
+    const auto width = static_cast<std::uint32_t>(image.width), height = static_cast<std::uint32_t>(image.height);
+    auto bytes_of = [](const auto& values) {
+      return std::string_view(reinterpret_cast<const char*>(values.data()), values.size() * sizeof(values[0]));
+    };
+    if (wanted(sinks, ids.image))
+      send(sinks, ids.image, stamp, record::encode_raw_image(time, frame, width, height, "rgb8", 3 * width, bytes_of(image.rgb)));
+    if (wanted(sinks, ids.depth))
+      send(sinks, ids.depth, stamp, record::encode_raw_image(time, frame, width, height, "32FC1", 4 * width, bytes_of(image.depth)));
+    if (wanted(sinks, ids.segmentation))
+      send(sinks, ids.segmentation, stamp, record::encode_raw_image(time, frame, width, height, "16UC1", 2 * width, bytes_of(image.segment)));
+    if (wanted(sinks, ids.points)) {
+      sensors::point_cloud(image, sensors::Intrinsics::of(rig.settings(c)), cloud_points_);
+      std::string cloud;
+      record::encode_point_cloud(time, frame, camera_fields_, sizeof(sensors::CloudPoint), cloud_points_.size(),
+                                 [&](char* out) { std::memcpy(out, cloud_points_.data(), cloud_points_.size() * sizeof(sensors::CloudPoint)); },
+                                 cloud);
+      send(sinks, ids.points, stamp, std::move(cloud));
+    }
+    if (wanted(sinks, ids.calibration)) {
+      const sensors::Intrinsics intrinsics = sensors::Intrinsics::of(rig.settings(c));
+      send(sinks, ids.calibration, stamp,
+           record::encode_camera_calibration(time, frame, width, height, intrinsics.fx, intrinsics.fy, intrinsics.cx, intrinsics.cy));
+    }
+    if (sinks.file) mcap_->flush();
+  }
+
   record::RunStats run_stats(const Simulation& simulation, const sph::StepStats* stats, const WorldPoses& poses) const {
     record::RunStats run;
     run.time = simulation.time();
@@ -254,6 +354,13 @@ class RunMessages final : public RunObserver {
   }
 
   double period_, live_interval_;  // s simulated; s wall
+  std::vector<TopicInfo> topics_;
+  std::vector<CameraTopics> camera_topics_;  // per camera of the scene
+  std::vector<record::PointField> camera_fields_ = camera_point_fields();
+  std::vector<sensors::CloudPoint> cloud_points_;
+  double next_frame_time_ = 0;
+  std::vector<double> next_camera_time_;
+  std::vector<Clock::time_point> last_camera_live_;
   std::filesystem::path mcap_file_;
   std::optional<record::McapWriter> mcap_;
   std::vector<std::uint16_t> mcap_channels_;  // per topic
@@ -276,7 +383,8 @@ std::unique_ptr<RunObserver> make_run_messages(Simulation& simulation, const Run
   if (record) std::filesystem::create_directories(options.output_directory);
   // Frames at the particle period; a scene without particle frames is recorded 20 times a second.
   return std::make_unique<RunMessages>(record ? options.output_directory / "run.mcap" : std::filesystem::path(), serve_port,
-                                       output.particles_period > 0 ? output.particles_period : 0.05, options.live_rate);
+                                       output.particles_period > 0 ? output.particles_period : 0.05, options.live_rate,
+                                       simulation.scene().cameras);
 }
 
 }  // namespace m3dp::sim::outputs

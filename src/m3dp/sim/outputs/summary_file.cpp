@@ -75,6 +75,14 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                  {"bytes", summary.recording.bytes},
                  {"chunks", summary.recording.chunks},
                  {"encode_seconds", summary.recording.encode_seconds}};
+  nlohmann::json cameras = nlohmann::json::array();
+  for (const auto& camera : summary.cameras)
+    cameras.push_back({{"name", camera.name},
+                       {"frames_written", camera.frames_written},
+                       {"frames_rendered", camera.frames_rendered},
+                       {"render_seconds", camera.render_seconds},
+                       {"rays", camera.rays},
+                       {"rays_per_second", camera.render_seconds > 0 ? double(camera.rays) / camera.render_seconds : 0.0}});
   nlohmann::json live;  // null: no live stream
   if (summary.live.port != 0)
     live = {{"port", summary.live.port},
@@ -131,6 +139,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"meshes_skipped", summary.meshes_skipped},
       {"recording", recording},
       {"live", live},
+      {"cameras", cameras},
   };
 }
 

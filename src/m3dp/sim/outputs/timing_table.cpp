@@ -7,6 +7,7 @@
 #include <cstdio>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/simulation.hpp"
 
@@ -22,7 +23,8 @@ class TimingTable final : public RunObserver {
     if (!file_) throw Error("cannot write " + partial_.string());
     std::string header = "step,time_s,dt_s,particles,density_iterations,divergence_iterations,viscosity_iterations,density_error";
     for (const auto name : sph::kStageNames) header += fmt::format(",ms_{}", name);
-    header += ",ms_coupling,ms_world,ms_output,ms_total\n";
+    // ms_cameras: the cameras' rendering, a part of ms_output (the outputs that asked for images).
+    header += ",ms_coupling,ms_world,ms_output,ms_cameras,ms_total\n";
     std::fputs(header.c_str(), file_);
   }
   ~TimingTable() override {
@@ -38,8 +40,9 @@ class TimingTable final : public RunObserver {
                solver.fluid().size(), stats.density_iterations, stats.divergence_iterations, stats.viscosity_iterations,
                stats.density_error);
     for (const double ms : stats.stage_ms.ms) fmt::print(file_, ",{:.4f}", ms);
-    fmt::print(file_, ",{:.4f},{:.4f},{:.4f},{:.4f}\n", simulation.last_coupling_ms(), simulation.last_world_ms(), report.output_ms,
-               stats.stage_ms.total() + simulation.last_coupling_ms() + simulation.last_world_ms() + report.output_ms);
+    const double camera_ms = simulation.scene().cameras.empty() ? 0.0 : simulation.cameras().take_render_ms();
+    fmt::print(file_, ",{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n", simulation.last_coupling_ms(), simulation.last_world_ms(), report.output_ms,
+               camera_ms, stats.stage_ms.total() + simulation.last_coupling_ms() + simulation.last_world_ms() + report.output_ms);
   }
 
   void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) override {

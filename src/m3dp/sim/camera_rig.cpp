@@ -1,0 +1,173 @@
+#include "m3dp/sim/camera_rig.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/core/parallel.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+namespace m3dp::sim {
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+/// Colours of things that are not materials (linear RGB).
+constexpr sensors::Rgb kStaticColor{0.55f, 0.55f, 0.58f}, kLinkColor{0.30f, 0.45f, 0.70f}, kBodyColor{0.85f, 0.50f, 0.15f},
+    kNozzleColor{0.20f, 0.20f, 0.22f}, kPrintedMeshColor{0.60f, 0.52f, 0.45f};
+/// Materials without a <color>: a palette that tells them apart.
+constexpr sensors::Rgb kMaterialPalette[] = {{0.80f, 0.55f, 0.35f}, {0.35f, 0.65f, 0.45f}, {0.75f, 0.35f, 0.45f},
+                                             {0.55f, 0.45f, 0.75f}, {0.80f, 0.75f, 0.35f}, {0.35f, 0.65f, 0.75f}};
+/// A material's layers alternate a little in brightness, so that a picture shows them.
+constexpr float kLayerShade[] = {1.0f, 0.86f};
+constexpr std::size_t kMaxLayers = 4000;  // per material; later layers share the last id
+
+TriangleMesh transformed(const TriangleMesh& mesh, const Pose& pose) {
+  TriangleMesh out;
+  out.triangles = mesh.triangles;
+  out.vertices.reserve(mesh.vertices.size());
+  for (const Vec3& vertex : mesh.vertices) out.vertices.push_back(pose.apply(vertex));
+  return out;
+}
+
+}  // namespace
+
+std::vector<double> layer_start_times(const PathView& path, Real tolerance) {
+  std::vector<double> starts;
+  Real layer_height = 0;
+  for (const auto& vertex : path.vertices) {
+    if (!vertex.extruding) continue;
+    if (starts.empty() || std::abs(vertex.position.z() - layer_height) > tolerance) {
+      starts.push_back(vertex.time);
+      layer_height = vertex.position.z();
+    }
+  }
+  return starts;
+}
+
+CameraRig::CameraRig(const Simulation& simulation) : layout_(world_layout(simulation)) {
+  const auto& scene = simulation.scene();
+  add_segment({0, "background", "", "", -1, {}});
+  // Everything that is not fluid, each its own segment.
+  for (std::size_t b = 0; b < layout_.bodies.size(); ++b) {
+    const BodyView& body = layout_.bodies[b];
+    const std::string kind = body.kind == BodyKind::static_body ? "static" : body.kind == BodyKind::free_body ? "body" : "link";
+    const sensors::Rgb color = body.kind == BodyKind::static_body ? kStaticColor : body.kind == BodyKind::free_body ? kBodyColor : kLinkColor;
+    const std::uint16_t segment = add_segment({0, kind, body.name, body.robot, -1, color});
+    if (!body.link) {
+      renderer_.add_static(transformed(body.triangles, body.fixed_pose), segment);
+      body_handles_.push_back(~std::size_t(0));
+    } else {
+      body_handles_.push_back(renderer_.add_body(body.triangles, segment));
+    }
+  }
+  for (const auto& nozzle : layout_.nozzles)
+    nozzle_handles_.push_back(renderer_.add_body(nozzle.triangles, add_segment({0, "nozzle", "nozzle/" + nozzle.name, "", -1, kNozzleColor})));
+  printed_segment_ = add_segment({0, "printed_material", "printed_material", "", -1, kPrintedMeshColor});
+
+  // Materials: a segment per print layer of the first print head that prints it (by birth time),
+  // and one for what no path printed (fluid blocks).
+  const std::size_t phases = scene.materials.size();
+  material_colors_.resize(phases);
+  layer_starts_.resize(phases);
+  layer_segments_.resize(phases);
+  for (std::size_t phase = 0; phase < phases; ++phase) {
+    const auto& color = scene.materials[phase].color;
+    material_colors_[phase] = color ? sensors::Rgb{(*color)[0], (*color)[1], (*color)[2]} : kMaterialPalette[phase % std::size(kMaterialPalette)];
+    for (std::size_t head = 0; head < scene.print_heads.size(); ++head) {
+      if (scene.material_index(scene.print_heads[head].material) != phase) continue;
+      const auto path = std::find_if(layout_.paths.begin(), layout_.paths.end(),
+                                     [&](const PathView& view) { return !view.base_path && view.name == scene.print_heads[head].name; });
+      if (path != layout_.paths.end()) layer_starts_[phase] = layer_start_times(*path, Real(0.25) * scene.print_heads[head].inner_diameter);
+      break;
+    }
+    if (layer_starts_[phase].size() > kMaxLayers) layer_starts_[phase].resize(kMaxLayers);
+    const std::string& name = scene.materials[phase].material.name;
+    layer_segments_[phase].push_back(add_segment({0, "material", name, "", -1, material_colors_[phase]}));
+    for (std::size_t layer = 0; layer < layer_starts_[phase].size(); ++layer) {
+      sensors::Rgb shaded = material_colors_[phase];
+      const float shade = kLayerShade[layer % std::size(kLayerShade)];
+      shaded = {shaded.r * shade, shaded.g * shade, shaded.b * shade};
+      layer_segments_[phase].push_back(add_segment({0, "material", name, "", static_cast<int>(layer), shaded}));
+    }
+  }
+  std::vector<sensors::Rgb> palette;
+  for (const Segment& segment : legend_) palette.push_back(segment.color);
+  renderer_.set_palette(std::move(palette));
+
+  // The cameras, each on its link (found by name among the robots) or fixed in the world.
+  for (const auto& entry : scene.cameras) {
+    Camera camera;
+    camera.settings = entry.settings;
+    cameras_.push_back(std::move(camera));
+  }
+}
+
+std::uint16_t CameraRig::add_segment(Segment segment) {
+  if (legend_.size() >= 65535) throw Error("cameras: more than 65535 things to tell apart in the segmentation images");
+  segment.id = static_cast<std::uint16_t>(legend_.size());
+  legend_.push_back(std::move(segment));
+  return legend_.back().id;
+}
+
+Pose CameraRig::pose(const Simulation& simulation, std::size_t index) const {
+  const sensors::CameraSettings& settings = cameras_.at(index).settings;
+  if (settings.robot.empty()) return settings.pose;
+  const auto& world = simulation.world();
+  for (const world::RobotIndex robot : simulation.robots()) {
+    if (world.robot_name(robot) != settings.robot) continue;
+    if (const auto link = world.robot_link_pose(robot, settings.link)) return *link * settings.pose;
+  }
+  throw Error(fmt::format("camera '{}': robot '{}' has no link '{}'", settings.name, settings.robot, settings.link));
+}
+
+void CameraRig::update(const Simulation& simulation) {
+  const auto step = static_cast<std::uint64_t>(simulation.solver().state().step);
+  if (step == updated_step_) return;
+  updated_step_ = step;
+  const WorldPoses poses = world_poses(simulation, layout_);
+  for (std::size_t b = 0; b < layout_.bodies.size(); ++b)
+    if (layout_.bodies[b].link) renderer_.set_body_pose(body_handles_[b], poses.bodies[b]);
+  for (std::size_t n = 0; n < nozzle_handles_.size(); ++n) renderer_.set_body_pose(nozzle_handles_[n], poses.nozzles[n].pose);
+  if (simulation.printed_mesh() && simulation.printed_mesh_version() != printed_version_) {
+    printed_version_ = simulation.printed_mesh_version();
+    renderer_.set_printed_mesh(*simulation.printed_mesh(), printed_segment_);
+  }
+  const auto& fluid = simulation.solver().fluid();
+  particle_segments_.resize(fluid.size());
+  parallel_for_each_index(fluid.size(), [&](std::size_t i) {
+    const std::uint16_t phase = fluid.phase[i];
+    const auto& starts = layer_starts_[phase];
+    // Layer k began at starts[k]: the segments list "no layer" first, then each layer.
+    const auto layer = static_cast<std::size_t>(std::upper_bound(starts.begin(), starts.end(), double(fluid.birth_time[i])) - starts.begin());
+    particle_segments_[i] = layer_segments_[phase][std::min(layer, layer_segments_[phase].size() - 1)];
+  }, 4096);
+  renderer_.set_particles(fluid.position, simulation.solver().parameters().settings.particle_radius, particle_segments_);
+}
+
+const sensors::CameraImage& CameraRig::image(const Simulation& simulation, std::size_t index) {
+  Camera& camera = cameras_.at(index);
+  const auto step = static_cast<std::uint64_t>(simulation.solver().state().step);
+  if (camera.rendered_step == step) return camera.image;
+  const auto began = Clock::now();
+  update(simulation);
+  renderer_.render(camera.settings, pose(simulation, index), camera.totals.frames++ * 1000003ull + index, camera.image);
+  camera.rendered_step = step;
+  const double ms = std::chrono::duration<double, std::milli>(Clock::now() - began).count();
+  render_ms_ += ms;
+  camera.totals.render_seconds += 1e-3 * ms;
+  camera.totals.rays += renderer_.last_stats().rays;
+  return camera.image;
+}
+
+double CameraRig::take_render_ms() {
+  const double ms = render_ms_;
+  render_ms_ = 0;
+  return ms;
+}
+
+}  // namespace m3dp::sim

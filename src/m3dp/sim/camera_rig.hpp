@@ -1,0 +1,84 @@
+#pragma once
+// The scene's cameras on a simulation: one renderer (sensors::Renderer) fed from the world as the
+// outputs draw it (world_view: static shapes, links, bodies, nozzles), the printed material's mesh
+// and the particles; each camera where its link or the world puts it. Every pixel's segment id
+// names what it saw in a legend: the background, each static shape, link, body and nozzle, the
+// printed mesh, and each material's print layers (a particle's layer is the layer of its print
+// head's path it was emitted in, by its birth time).
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "m3dp/sensors/renderer.hpp"
+#include "m3dp/sim/world_view.hpp"
+
+namespace m3dp::sim {
+
+class Simulation;
+
+struct Segment {
+  std::uint16_t id = 0;
+  std::string kind;      // background, static, link, body, nozzle, printed_material, material
+  std::string name;      // the body's, link's ("ur10/forearm_link") or material's name
+  std::string robot;     // for a link
+  int layer = -1;        // for a material: its print layer (0 first), -1: not printed by a path
+  sensors::Rgb color;
+};
+
+class CameraRig {
+ public:
+  explicit CameraRig(const Simulation& simulation);
+
+  [[nodiscard]] std::size_t size() const { return cameras_.size(); }
+  [[nodiscard]] const sensors::CameraSettings& settings(std::size_t camera) const { return cameras_.at(camera).settings; }
+  /// The camera frame's pose in the world now (x forward, z up).
+  [[nodiscard]] Pose pose(const Simulation& simulation, std::size_t camera) const;
+  /// The camera's image of the simulation as it is now (rendered once per step and camera).
+  const sensors::CameraImage& image(const Simulation& simulation, std::size_t camera);
+  /// What each segment id is (index: id): fixed when the rig is made, layers from the paths.
+  [[nodiscard]] const std::vector<Segment>& legend() const { return legend_; }
+  /// Wall ms spent rendering since the last call (timing.csv's cameras column).
+  double take_render_ms();
+  /// A camera's images rendered so far, the wall seconds they took and their rays.
+  struct Totals {
+    std::size_t frames = 0;
+    double render_seconds = 0;
+    std::uint64_t rays = 0;
+  };
+  [[nodiscard]] const Totals& totals(std::size_t camera) const { return cameras_.at(camera).totals; }
+  [[nodiscard]] const sensors::RenderStats& last_stats() const { return renderer_.last_stats(); }
+
+ private:
+  struct Camera {
+    sensors::CameraSettings settings;
+    std::optional<world::LinkIndex> link;  // what carries it (none: fixed in the world)
+    Pose fixed_link_pose;                  // a fixed robot link's pose, if it is on one
+    sensors::CameraImage image;
+    std::uint64_t rendered_step = ~0ull;
+    Totals totals;
+  };
+  /// Brings the renderer's scene to the simulation's present (once per step).
+  void update(const Simulation& simulation);
+  std::uint16_t add_segment(Segment segment);
+
+  WorldLayout layout_;
+  std::vector<std::size_t> body_handles_;  // per moving layout body
+  std::vector<std::size_t> nozzle_handles_;
+  sensors::Renderer renderer_;
+  std::vector<Camera> cameras_;
+  std::vector<Segment> legend_;
+  std::vector<sensors::Rgb> material_colors_;                  // per phase
+  std::vector<std::vector<double>> layer_starts_;              // per phase: when each layer began (s)
+  std::vector<std::vector<std::uint16_t>> layer_segments_;     // per phase: [0] no layer, [k + 1] layer k
+  std::vector<std::uint16_t> particle_segments_;
+  std::uint16_t printed_segment_ = 0;
+  std::size_t printed_version_ = 0;
+  std::uint64_t updated_step_ = ~0ull;
+  double render_ms_ = 0;
+};
+
+/// Each layer's start time on a path: where its extruding height changes by more than `tolerance` (m).
+[[nodiscard]] std::vector<double> layer_start_times(const PathView& path, Real tolerance);
+
+}  // namespace m3dp::sim

@@ -1,0 +1,157 @@
+// cameras/NAME/ for every camera of the scene, at its <update_rate> (images per simulated second):
+//   rgb_NNNNNN.png           8-bit RGB (colour cameras)
+//   depth_NNNNNN.npy         float32 metres along the optical axis, inf where nothing was hit (depth cameras)
+//   depth_NNNNNN.png         16-bit millimetres, 0 where nothing was hit (ROS's 16UC1)
+//   segmentation_NNNNNN.png  16-bit segment ids, named in legend.json
+//   points_NNNNNN.ply        the point cloud in the optical frame: x y z, colour, segment (depth cameras)
+//   camera.json              intrinsics, clip, type, where it is mounted, the frame conventions
+//   frames.csv               each frame's time and the optical frame's pose in the world
+// The rendering is the simulation's camera rig (rendered once a step, shared with the recording).
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
+#include <cmath>
+
+#include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/image_files.hpp"
+#include "m3dp/sim/camera_rig.hpp"
+#include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+namespace m3dp::sim::outputs {
+
+namespace {
+
+constexpr double kTimeSlack = 1e-9;  // s: a frame due at t is taken by a step that ends within this of it
+
+nlohmann::json pose_json(const Pose& pose) {
+  const Quat& q = pose.orientation;
+  return {{"position_m", {pose.position.x(), pose.position.y(), pose.position.z()}}, {"orientation_wxyz", {q.w(), q.x(), q.y(), q.z()}}};
+}
+
+void write_point_cloud(const std::filesystem::path& file, const std::vector<sensors::CloudPoint>& points) {
+  io::write_file_atomically(file, [&](std::ostream& stream) {
+    stream << "ply\nformat binary_little_endian 1.0\ncomment m3dp camera point cloud, optical frame (z forward, x right, y down), m\n"
+           << "element vertex " << points.size() << "\n"
+           << "property float x\nproperty float y\nproperty float z\n"
+           << "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n"
+           << "property ushort segment\nproperty ushort padding\nend_header\n";
+    stream.write(reinterpret_cast<const char*>(points.data()), static_cast<std::streamsize>(points.size() * sizeof(sensors::CloudPoint)));
+  }, true);
+}
+
+class CameraFiles final : public RunObserver {
+ public:
+  explicit CameraFiles(std::filesystem::path folder) : folder_(std::move(folder)) {}
+  // Every step: each camera has its own rate.
+  [[nodiscard]] double period() const override { return 0; }
+
+  void start(const Simulation& simulation) override {
+    CameraRig& rig = simulation.cameras();
+    nlohmann::json legend = nlohmann::json::array();
+    for (const Segment& segment : rig.legend()) {
+      nlohmann::json entry = {{"id", segment.id}, {"kind", segment.kind}, {"name", segment.name},
+                              {"color_rgb", {segment.color.r, segment.color.g, segment.color.b}}};
+      if (!segment.robot.empty()) entry["robot"] = segment.robot;
+      if (segment.kind == "material") entry["layer"] = segment.layer >= 0 ? nlohmann::json(segment.layer) : nlohmann::json();
+      legend.push_back(entry);
+    }
+    for (std::size_t c = 0; c < rig.size(); ++c) {
+      const auto& settings = rig.settings(c);
+      const auto folder = folder_ / settings.name;
+      std::filesystem::create_directories(folder);
+      const sensors::Intrinsics intrinsics = sensors::Intrinsics::of(settings);
+      nlohmann::json camera = {
+          {"name", settings.name},
+          {"type", sensors::camera_type_name(settings.type)},
+          {"width", settings.width},
+          {"height", settings.height},
+          {"horizontal_fov_rad", settings.horizontal_fov},
+          {"vertical_fov_rad", intrinsics.vertical_fov()},
+          {"fx", intrinsics.fx},
+          {"fy", intrinsics.fy},
+          {"cx", intrinsics.cx},
+          {"cy", intrinsics.cy},
+          {"near_m", settings.near},
+          {"far_m", settings.far},
+          {"update_rate_hz", settings.update_rate},
+          {"noise", {{"type", settings.noise.enabled() ? "gaussian" : "none"}, {"mean", settings.noise.mean}, {"stddev", settings.noise.stddev}}},
+          {"mounted_on", settings.robot.empty() ? nlohmann::json("world") : nlohmann::json(settings.robot + "/" + settings.link)},
+          {"pose_in_mount", pose_json(settings.pose)},
+          {"conventions",
+           "camera frame: x forward, z up (SDF); images and point clouds: optical frame, z forward, x right, y down (REP 103); "
+           "pixel (i, j) from the top left, its centre at (i + 0.5, j + 0.5); depth is along the optical axis"}};
+      io::write_text_atomically(folder / "camera.json", camera.dump(2) + "\n");
+      io::write_text_atomically(folder / "legend.json", legend.dump(2) + "\n");
+      cameras_.push_back({folder, simulation.time(), 0, "frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz\n"});
+    }
+    observe_cameras(simulation);
+  }
+
+  void observe(const Simulation& simulation, const StepReport& /*report*/) override { observe_cameras(simulation); }
+
+  void finish(const Simulation& simulation, RunSummary& summary) override {
+    CameraRig& rig = simulation.cameras();
+    for (std::size_t c = 0; c < cameras_.size(); ++c) {
+      const CameraRig::Totals& totals = rig.totals(c);
+      summary.cameras.push_back({rig.settings(c).name, cameras_[c].frames, totals.frames, totals.render_seconds, totals.rays});
+    }
+  }
+
+ private:
+  struct CameraOutput {
+    std::filesystem::path folder;
+    double next_time = 0;
+    std::size_t frames = 0;
+    std::string frames_csv;
+  };
+
+  void observe_cameras(const Simulation& simulation) {
+    CameraRig& rig = simulation.cameras();
+    const double time = simulation.time();
+    for (std::size_t c = 0; c < cameras_.size(); ++c) {
+      CameraOutput& output = cameras_[c];
+      if (time + kTimeSlack < output.next_time) continue;
+      const double period = 1 / rig.settings(c).update_rate;
+      while (output.next_time <= time + kTimeSlack) output.next_time += period;
+      write_frame(simulation, rig, c, output);
+    }
+  }
+
+  void write_frame(const Simulation& simulation, CameraRig& rig, std::size_t c, CameraOutput& output) {
+    const sensors::CameraImage& image = rig.image(simulation, c);
+    const auto& settings = rig.settings(c);
+    const std::string index = fmt::format("{:06}", output.frames);
+    if (!image.rgb.empty()) io::write_png(output.folder / fmt::format("rgb_{}.png", index), image.width, image.height, 3, 8, image.rgb.data());
+    io::write_png(output.folder / fmt::format("segmentation_{}.png", index), image.width, image.height, 1, 16, image.segment.data());
+    if (!image.depth.empty()) {
+      io::write_npy(output.folder / fmt::format("depth_{}.npy", index), image.height, image.width, image.depth);
+      depth_mm_.resize(image.depth.size());
+      for (std::size_t p = 0; p < image.depth.size(); ++p)
+        depth_mm_[p] = std::isfinite(image.depth[p]) ? static_cast<std::uint16_t>(std::clamp(std::lround(1000.0 * image.depth[p]), 1L, 65535L)) : 0;
+      io::write_png(output.folder / fmt::format("depth_{}.png", index), image.width, image.height, 1, 16, depth_mm_.data());
+      sensors::point_cloud(image, sensors::Intrinsics::of(settings), points_);
+      write_point_cloud(output.folder / fmt::format("points_{}.ply", index), points_);
+    }
+    const Pose optical = sensors::optical_pose(rig.pose(simulation, c));
+    const Quat& q = optical.orientation;
+    output.frames_csv += fmt::format("{},{:.6f},{:.6f},{:.6f},{:.6f},{:.7f},{:.7f},{:.7f},{:.7f}\n", output.frames, simulation.time(),
+                                     optical.position.x(), optical.position.y(), optical.position.z(), q.w(), q.x(), q.y(), q.z());
+    io::write_text_atomically(output.folder / "frames.csv", output.frames_csv);
+    ++output.frames;
+  }
+
+  std::filesystem::path folder_;
+  std::vector<CameraOutput> cameras_;
+  std::vector<std::uint16_t> depth_mm_;
+  std::vector<sensors::CloudPoint> points_;
+};
+
+}  // namespace
+
+std::unique_ptr<RunObserver> make_camera_files(Simulation& simulation, const RunOptions& options) {
+  if (options.output_directory.empty() || simulation.scene().cameras.empty()) return nullptr;
+  return std::make_unique<CameraFiles>(options.output_directory / "cameras");
+}
+
+}  // namespace m3dp::sim::outputs
