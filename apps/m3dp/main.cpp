@@ -3,6 +3,7 @@
 //   m3dp validate SCENE
 //   m3dp bench [--particles N] [--steps S] ...
 //   m3dp mesh INPUT -o OUT [--method M] ...
+//   m3dp render RUN_DIR [--time T] [--camera NAME | --eye X Y Z --target X Y Z] -o image.png
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
@@ -13,6 +14,7 @@
 
 #include "bench_command.hpp"
 #include "mesh_command.hpp"
+#include "render_command.hpp"
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
@@ -111,6 +113,10 @@ int main(int argc, char** argv) {
   auto* mesh = app.add_subcommand("mesh", "Turn saved particle frames (.vtu/.ply, or a .pvd sequence) into surface meshes");
   m3dp::app::add_mesh_options(*mesh, mesh_options);
 
+  m3dp::app::RenderOptions render_options;
+  auto* render = app.add_subcommand("render", "A picture of a saved run at a time, from one of its cameras or any eye point");
+  m3dp::app::add_render_options(*render, render_options);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run->parsed()) {
@@ -121,6 +127,7 @@ int main(int argc, char** argv) {
     if (validate->parsed()) return validate_command(validate_file);
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);
     if (mesh->parsed()) return m3dp::app::mesh_command(mesh_options);
+    if (render->parsed()) return m3dp::app::render_command(render_options);
   } catch (const m3dp::InputError& error) {
     fmt::print(stderr, "{}\n", error.what());
     fmt::print(stderr, "m3dp: {} problem(s) found\n", error.diagnostics().size());

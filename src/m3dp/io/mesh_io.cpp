@@ -8,11 +8,13 @@
 #include <charconv>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <fstream>
 #include <functional>
 #include <iterator>
 #include <limits>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <string_view>
 #include <unordered_map>
@@ -300,6 +302,113 @@ TriangleMesh read_ascii_stl(const std::string& text, const fs::path& file) {
   return mesh;
 }
 
+/// PLY meshes as m3dp, MeshLab and most tools write them: binary little-endian or ASCII, vertices
+/// with x, y, z (any numeric properties beside them), faces as index lists (polygons fanned into triangles).
+TriangleMesh read_ply(const fs::path& file) {
+  const std::string bytes = read_whole_file(file);
+  const std::size_t header_end = bytes.find("end_header");
+  if (bytes.rfind("ply", 0) != 0 || header_end == std::string::npos) fail(file, 0, "not a PLY file: expected 'ply' ... 'end_header'");
+  const std::size_t body = bytes.find('\n', header_end) + 1;
+  std::istringstream header(bytes.substr(0, header_end));
+  struct Property {
+    std::string name, type, count_type;  // count_type: a list's
+  };
+  struct Element {
+    std::string name;
+    std::size_t count = 0;
+    std::vector<Property> properties;
+  };
+  std::vector<Element> elements;
+  std::string format;
+  int line_number = 0;
+  for (std::string line; std::getline(header, line);) {
+    ++line_number;
+    std::istringstream words(line);
+    std::string keyword;
+    words >> keyword;
+    if (keyword == "format") words >> format;
+    else if (keyword == "element") {
+      elements.emplace_back();
+      words >> elements.back().name >> elements.back().count;
+    } else if (keyword == "property") {
+      if (elements.empty()) fail(file, line_number, "a property before any element");
+      Property property;
+      words >> property.type;
+      if (property.type == "list") words >> property.count_type >> property.type;
+      words >> property.name;
+      elements.back().properties.push_back(property);
+    }
+  }
+  if (format != "binary_little_endian" && format != "ascii")
+    fail(file, 0, fmt::format("PLY format '{}'; expected binary_little_endian or ascii", format));
+  const bool binary = format == "binary_little_endian";
+  auto type_bytes = [&](const std::string& type) -> std::size_t {
+    if (type == "char" || type == "uchar" || type == "int8" || type == "uint8") return 1;
+    if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
+    if (type == "int" || type == "uint" || type == "float" || type == "int32" || type == "uint32" || type == "float32") return 4;
+    if (type == "double" || type == "float64") return 8;
+    fail(file, 0, fmt::format("unknown PLY property type '{}'", type));
+  };
+  std::size_t at = body;
+  std::istringstream ascii(binary ? std::string() : bytes.substr(body));
+  // One number of `type` from the body, as a double.
+  auto next = [&](const std::string& type) -> double {
+    if (!binary) {
+      double value;
+      if (!(ascii >> value)) fail(file, 0, "the PLY body ends early");
+      return value;
+    }
+    const std::size_t size = type_bytes(type);
+    if (at + size > bytes.size()) fail(file, 0, "the PLY body ends early");
+    double value = 0;
+    auto as = [&]<class T>(T) {
+      T typed;
+      std::memcpy(&typed, bytes.data() + at, sizeof(T));
+      value = static_cast<double>(typed);
+    };
+    if (type == "char" || type == "int8") as(std::int8_t{});
+    else if (type == "uchar" || type == "uint8") as(std::uint8_t{});
+    else if (type == "short" || type == "int16") as(std::int16_t{});
+    else if (type == "ushort" || type == "uint16") as(std::uint16_t{});
+    else if (type == "int" || type == "int32") as(std::int32_t{});
+    else if (type == "uint" || type == "uint32") as(std::uint32_t{});
+    else if (type == "float" || type == "float32") as(float{});
+    else as(double{});
+    at += size;
+    return value;
+  };
+  TriangleMesh mesh;
+  for (const Element& element : elements) {
+    for (std::size_t item = 0; item < element.count; ++item) {
+      Vec3 vertex = Vec3::Zero();
+      std::vector<Index> polygon;
+      for (const Property& property : element.properties) {
+        if (!property.count_type.empty()) {
+          const auto count = static_cast<std::size_t>(next(property.count_type));
+          for (std::size_t k = 0; k < count; ++k) {
+            const double index = next(property.type);
+            if (element.name == "face" && (property.name == "vertex_indices" || property.name == "vertex_index"))
+              polygon.push_back(static_cast<Index>(index));
+          }
+          continue;
+        }
+        const double value = next(property.type);
+        if (element.name == "vertex") {
+          if (property.name == "x") vertex.x() = static_cast<Real>(value);
+          else if (property.name == "y") vertex.y() = static_cast<Real>(value);
+          else if (property.name == "z") vertex.z() = static_cast<Real>(value);
+        }
+      }
+      if (element.name == "vertex") mesh.vertices.push_back(vertex);
+      for (std::size_t k = 2; k < polygon.size(); ++k) mesh.triangles.push_back({polygon[0], polygon[k - 1], polygon[k]});
+    }
+  }
+  for (const auto& triangle : mesh.triangles)
+    for (const Index index : triangle)
+      if (index >= mesh.vertices.size()) fail(file, 0, fmt::format("a face uses vertex {} of {}", index, mesh.vertices.size()));
+  return mesh;
+}
+
 TriangleMesh read_stl(const fs::path& file) {
   const std::string bytes = read_whole_file(file);
   // Some binary exporters also start their header with "solid", so the size decides first.
@@ -369,7 +478,7 @@ void write_binary_stl(std::ostream& stream, const TriangleMesh& mesh) {
 
 constexpr MeshFormat kMeshFormats[] = {
     {"obj", ".obj", "Wavefront OBJ (text)", false, write_obj, read_obj},
-    {"ply", ".ply", "binary PLY", true, write_ply, nullptr},
+    {"ply", ".ply", "binary PLY (read: binary or ASCII)", true, write_ply, read_ply},
     {"stl", ".stl", "binary STL (read: ASCII or binary)", true, write_binary_stl, read_stl},
 };
 

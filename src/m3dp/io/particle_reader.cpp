@@ -160,9 +160,14 @@ ParticleFrame read_vtk_xml(const fs::path& file) {
   frame.positions.resize(count);
   for (std::size_t i = 0; i < count; ++i) frame.positions[i] = Vec3(coordinates[3 * i], coordinates[3 * i + 1], coordinates[3 * i + 2]);
   // Stable particle ids (m3dp run writes them): let a sequence be meshed incrementally.
-  for (const pugi::xml_node array : piece.child("PointData").children("DataArray"))
-    if (std::string(array.attribute("Name").as_string()) == "id" && array.attribute("NumberOfComponents").as_int(1) == 1)
-      frame.ids = read_data_array<std::uint64_t>(file, array, count, 1, layout);
+  // Material and birth time: what cameras draw a saved run's particles by (m3dp render).
+  for (const pugi::xml_node array : piece.child("PointData").children("DataArray")) {
+    const std::string name = array.attribute("Name").as_string();
+    if (array.attribute("NumberOfComponents").as_int(1) != 1) continue;
+    if (name == "id") frame.ids = read_data_array<std::uint64_t>(file, array, count, 1, layout);
+    else if (name == "material") frame.material = read_data_array<std::uint16_t>(file, array, count, 1, layout);
+    else if (name == "birth_time") frame.birth_time = read_data_array<Real>(file, array, count, 1, layout);
+  }
   for (const pugi::xml_node array : dataset.child("FieldData").children("DataArray"))
     if (std::string(array.attribute("Name").as_string()) == "particle_radius")
       frame.particle_radius = static_cast<Real>(array.text().as_double());
@@ -282,6 +287,38 @@ std::vector<CollectionEntry> read_pvd(const fs::path& file) {
     entries.push_back({dataset.attribute("timestep").as_double(), file.parent_path() / name});
   }
   return entries;
+}
+
+std::vector<NamedBlock> read_vtm(const fs::path& file) {
+  pugi::xml_document document;
+  const pugi::xml_parse_result parsed = document.load_file(file.c_str());
+  if (!parsed) fail(file, 0, fmt::format("not a VTK multiblock file: {}", parsed.description()));
+  const pugi::xml_node multiblock = document.child("VTKFile").child("vtkMultiBlockDataSet");
+  if (!multiblock) fail(file, 0, "expected <VTKFile type=\"vtkMultiBlockDataSet\"><vtkMultiBlockDataSet>");
+  std::vector<NamedBlock> blocks;
+  for (const pugi::xml_node dataset : multiblock.children("DataSet")) {
+    const char* name = dataset.attribute("file").as_string();
+    if (*name == '\0') fail(file, 0, "a <DataSet> without a file attribute");
+    blocks.push_back({dataset.attribute("name").as_string(), file.parent_path() / name});
+  }
+  return blocks;
+}
+
+std::map<std::string, std::vector<double>> read_field_data(const fs::path& file) {
+  const std::string bytes = read_bytes(file);
+  pugi::xml_document document;
+  if (!document.load_string(bytes.c_str())) fail(file, 0, "not a VTK XML file");
+  const pugi::xml_node root = document.child("VTKFile");
+  const pugi::xml_node dataset = root.first_child();
+  std::map<std::string, std::vector<double>> fields;
+  for (const pugi::xml_node array : dataset.child("FieldData").children("DataArray")) {
+    if (std::string(array.attribute("format").as_string()) != "ascii") continue;
+    std::vector<double> values;
+    std::istringstream text(array.text().as_string());
+    for (double value; text >> value;) values.push_back(value);
+    fields[array.attribute("Name").as_string()] = std::move(values);
+  }
+  return fields;
 }
 
 }  // namespace m3dp::io

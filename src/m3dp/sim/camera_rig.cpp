@@ -17,7 +17,7 @@ namespace {
 using Clock = std::chrono::steady_clock;
 
 /// Colours of things that are not materials (linear RGB).
-constexpr sensors::Rgb kStaticColor{0.55f, 0.55f, 0.58f}, kLinkColor{0.30f, 0.45f, 0.70f}, kBodyColor{0.85f, 0.50f, 0.15f},
+constexpr sensors::Rgb kStaticColor{0.36f, 0.37f, 0.40f}, kLinkColor{0.30f, 0.45f, 0.70f}, kBodyColor{0.85f, 0.50f, 0.15f},
     kNozzleColor{0.20f, 0.20f, 0.22f}, kPrintedMeshColor{0.60f, 0.52f, 0.45f};
 /// Materials without a <color>: a palette that tells them apart.
 constexpr sensors::Rgb kMaterialPalette[] = {{0.80f, 0.55f, 0.35f}, {0.35f, 0.65f, 0.45f}, {0.75f, 0.35f, 0.45f},
@@ -49,15 +49,16 @@ std::vector<double> layer_start_times(const PathView& path, Real tolerance) {
   return starts;
 }
 
-CameraRig::CameraRig(const Simulation& simulation) : layout_(world_layout(simulation)) {
+CameraRig::CameraRig(const Simulation& simulation)
+    : layout_(world_layout(simulation)), particle_radius_(simulation.solver().parameters().settings.particle_radius) {
   const auto& scene = simulation.scene();
-  add_segment({0, "background", "", "", -1, {}});
+  add_segment({0, "background", "", "", -1, 0, {}});
   // Everything that is not fluid, each its own segment.
   for (std::size_t b = 0; b < layout_.bodies.size(); ++b) {
     const BodyView& body = layout_.bodies[b];
     const std::string kind = body.kind == BodyKind::static_body ? "static" : body.kind == BodyKind::free_body ? "body" : "link";
     const sensors::Rgb color = body.kind == BodyKind::static_body ? kStaticColor : body.kind == BodyKind::free_body ? kBodyColor : kLinkColor;
-    const std::uint16_t segment = add_segment({0, kind, body.name, body.robot, -1, color});
+    const std::uint16_t segment = add_segment({0, kind, body.name, body.robot, -1, 0, color});
     if (!body.link) {
       renderer_.add_static(transformed(body.triangles, body.fixed_pose), segment);
       body_handles_.push_back(~std::size_t(0));
@@ -66,8 +67,8 @@ CameraRig::CameraRig(const Simulation& simulation) : layout_(world_layout(simula
     }
   }
   for (const auto& nozzle : layout_.nozzles)
-    nozzle_handles_.push_back(renderer_.add_body(nozzle.triangles, add_segment({0, "nozzle", "nozzle/" + nozzle.name, "", -1, kNozzleColor})));
-  printed_segment_ = add_segment({0, "printed_material", "printed_material", "", -1, kPrintedMeshColor});
+    nozzle_handles_.push_back(renderer_.add_body(nozzle.triangles, add_segment({0, "nozzle", "nozzle/" + nozzle.name, "", -1, 0, kNozzleColor})));
+  printed_segment_ = add_segment({0, "printed_material", "printed_material", "", -1, 0, kPrintedMeshColor});
 
   // Materials: a segment per print layer of the first print head that prints it (by birth time),
   // and one for what no path printed (fluid blocks).
@@ -87,12 +88,12 @@ CameraRig::CameraRig(const Simulation& simulation) : layout_(world_layout(simula
     }
     if (layer_starts_[phase].size() > kMaxLayers) layer_starts_[phase].resize(kMaxLayers);
     const std::string& name = scene.materials[phase].material.name;
-    layer_segments_[phase].push_back(add_segment({0, "material", name, "", -1, material_colors_[phase]}));
+    layer_segments_[phase].push_back(add_segment({0, "material", name, "", -1, 0, material_colors_[phase]}));
     for (std::size_t layer = 0; layer < layer_starts_[phase].size(); ++layer) {
       sensors::Rgb shaded = material_colors_[phase];
       const float shade = kLayerShade[layer % std::size(kLayerShade)];
       shaded = {shaded.r * shade, shaded.g * shade, shaded.b * shade};
-      layer_segments_[phase].push_back(add_segment({0, "material", name, "", static_cast<int>(layer), shaded}));
+      layer_segments_[phase].push_back(add_segment({0, "material", name, "", static_cast<int>(layer), layer_starts_[phase][layer], shaded}));
     }
   }
   std::vector<sensors::Rgb> palette;
@@ -130,23 +131,35 @@ void CameraRig::update(const Simulation& simulation) {
   if (step == updated_step_) return;
   updated_step_ = step;
   const WorldPoses poses = world_poses(simulation, layout_);
-  for (std::size_t b = 0; b < layout_.bodies.size(); ++b)
-    if (layout_.bodies[b].link) renderer_.set_body_pose(body_handles_[b], poses.bodies[b]);
-  for (std::size_t n = 0; n < nozzle_handles_.size(); ++n) renderer_.set_body_pose(nozzle_handles_[n], poses.nozzles[n].pose);
-  if (simulation.printed_mesh() && simulation.printed_mesh_version() != printed_version_) {
-    printed_version_ = simulation.printed_mesh_version();
-    renderer_.set_printed_mesh(*simulation.printed_mesh(), printed_segment_);
-  }
+  std::vector<Pose> nozzles;
+  for (const auto& nozzle : poses.nozzles) nozzles.push_back(nozzle.pose);
   const auto& fluid = simulation.solver().fluid();
-  particle_segments_.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) {
-    const std::uint16_t phase = fluid.phase[i];
+  const bool new_mesh = simulation.printed_mesh() && simulation.printed_mesh_version() != printed_version_;
+  printed_version_ = simulation.printed_mesh_version();
+  show({poses.bodies, nozzles, fluid.position, fluid.phase, fluid.birth_time, new_mesh ? simulation.printed_mesh().get() : nullptr});
+}
+
+void CameraRig::show(const State& state) {
+  for (std::size_t b = 0; b < layout_.bodies.size() && b < state.bodies.size(); ++b)
+    if (layout_.bodies[b].link) renderer_.set_body_pose(body_handles_[b], state.bodies[b]);
+  for (std::size_t n = 0; n < nozzle_handles_.size() && n < state.nozzles.size(); ++n) renderer_.set_body_pose(nozzle_handles_[n], state.nozzles[n]);
+  if (state.printed_mesh) renderer_.set_printed_mesh(*state.printed_mesh, printed_segment_);
+  const std::size_t count = state.positions.size();
+  particle_segments_.resize(count);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const std::uint16_t phase = i < state.phases.size() && state.phases[i] < layer_segments_.size() ? state.phases[i] : 0;
+    if (layer_segments_.empty()) return;
     const auto& starts = layer_starts_[phase];
     // Layer k began at starts[k]: the segments list "no layer" first, then each layer.
-    const auto layer = static_cast<std::size_t>(std::upper_bound(starts.begin(), starts.end(), double(fluid.birth_time[i])) - starts.begin());
+    const double birth = i < state.birth_times.size() ? double(state.birth_times[i]) : 0.0;
+    const auto layer = static_cast<std::size_t>(std::upper_bound(starts.begin(), starts.end(), birth) - starts.begin());
     particle_segments_[i] = layer_segments_[phase][std::min(layer, layer_segments_[phase].size() - 1)];
   }, 4096);
-  renderer_.set_particles(fluid.position, simulation.solver().parameters().settings.particle_radius, particle_segments_);
+  renderer_.set_particles(state.positions, particle_radius_, particle_segments_);
+}
+
+void CameraRig::render(const sensors::CameraSettings& settings, const Pose& camera_pose, std::uint64_t frame, sensors::CameraImage& image) {
+  renderer_.render(settings, camera_pose, frame, image);
 }
 
 const sensors::CameraImage& CameraRig::image(const Simulation& simulation, std::size_t index) {

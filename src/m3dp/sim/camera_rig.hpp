@@ -7,6 +7,7 @@
 // head's path it was emitted in, by its birth time).
 #include <cstdint>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -23,6 +24,7 @@ struct Segment {
   std::string name;      // the body's, link's ("ur10/forearm_link") or material's name
   std::string robot;     // for a link
   int layer = -1;        // for a material: its print layer (0 first), -1: not printed by a path
+  double layer_start = 0;  // s: when that layer began
   sensors::Rgb color;
 };
 
@@ -38,6 +40,22 @@ class CameraRig {
   const sensors::CameraImage& image(const Simulation& simulation, std::size_t camera);
   /// What each segment id is (index: id): fixed when the rig is made, layers from the paths.
   [[nodiscard]] const std::vector<Segment>& legend() const { return legend_; }
+  [[nodiscard]] const WorldLayout& layout() const { return layout_; }
+
+  /// What the cameras see when it does not come from the simulation (a saved run: m3dp render):
+  /// each layout body's and nozzle's pose (static ones ignored), the particles with their
+  /// material (phase) and birth time, and the printed mesh (null: none).
+  struct State {
+    std::span<const Pose> bodies;
+    std::span<const Pose> nozzles;
+    std::span<const Vec3> positions;
+    std::span<const std::uint16_t> phases;
+    std::span<const Real> birth_times;
+    const TriangleMesh* printed_mesh = nullptr;
+  };
+  void show(const State& state);
+  /// An image of what was last shown, from any camera at any pose (frame seeds the noise).
+  void render(const sensors::CameraSettings& settings, const Pose& camera_pose, std::uint64_t frame, sensors::CameraImage& image);
   /// Wall ms spent rendering since the last call (timing.csv's cameras column).
   double take_render_ms();
   /// A camera's images rendered so far, the wall seconds they took and their rays.
@@ -72,6 +90,7 @@ class CameraRig {
   std::vector<std::vector<double>> layer_starts_;              // per phase: when each layer began (s)
   std::vector<std::vector<std::uint16_t>> layer_segments_;     // per phase: [0] no layer, [k + 1] layer k
   std::vector<std::uint16_t> particle_segments_;
+  Real particle_radius_;  // m
   std::uint16_t printed_segment_ = 0;
   std::size_t printed_version_ = 0;
   std::uint64_t updated_step_ = ~0ull;

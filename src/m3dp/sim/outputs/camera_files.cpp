@@ -53,7 +53,10 @@ class CameraFiles final : public RunObserver {
       nlohmann::json entry = {{"id", segment.id}, {"kind", segment.kind}, {"name", segment.name},
                               {"color_rgb", {segment.color.r, segment.color.g, segment.color.b}}};
       if (!segment.robot.empty()) entry["robot"] = segment.robot;
-      if (segment.kind == "material") entry["layer"] = segment.layer >= 0 ? nlohmann::json(segment.layer) : nlohmann::json();
+      if (segment.kind == "material") {
+        entry["layer"] = segment.layer >= 0 ? nlohmann::json(segment.layer) : nlohmann::json();
+        if (segment.layer >= 0) entry["layer_start_s"] = segment.layer_start;
+      }
       legend.push_back(entry);
     }
     for (std::size_t c = 0; c < rig.size(); ++c) {
