@@ -86,11 +86,20 @@ struct Renderer::Impl {
   RTCScene printed_scene = nullptr;
   unsigned printed_instance = kInvalid;
   std::uint16_t printed_segment = 0;
-  // Particles: sphere points straight in the top scene (rebuilt every frame they change).
-  RTCGeometry particles = nullptr;
-  unsigned particles_id = kInvalid;
-  std::vector<float> particle_buffer;  // x, y, z, r per particle, and 4 more floats of padding Embree may read
-  std::vector<std::uint16_t> particle_segments;
+  // Particles: sphere points, each set in a scene of its own, rebuilt when it changes; an instance
+  // in the top scene, so that moving a body rebuilds only the top scene's few instances.
+  struct ParticleLayer {
+    RTCScene scene = nullptr;
+    RTCGeometry geometry = nullptr;
+    unsigned instance = kInvalid;
+    bool changed = false;
+    std::uint64_t version = ~0ull;         // the resting set's, as last built
+    const float* shared_buffer = nullptr;  // what Embree was last given, and how many particles
+    std::size_t shared_count = 0;
+    std::vector<float> buffer;  // x, y, z, r per particle, and 4 more floats of padding Embree may read
+    std::vector<std::uint16_t> segments;
+  };
+  ParticleLayer layers[2];  // ParticleSet::moving, ParticleSet::resting
   std::vector<Rgb> palette;
   bool top_changed = true;
   std::string error;  // the first error Embree reported, not yet thrown
@@ -107,7 +116,10 @@ struct Renderer::Impl {
       if (body.scene) rtcReleaseScene(body.scene);
     if (static_scene) rtcReleaseScene(static_scene);
     if (printed_scene) rtcReleaseScene(printed_scene);
-    if (particles) rtcReleaseGeometry(particles);
+    for (auto& layer : layers) {
+      if (layer.geometry) rtcReleaseGeometry(layer.geometry);
+      if (layer.scene) rtcReleaseScene(layer.scene);
+    }
     rtcReleaseScene(top);
     rtcReleaseDevice(device);
   }
@@ -188,34 +200,42 @@ void Renderer::set_body_pose(std::size_t index, const Pose& pose) {
   impl.top_changed = true;
 }
 
-void Renderer::set_particles(std::span<const Vec3> positions, Real radius, std::span<const std::uint16_t> segments) {
+void Renderer::set_particles(std::span<const Vec3> positions, Real radius, std::span<const std::uint16_t> segments, ParticleSet set,
+                             std::uint64_t version) {
   Impl& impl = *impl_;
+  Impl::ParticleLayer& layer = impl.layers[static_cast<int>(set)];
+  if (set == ParticleSet::resting && version == layer.version) return;  // as built
+  layer.version = version;
   const std::size_t count = positions.size();
-  impl.particle_buffer.resize(4 * count + 4);
-  impl.particle_segments.assign(segments.begin(), segments.end());
+  layer.buffer.resize(4 * count + 4);
+  layer.segments.assign(segments.begin(), segments.end());
   parallel_for_each_index(count, [&](std::size_t i) {
-    float* point = impl.particle_buffer.data() + 4 * i;
+    float* point = layer.buffer.data() + 4 * i;
     point[0] = static_cast<float>(positions[i].x());
     point[1] = static_cast<float>(positions[i].y());
     point[2] = static_cast<float>(positions[i].z());
     point[3] = static_cast<float>(radius);
   }, 4096);
+  if (!layer.scene) {
+    layer.scene = rtcNewScene(impl.device);
+    rtcSetSceneBuildQuality(layer.scene, RTC_BUILD_QUALITY_LOW);  // rebuilt whenever they move: the fast builder
+    rtcSetSceneFlags(layer.scene, RTC_SCENE_FLAG_DYNAMIC);        // and its memory kept from build to build
+    layer.geometry = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_SPHERE_POINT);
+    rtcAttachGeometry(layer.scene, layer.geometry);
+    layer.instance = impl.attach_instance(layer.scene, Pose{});
+  }
+  layer.changed = true;
+  // No particles: an empty buffer (Embree accepts a geometry of no primitives).
+  if (layer.buffer.data() == layer.shared_buffer && count == layer.shared_count) {
+    rtcUpdateGeometryBuffer(layer.geometry, RTC_BUFFER_TYPE_VERTEX, 0);
+  } else {
+    rtcSetSharedGeometryBuffer(layer.geometry, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, layer.buffer.data(), 0, 4 * sizeof(float),
+                               count);
+    layer.shared_buffer = layer.buffer.data();
+    layer.shared_count = count;
+  }
   impl.top_changed = true;
-  if (count == 0) {
-    if (impl.particles_id != kInvalid) rtcDetachGeometry(impl.top, impl.particles_id);
-    if (impl.particles) rtcReleaseGeometry(impl.particles);
-    impl.particles = nullptr;
-    impl.particles_id = kInvalid;
-    return;
-  }
-  if (!impl.particles) {
-    impl.particles = rtcNewGeometry(impl.device, RTC_GEOMETRY_TYPE_SPHERE_POINT);
-    impl.particles_id = rtcAttachGeometry(impl.top, impl.particles);
-  }
-  // Our buffer, shared: Embree reads it when the top scene is built (its padding: 4 floats).
-  rtcSetSharedGeometryBuffer(impl.particles, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT4, impl.particle_buffer.data(), 0,
-                             4 * sizeof(float), count);
-  rtcCommitGeometry(impl.particles);
+  rtcCommitGeometry(layer.geometry);
   impl.throw_if_failed();
 }
 
@@ -249,6 +269,16 @@ void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, s
     if (impl.static_instance == kInvalid) impl.static_instance = impl.attach_instance(impl.static_scene, Pose{});
     else impl.top_changed = true;
     impl.static_changed = false;
+  }
+  stats_.particle_build_ms = 0;
+  for (auto& layer : impl.layers) {
+    if (!layer.changed) continue;
+    const auto particles_start = Clock::now();
+    rtcCommitScene(layer.scene);
+    stats_.particle_build_ms += std::chrono::duration<double, std::milli>(Clock::now() - particles_start).count();
+    layer.changed = false;
+    // The instance sees its scene's new bounds only when committed again.
+    rtcCommitGeometry(rtcGetGeometry(impl.top, layer.instance));
   }
   if (impl.top_changed) {
     rtcCommitScene(impl.top);
@@ -300,8 +330,9 @@ void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, s
         std::uint16_t segment = kBackground;
         Vec3d normal(hit.hit.Ng_x, hit.hit.Ng_y, hit.hit.Ng_z);
         const unsigned instance = hit.hit.instID[0];
-        if (instance == kInvalid) {
-          segment = hit.hit.primID < impl.particle_segments.size() ? impl.particle_segments[hit.hit.primID] : kBackground;
+        if (instance == impl.layers[0].instance || instance == impl.layers[1].instance) {
+          const auto& layer = impl.layers[instance == impl.layers[0].instance ? 0 : 1];
+          segment = hit.hit.primID < layer.segments.size() ? layer.segments[hit.hit.primID] : kBackground;
         } else if (instance == impl.static_instance) {
           segment = impl.static_segments[hit.hit.geomID];
         } else if (instance == impl.printed_instance) {

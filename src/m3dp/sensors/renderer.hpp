@@ -33,7 +33,8 @@ struct CameraImage {
 };
 
 struct RenderStats {
-  double build_ms = 0;    // BVH builds and refits of this frame
+  double build_ms = 0;    // BVH builds and refits of this frame, all of them
+  double particle_build_ms = 0;  // of which the particles' BVH (rebuilt when they moved)
   double trace_ms = 0;    // rays
   std::uint64_t rays = 0; // primary and shadow rays
 };
@@ -51,8 +52,12 @@ class Renderer {
   /// A rigid thing with its triangles in its own frame (a link, a body, a nozzle): its handle.
   std::size_t add_body(const TriangleMesh& mesh, std::uint16_t segment);
   void set_body_pose(std::size_t body, const Pose& pose);
-  /// The particles as spheres of `radius` (m) at `positions`, each with its segment id.
-  void set_particles(std::span<const Vec3> positions, Real radius, std::span<const std::uint16_t> segments);
+  /// Two sets of particles, each its own BVH: those that move (rebuilt whenever set) and those at
+  /// rest, rebuilt only when `version` changes (a print's resting material stays built).
+  enum class ParticleSet { moving = 0, resting = 1 };
+  /// The set's particles as spheres of `radius` (m) at `positions`, each with its segment id.
+  void set_particles(std::span<const Vec3> positions, Real radius, std::span<const std::uint16_t> segments,
+                     ParticleSet set = ParticleSet::moving, std::uint64_t version = 0);
   /// Replaces the printed material's mesh (world frame); an empty one removes it.
   void set_printed_mesh(const TriangleMesh& mesh, std::uint16_t segment);
   /// Each segment id's colour (index: id). Ids beyond it are drawn grey.

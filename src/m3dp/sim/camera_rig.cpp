@@ -136,7 +136,9 @@ void CameraRig::update(const Simulation& simulation) {
   const auto& fluid = simulation.solver().fluid();
   const bool new_mesh = simulation.printed_mesh() && simulation.printed_mesh_version() != printed_version_;
   printed_version_ = simulation.printed_mesh_version();
-  show({poses.bodies, nozzles, fluid.position, fluid.phase, fluid.birth_time, new_mesh ? simulation.printed_mesh().get() : nullptr});
+  const auto settled = simulation.solver().settled_particles();
+  show({poses.bodies, nozzles, fluid.position, fluid.phase, fluid.birth_time, new_mesh ? simulation.printed_mesh().get() : nullptr,
+        settled.begin, settled.end, settled.build});
 }
 
 void CameraRig::show(const State& state) {
@@ -155,7 +157,21 @@ void CameraRig::show(const State& state) {
     const auto layer = static_cast<std::size_t>(std::upper_bound(starts.begin(), starts.end(), birth) - starts.begin());
     particle_segments_[i] = layer_segments_[phase][std::min(layer, layer_segments_[phase].size() - 1)];
   }, 4096);
-  renderer_.set_particles(state.positions, particle_radius_, particle_segments_);
+  using Set = sensors::Renderer::ParticleSet;
+  if (state.settled_end <= state.settled_begin || state.settled_end > count) {
+    renderer_.set_particles({}, particle_radius_, {}, Set::resting, 0);
+    renderer_.set_particles(state.positions, particle_radius_, particle_segments_, Set::moving);
+    return;
+  }
+  // Settled particles keep their BVH until the solver chooses them anew; the rest are rebuilt.
+  const std::size_t begin = state.settled_begin, end = state.settled_end;
+  renderer_.set_particles(state.positions.subspan(begin, end - begin), particle_radius_,
+                          std::span<const std::uint16_t>(particle_segments_).subspan(begin, end - begin), Set::resting, state.settled_build);
+  moving_positions_.assign(state.positions.begin(), state.positions.begin() + static_cast<std::ptrdiff_t>(begin));
+  moving_positions_.insert(moving_positions_.end(), state.positions.begin() + static_cast<std::ptrdiff_t>(end), state.positions.end());
+  moving_segments_.assign(particle_segments_.begin(), particle_segments_.begin() + static_cast<std::ptrdiff_t>(begin));
+  moving_segments_.insert(moving_segments_.end(), particle_segments_.begin() + static_cast<std::ptrdiff_t>(end), particle_segments_.end());
+  renderer_.set_particles(moving_positions_, particle_radius_, moving_segments_, Set::moving);
 }
 
 void CameraRig::render(const sensors::CameraSettings& settings, const Pose& camera_pose, std::uint64_t frame, sensors::CameraImage& image) {

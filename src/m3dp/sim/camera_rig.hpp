@@ -52,6 +52,10 @@ class CameraRig {
     std::span<const std::uint16_t> phases;
     std::span<const Real> birth_times;
     const TriangleMesh* printed_mesh = nullptr;
+    /// Particles [settled_begin, settled_end) have not moved since build `settled_build` (their
+    /// BVH is kept until it changes); none: every particle is drawn as moving.
+    std::size_t settled_begin = 0, settled_end = 0;
+    std::uint64_t settled_build = 0;
   };
   void show(const State& state);
   /// An image of what was last shown, from any camera at any pose (frame seeds the noise).
@@ -90,6 +94,8 @@ class CameraRig {
   std::vector<std::vector<double>> layer_starts_;              // per phase: when each layer began (s)
   std::vector<std::vector<std::uint16_t>> layer_segments_;     // per phase: [0] no layer, [k + 1] layer k
   std::vector<std::uint16_t> particle_segments_;
+  std::vector<Vec3> moving_positions_;               // the particles not settled, when some are
+  std::vector<std::uint16_t> moving_segments_;
   Real particle_radius_;  // m
   std::uint16_t printed_segment_ = 0;
   std::size_t printed_version_ = 0;

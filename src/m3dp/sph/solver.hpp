@@ -43,6 +43,20 @@ class Solver {
   [[nodiscard]] const Parameters& parameters() const { return model_; }
   [[nodiscard]] const State& state() const { return state_; }
   [[nodiscard]] const Workspace& workspace() const { return workspace_; }
+  /// The settled resting particles: slots [begin, end) whose particles have not moved since the
+  /// neighbour stage chose them (build number `build`), for what keeps its own structure of them
+  /// (cameras). Empty when there are none or a slot has changed since.
+  struct SettledParticles {
+    std::size_t begin = 0, end = 0;
+    std::uint64_t build = 0;
+  };
+  [[nodiscard]] SettledParticles settled_particles() const {
+    const auto& fluid = state_.fluid;
+    if (workspace_.resting_grid_dirty || fluid.watched_touched || workspace_.settled_begin < state_.active_count ||
+        workspace_.settled_end > fluid.size() || workspace_.settled_begin >= workspace_.settled_end)
+      return {};
+    return {workspace_.settled_begin, workspace_.settled_end, workspace_.settled_builds};
+  }
   [[nodiscard]] const FluidParticles& fluid() const { return state_.fluid; }
   [[nodiscard]] const BoundaryParticles& boundary() const { return state_.boundary; }
   [[nodiscard]] const std::vector<BoundaryBody>& bodies() const { return state_.bodies; }

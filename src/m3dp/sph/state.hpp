@@ -144,6 +144,7 @@ struct Workspace {
   SpatialHashGrid recent_resting_grid;
   bool resting_grid_dirty = true;                // built from another state, or never
   std::size_t settled_begin = 0, settled_end = 0;
+  std::uint64_t settled_builds = 0;               // how many times the settled slots were chosen (cameras keep their BVH until then)
   std::vector<Index> resting_grid_subset;
   std::vector<Index> recent_resting_slots;        // the recent grid's particles as built: slots,
   std::vector<std::uint64_t> recent_resting_ids;  // ids

@@ -98,6 +98,7 @@ void update_resting_grids(State& state, Workspace& workspace, Real cell_size) {
     std::iota(workspace.resting_grid_subset.begin(), workspace.resting_grid_subset.end(), static_cast<Index>(workspace.settled_begin));
     workspace.resting_grid.build(fluid.position, workspace.resting_grid_subset, cell_size);
     fluid.watch_slots(workspace.settled_begin, workspace.settled_end);
+    ++workspace.settled_builds;
     workspace.resting_grid_dirty = false;
     changed = true;
   }
