@@ -61,13 +61,17 @@ def check_files(camera):
         millimetres = numpy.asarray(Image.open(folder / f"depth_{index:06d}.png"))
         assert (numpy.abs(millimetres[seen] - numpy.round(1000 * depth[seen])) <= 1).all(), f"{camera} {index}: 16UC1 depth is not the float depth in mm"
         assert (millimetres[~seen] == 0).all()
-    # The last point cloud: binary PLY, points in front of the camera, as many as pixels that saw something.
+    # The last point cloud, where the camera writes one: binary PLY, as many points as pixels that saw something.
+    if settings["point_cloud"] == "none":
+        assert not list(folder.glob("points_*.ply")), f"{camera}: point clouds it was not asked for"
+        return len(frames)
     ply = (folder / f"points_{len(frames) - 1:06d}.ply").read_bytes()
     header_end = ply.index(b"end_header\n") + len(b"end_header\n")
     count = int(next(line for line in ply[:header_end].decode().splitlines() if line.startswith("element vertex")).split()[2])
     points = numpy.frombuffer(ply[header_end:], dtype=[("x", "<f4"), ("y", "<f4"), ("z", "<f4"), ("rgba", "u1", 4), ("segment", "<u2"), ("pad", "<u2")])
     assert len(points) == count == int(seen.sum()), f"{camera}: {len(points)} points, {count} in the header, {seen.sum()} pixels"
-    assert (points["z"] > 0).all()
+    if settings["point_cloud"] == "optical":
+        assert (points["z"] > 0).all()
     return len(frames)
 
 

@@ -1053,11 +1053,30 @@ void SceneReader::read_sensor(const pugi::xml_node& sensor, const Pose& link_pos
 
 void SceneReader::read_plugin_camera(const pugi::xml_node& element) {
   check_attributes(element, {"name", "type"});
-  check_children(element, {"mount", "pose", "update_rate", "horizontal_fov", "image", "clip", "noise", "shadows"});
+  check_children(element, {"mount", "pose", "update_rate", "horizontal_fov", "image", "clip", "noise", "shadows", "point_cloud"});
   CameraEntry entry;
   entry.where = where(element);
   bool valid = read_camera_settings(element, element, entry.settings);
   if (const auto shadows = read_bool(element, "shadows")) entry.settings.shadows = *shadows;
+  if (const pugi::xml_node cloud = element.child("point_cloud")) {
+    // <point_cloud frame="optical|world">true</point_cloud>
+    const std::string_view text = leaf_text(cloud, {"frame"});
+    const auto enabled = parse_bool(text);
+    const std::string frame = cloud.attribute("frame").as_string("optical");
+    if (!enabled) {
+      report(cloud, fmt::format("<point_cloud> must be true or false (or 1 or 0), got '{}'", text));
+      valid = false;
+    } else if (frame != "optical" && frame != "world") {
+      report(cloud, fmt::format("<point_cloud frame=\"{}\">: expected optical or world", frame));
+      valid = false;
+    } else if (*enabled) {
+      if (!sensors::has_depth(entry.settings.type)) {
+        report(cloud, "a point cloud needs depth: the camera's type must be depth_camera or rgbd_camera");
+        valid = false;
+      }
+      entry.settings.point_cloud = frame == "world" ? sensors::CameraSettings::PointCloud::world : sensors::CameraSettings::PointCloud::optical;
+    }
+  }
   if (const pugi::xml_node mount = element.child("mount")) {
     check_attributes(mount, {"robot", "link"});
     check_children(mount, {"pose"});

@@ -33,6 +33,10 @@ struct CameraSettings {
   double update_rate = 10;             // images per second of simulated time
   GaussianNoise noise;
   bool shadows = true;                 // the key light casts shadows (one more ray a pixel)
+  /// A point cloud of each depth image in the run's files and messages (20 bytes a pixel that saw
+  /// something): in the optical frame, or in the world's (a scan that adds up across frames).
+  enum class PointCloud { none, optical, world };
+  PointCloud point_cloud = PointCloud::none;
   /// Where it is: on a robot link (`robot`/`link` not empty) at `pose` in the link frame, else at
   /// `pose` in the world.
   std::string robot, link;

@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -60,9 +61,15 @@ double gaussian(std::uint64_t frame, std::uint64_t pixel, std::uint64_t channel)
   return std::sqrt(-2 * std::log(u1)) * std::cos(2 * 3.141592653589793 * u2);
 }
 
+/// Linear [0, 1] to an sRGB byte (gamma 2.2), by a table of 4096 steps.
 std::uint8_t srgb_byte(float linear) {
-  const float clamped = std::clamp(linear, 0.0f, 1.0f);
-  return static_cast<std::uint8_t>(std::lround(255 * std::pow(clamped, 1 / 2.2f)));
+  static const auto table = [] {
+    std::array<std::uint8_t, 4097> bytes{};
+    for (std::size_t i = 0; i < bytes.size(); ++i)
+      bytes[i] = static_cast<std::uint8_t>(std::lround(255 * std::pow(static_cast<double>(i) / 4096, 1 / 2.2)));
+    return bytes;
+  }();
+  return table[static_cast<std::size_t>(std::clamp(linear, 0.0f, 1.0f) * 4096 + 0.5f)];
 }
 
 }  // namespace
@@ -302,84 +309,116 @@ void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, s
   const Vec3d light = light_direction();
   std::atomic<std::uint64_t> shadow_rays{0};
 
+  // Rows in parallel; each row in packets of 8 neighbouring rays (Embree traces coherent packets
+  // faster than single rays), then their shadow rays as a packet.
+  const float origin_x = static_cast<float>(origin.x()), origin_y = static_cast<float>(origin.y()), origin_z = static_cast<float>(origin.z());
   parallel_for_each_index(static_cast<std::size_t>(height), [&](std::size_t row) {
     RTCIntersectContext context;
     rtcInitIntersectContext(&context);
+    context.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
     std::uint64_t shadows_cast = 0;
-    for (int column = 0; column < width; ++column) {
-      const std::size_t pixel = row * static_cast<std::size_t>(width) + static_cast<std::size_t>(column);
-      // Through the pixel's centre; z = 1 in the optical frame, so t is the depth along the axis.
-      const Vec3d direction = rotation * ray_through(intrinsics, column + 0.5, static_cast<double>(row) + 0.5);
-      RTCRayHit hit{};
-      hit.ray.org_x = static_cast<float>(origin.x());
-      hit.ray.org_y = static_cast<float>(origin.y());
-      hit.ray.org_z = static_cast<float>(origin.z());
-      hit.ray.dir_x = static_cast<float>(direction.x());
-      hit.ray.dir_y = static_cast<float>(direction.y());
-      hit.ray.dir_z = static_cast<float>(direction.z());
-      hit.ray.tnear = static_cast<float>(settings.near);
-      hit.ray.tfar = static_cast<float>(settings.far);
-      hit.ray.mask = 0xFFFFFFFF;
-      hit.hit.geomID = kInvalid;
-      hit.hit.instID[0] = kInvalid;
-      rtcIntersect1(impl.top, &context, &hit);
+    alignas(32) int valid[8];
+    alignas(32) int shadow_valid[8];
+    alignas(32) RTCRayHit8 hits;
+    alignas(32) RTCRay8 shadows;
+    Vec3d directions[8], normals[8];
+    for (int first = 0; first < width; first += 8) {
+      const int lanes = std::min(8, width - first);
+      for (int k = 0; k < 8; ++k) {
+        valid[k] = k < lanes ? -1 : 0;
+        // Through the pixel's centre; z = 1 in the optical frame, so t is the depth along the axis.
+        directions[k] = rotation * ray_through(intrinsics, first + k + 0.5, static_cast<double>(row) + 0.5);
+        hits.ray.org_x[k] = origin_x;
+        hits.ray.org_y[k] = origin_y;
+        hits.ray.org_z[k] = origin_z;
+        hits.ray.dir_x[k] = static_cast<float>(directions[k].x());
+        hits.ray.dir_y[k] = static_cast<float>(directions[k].y());
+        hits.ray.dir_z[k] = static_cast<float>(directions[k].z());
+        hits.ray.tnear[k] = static_cast<float>(settings.near);
+        hits.ray.tfar[k] = static_cast<float>(settings.far);
+        hits.ray.time[k] = 0;
+        hits.ray.mask[k] = 0xFFFFFFFF;
+        hits.ray.id[k] = static_cast<unsigned>(k);
+        hits.ray.flags[k] = 0;
+        hits.hit.geomID[k] = kInvalid;
+        hits.hit.instID[0][k] = kInvalid;
+      }
+      rtcIntersect8(valid, impl.top, &context, &hits);
 
-      Rgb shade = kSky;
-      if (hit.hit.geomID != kInvalid) {
+      std::uint16_t segments[8];
+      for (int k = 0; k < lanes; ++k) {
+        shadow_valid[k] = 0;
+        segments[k] = kBackground;
+        if (hits.hit.geomID[k] == kInvalid) continue;
         // What it hit, and the surface's normal in the world.
-        std::uint16_t segment = kBackground;
-        Vec3d normal(hit.hit.Ng_x, hit.hit.Ng_y, hit.hit.Ng_z);
-        const unsigned instance = hit.hit.instID[0];
+        Vec3d normal(hits.hit.Ng_x[k], hits.hit.Ng_y[k], hits.hit.Ng_z[k]);
+        const unsigned instance = hits.hit.instID[0][k];
+        const unsigned primitive = hits.hit.primID[k];
         if (instance == impl.layers[0].instance || instance == impl.layers[1].instance) {
           const auto& layer = impl.layers[instance == impl.layers[0].instance ? 0 : 1];
-          segment = hit.hit.primID < layer.segments.size() ? layer.segments[hit.hit.primID] : kBackground;
+          segments[k] = primitive < layer.segments.size() ? layer.segments[primitive] : kBackground;
         } else if (instance == impl.static_instance) {
-          segment = impl.static_segments[hit.hit.geomID];
+          segments[k] = impl.static_segments[hits.hit.geomID[k]];
         } else if (instance == impl.printed_instance) {
-          segment = impl.printed_segment;
+          segments[k] = impl.printed_segment;
         } else if (instance < impl.body_of_instance.size() && impl.body_of_instance[instance] < impl.bodies.size()) {
           const auto& body = impl.bodies[impl.body_of_instance[instance]];
-          segment = body.segment;
+          segments[k] = body.segment;
           normal = body.rotation.cast<double>() * normal;
         }
-        image.segment[pixel] = segment;
-        if (depth) image.depth[pixel] = hit.ray.tfar;
-        if (color) {
-          normal.normalize();
-          if (normal.dot(direction) > 0) normal = -normal;
-          double lit = std::max(0.0, normal.dot(light));
-          if (lit > 0 && settings.shadows) {
-            const Vec3d point = origin + static_cast<double>(hit.ray.tfar) * direction;
-            RTCRay shadow{};
-            const Vec3d start = point + (1e-5 + 1e-4 * hit.ray.tfar) * normal;
-            shadow.org_x = static_cast<float>(start.x());
-            shadow.org_y = static_cast<float>(start.y());
-            shadow.org_z = static_cast<float>(start.z());
-            shadow.dir_x = static_cast<float>(light.x());
-            shadow.dir_y = static_cast<float>(light.y());
-            shadow.dir_z = static_cast<float>(light.z());
-            shadow.tnear = 0;
-            shadow.tfar = std::numeric_limits<float>::infinity();
-            shadow.mask = 0xFFFFFFFF;
-            rtcOccluded1(impl.top, &context, &shadow);
-            ++shadows_cast;
-            if (shadow.tfar < 0) lit = 0;  // Embree marks an occluded ray with tfar = -inf
-          }
-          const Rgb albedo = segment < impl.palette.size() ? impl.palette[segment] : Rgb{};
+        normal.normalize();
+        if (normal.dot(directions[k]) > 0) normal = -normal;
+        normals[k] = normal;
+        if (color && settings.shadows && normal.dot(light) > 0) {
+          // A shadow ray toward the key light, from just off the surface.
+          const float t = hits.ray.tfar[k];
+          const Vec3d start = origin + double(t) * directions[k] + (1e-5 + 1e-4 * double(t)) * normal;
+          shadow_valid[k] = -1;
+          shadows.org_x[k] = static_cast<float>(start.x());
+          shadows.org_y[k] = static_cast<float>(start.y());
+          shadows.org_z[k] = static_cast<float>(start.z());
+          shadows.dir_x[k] = static_cast<float>(light.x());
+          shadows.dir_y[k] = static_cast<float>(light.y());
+          shadows.dir_z[k] = static_cast<float>(light.z());
+          shadows.tnear[k] = 0;
+          shadows.tfar[k] = std::numeric_limits<float>::infinity();
+          shadows.time[k] = 0;
+          shadows.mask[k] = 0xFFFFFFFF;
+          shadows.id[k] = static_cast<unsigned>(k);
+          shadows.flags[k] = 0;
+          ++shadows_cast;
+        }
+      }
+      for (int k = lanes; k < 8; ++k) shadow_valid[k] = 0;
+      if (std::any_of(shadow_valid, shadow_valid + 8, [](int lane) { return lane != 0; })) {
+        RTCIntersectContext incoherent;
+        rtcInitIntersectContext(&incoherent);
+        rtcOccluded8(shadow_valid, impl.top, &incoherent, &shadows);
+      }
+
+      for (int k = 0; k < lanes; ++k) {
+        const std::size_t pixel = row * static_cast<std::size_t>(width) + static_cast<std::size_t>(first + k);
+        const bool hit = hits.hit.geomID[k] != kInvalid;
+        image.segment[pixel] = segments[k];
+        if (depth && hit) image.depth[pixel] = hits.ray.tfar[k];
+        // SDF's Gaussian noise: on each colour channel (0 to 1) and on the depth (m).
+        if (depth && hit && settings.noise.enabled())
+          image.depth[pixel] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(frame, pixel, 3));
+        if (!color) continue;
+        Rgb shade = kSky;
+        if (hit) {
+          double lit = std::max(0.0, normals[k].dot(light));
+          if (shadow_valid[k] != 0 && shadows.tfar[k] < 0) lit = 0;  // Embree marks an occluded ray with tfar = -inf
+          const Rgb albedo = segments[k] < impl.palette.size() ? impl.palette[segments[k]] : Rgb{};
           const float light_amount = kAmbient + kDirect * static_cast<float>(lit);
           shade = {albedo.r * light_amount, albedo.g * light_amount, albedo.b * light_amount};
         }
-      }
-      // SDF's Gaussian noise: on each colour channel (0 to 1) and on the depth (m).
-      if (color) {
         float channels[3] = {shade.r, shade.g, shade.b};
         for (int c = 0; c < 3; ++c) {
           if (settings.noise.enabled()) channels[c] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(frame, pixel, c));
           image.rgb[3 * pixel + c] = srgb_byte(channels[c]);
         }
       }
-      if (depth && settings.noise.enabled() && std::isfinite(image.depth[pixel]))
-        image.depth[pixel] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(frame, pixel, 3));
     }
     shadow_rays += shadows_cast;
   }, 1);
@@ -390,16 +429,18 @@ void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, s
   stats_.rays = static_cast<std::uint64_t>(width) * static_cast<std::uint64_t>(height) + shadow_rays.load();
 }
 
-void point_cloud(const CameraImage& image, const Intrinsics& intrinsics, std::vector<CloudPoint>& points) {
+void point_cloud(const CameraImage& image, const Intrinsics& intrinsics, std::vector<CloudPoint>& points, const Pose& to_frame) {
   points.clear();
   if (image.depth.empty()) return;
+  const Eigen::Matrix3d rotation = to_frame.orientation.cast<double>().toRotationMatrix();
+  const Vec3d translation = to_frame.position.cast<double>();
   for (int row = 0; row < image.height; ++row)
     for (int column = 0; column < image.width; ++column) {
       const std::size_t pixel = static_cast<std::size_t>(row) * static_cast<std::size_t>(image.width) + static_cast<std::size_t>(column);
       const float depth = image.depth[pixel];
       if (!std::isfinite(depth)) continue;
-      const Vec3d ray = ray_through(intrinsics, column + 0.5, row + 0.5);
-      CloudPoint point{static_cast<float>(depth * ray.x()), static_cast<float>(depth * ray.y()), depth, 200, 200, 200, 255,
+      const Vec3d at = rotation * (double(depth) * ray_through(intrinsics, column + 0.5, row + 0.5)) + translation;
+      CloudPoint point{static_cast<float>(at.x()), static_cast<float>(at.y()), static_cast<float>(at.z()), 200, 200, 200, 255,
                        image.segment[pixel], 0};
       if (!image.rgb.empty()) {
         point.r = image.rgb[3 * pixel];

@@ -84,7 +84,7 @@ struct CloudPoint {
 static_assert(sizeof(CloudPoint) == 20);
 
 /// The image's pixels that hit something as points in the optical frame (depth along the ray
-/// through each pixel's centre).
-void point_cloud(const CameraImage& image, const Intrinsics& intrinsics, std::vector<CloudPoint>& points);
+/// through each pixel's centre), or moved by `to_frame` (e.g. the optical frame's pose in the world).
+void point_cloud(const CameraImage& image, const Intrinsics& intrinsics, std::vector<CloudPoint>& points, const Pose& to_frame = Pose{});
 
 }  // namespace m3dp::sensors

@@ -193,6 +193,19 @@ const sensors::CameraImage& CameraRig::image(const Simulation& simulation, std::
   return camera.image;
 }
 
+const std::vector<sensors::CloudPoint>& CameraRig::points(const Simulation& simulation, std::size_t index) {
+  Camera& camera = cameras_.at(index);
+  const sensors::CameraImage& rendered = image(simulation, index);
+  if (camera.points_step == camera.rendered_step) return camera.points;
+  camera.points_step = camera.rendered_step;
+  camera.points.clear();
+  using Frame = sensors::CameraSettings::PointCloud;
+  if (camera.settings.point_cloud == Frame::none) return camera.points;
+  const Pose to_frame = camera.settings.point_cloud == Frame::world ? sensors::optical_pose(pose(simulation, index)) : Pose{};
+  sensors::point_cloud(rendered, sensors::Intrinsics::of(camera.settings), camera.points, to_frame);
+  return camera.points;
+}
+
 double CameraRig::take_render_ms() {
   const double ms = render_ms_;
   render_ms_ = 0;

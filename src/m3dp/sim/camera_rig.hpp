@@ -38,6 +38,9 @@ class CameraRig {
   [[nodiscard]] Pose pose(const Simulation& simulation, std::size_t camera) const;
   /// The camera's image of the simulation as it is now (rendered once per step and camera).
   const sensors::CameraImage& image(const Simulation& simulation, std::size_t camera);
+  /// Its point cloud (the camera's point_cloud setting says in which frame; empty for none), made
+  /// once per image.
+  const std::vector<sensors::CloudPoint>& points(const Simulation& simulation, std::size_t camera);
   /// What each segment id is (index: id): fixed when the rig is made, layers from the paths.
   [[nodiscard]] const std::vector<Segment>& legend() const { return legend_; }
   [[nodiscard]] const WorldLayout& layout() const { return layout_; }
@@ -78,6 +81,8 @@ class CameraRig {
     Pose fixed_link_pose;                  // a fixed robot link's pose, if it is on one
     sensors::CameraImage image;
     std::uint64_t rendered_step = ~0ull;
+    std::vector<sensors::CloudPoint> points;
+    std::uint64_t points_step = ~0ull;
     Totals totals;
   };
   /// Brings the renderer's scene to the simulation's present (once per step).

@@ -3,7 +3,7 @@
 //   depth_NNNNNN.npy         float32 metres along the optical axis, inf where nothing was hit (depth cameras)
 //   depth_NNNNNN.png         16-bit millimetres, 0 where nothing was hit (ROS's 16UC1)
 //   segmentation_NNNNNN.png  16-bit segment ids, named in legend.json
-//   points_NNNNNN.ply        the point cloud in the optical frame: x y z, colour, segment (depth cameras)
+//   points_NNNNNN.ply        the point cloud: x y z, colour, segment (depth cameras whose <point_cloud> asks)
 //   camera.json              intrinsics, clip, type, where it is mounted, the frame conventions
 //   frames.csv               each frame's time and the optical frame's pose in the world
 // The rendering is the simulation's camera rig (rendered once a step, shared with the recording).
@@ -29,9 +29,10 @@ nlohmann::json pose_json(const Pose& pose) {
   return {{"position_m", {pose.position.x(), pose.position.y(), pose.position.z()}}, {"orientation_wxyz", {q.w(), q.x(), q.y(), q.z()}}};
 }
 
-void write_point_cloud(const std::filesystem::path& file, const std::vector<sensors::CloudPoint>& points) {
+void write_point_cloud(const std::filesystem::path& file, const std::vector<sensors::CloudPoint>& points, bool world) {
   io::write_file_atomically(file, [&](std::ostream& stream) {
-    stream << "ply\nformat binary_little_endian 1.0\ncomment m3dp camera point cloud, optical frame (z forward, x right, y down), m\n"
+    stream << "ply\nformat binary_little_endian 1.0\ncomment m3dp camera point cloud, "
+           << (world ? "world frame" : "optical frame (z forward, x right, y down)") << ", m\n"
            << "element vertex " << points.size() << "\n"
            << "property float x\nproperty float y\nproperty float z\n"
            << "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n"
@@ -79,6 +80,9 @@ class CameraFiles final : public RunObserver {
           {"far_m", settings.far},
           {"update_rate_hz", settings.update_rate},
           {"noise", {{"type", settings.noise.enabled() ? "gaussian" : "none"}, {"mean", settings.noise.mean}, {"stddev", settings.noise.stddev}}},
+          {"point_cloud", settings.point_cloud == sensors::CameraSettings::PointCloud::none      ? "none"
+                          : settings.point_cloud == sensors::CameraSettings::PointCloud::optical ? "optical"
+                                                                                                  : "world"},
           {"mounted_on", settings.robot.empty() ? nlohmann::json("world") : nlohmann::json(settings.robot + "/" + settings.link)},
           {"pose_in_mount", pose_json(settings.pose)},
           {"conventions",
@@ -133,8 +137,9 @@ class CameraFiles final : public RunObserver {
       for (std::size_t p = 0; p < image.depth.size(); ++p)
         depth_mm_[p] = std::isfinite(image.depth[p]) ? static_cast<std::uint16_t>(std::clamp(std::lround(1000.0 * image.depth[p]), 1L, 65535L)) : 0;
       io::write_png(output.folder / fmt::format("depth_{}.png", index), image.width, image.height, 1, 16, depth_mm_.data());
-      sensors::point_cloud(image, sensors::Intrinsics::of(settings), points_);
-      write_point_cloud(output.folder / fmt::format("points_{}.ply", index), points_);
+      if (settings.point_cloud != sensors::CameraSettings::PointCloud::none)
+        write_point_cloud(output.folder / fmt::format("points_{}.ply", index), rig.points(simulation, c),
+                          settings.point_cloud == sensors::CameraSettings::PointCloud::world);
     }
     const Pose optical = sensors::optical_pose(rig.pose(simulation, c));
     const Quat& q = optical.orientation;
@@ -147,7 +152,6 @@ class CameraFiles final : public RunObserver {
   std::filesystem::path folder_;
   std::vector<CameraOutput> cameras_;
   std::vector<std::uint16_t> depth_mm_;
-  std::vector<sensors::CloudPoint> points_;
 };
 
 }  // namespace

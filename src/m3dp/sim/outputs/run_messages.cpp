@@ -87,7 +87,8 @@ class RunMessages final : public RunObserver {
       if (sensors::has_color(settings.type)) ids.image = add("image", "foxglove.RawImage");
       if (sensors::has_depth(settings.type)) ids.depth = add("depth", "foxglove.RawImage");
       ids.segmentation = add("segmentation", "foxglove.RawImage");
-      if (sensors::has_depth(settings.type)) ids.points = add("points", "foxglove.PointCloud");
+      if (sensors::has_depth(settings.type) && settings.point_cloud != sensors::CameraSettings::PointCloud::none)
+        ids.points = add("points", "foxglove.PointCloud");
       ids.calibration = add("calibration", "foxglove.CameraCalibration");
       camera_topics_.push_back(ids);
     }
@@ -315,11 +316,11 @@ class RunMessages final : public RunObserver {
     if (wanted(sinks, ids.segmentation))
       send(sinks, ids.segmentation, stamp, record::encode_raw_image(time, frame, width, height, "16UC1", 2 * width, bytes_of(image.segment)));
     if (wanted(sinks, ids.points)) {
-      sensors::point_cloud(image, sensors::Intrinsics::of(rig.settings(c)), cloud_points_);
+      const auto& points = rig.points(simulation, c);
+      const bool world = rig.settings(c).point_cloud == sensors::CameraSettings::PointCloud::world;
       std::string cloud;
-      record::encode_point_cloud(time, frame, camera_fields_, sizeof(sensors::CloudPoint), cloud_points_.size(),
-                                 [&](char* out) { std::memcpy(out, cloud_points_.data(), cloud_points_.size() * sizeof(sensors::CloudPoint)); },
-                                 cloud);
+      record::encode_point_cloud(time, world ? "world" : frame, camera_fields_, sizeof(sensors::CloudPoint), points.size(),
+                                 [&](char* out) { std::memcpy(out, points.data(), points.size() * sizeof(sensors::CloudPoint)); }, cloud);
       send(sinks, ids.points, stamp, std::move(cloud));
     }
     if (wanted(sinks, ids.calibration)) {
@@ -357,7 +358,6 @@ class RunMessages final : public RunObserver {
   std::vector<TopicInfo> topics_;
   std::vector<CameraTopics> camera_topics_;  // per camera of the scene
   std::vector<record::PointField> camera_fields_ = camera_point_fields();
-  std::vector<sensors::CloudPoint> cloud_points_;
   double next_frame_time_ = 0;
   std::vector<double> next_camera_time_;
   std::vector<Clock::time_point> last_camera_live_;
