@@ -413,6 +413,37 @@ TEST(Scene, BrokenUrdfIsReportedAtItsOwnLine) {
   EXPECT_CONTAINS(error.what(), (folder / "broken.urdf").string() + ":4: error: the URDF is not well-formed XML");
 }
 
+TEST(Scene, UrdfColoursAreKeptForCameras) {
+  // A two-link robot: one link coloured in its visual, one by a named material at the top level.
+  const auto folder = std::filesystem::temp_directory_path() / ("m3dp_colour_urdf_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(folder);
+  {
+    std::ofstream urdf(folder / "painted.urdf");
+    urdf << R"(<?xml version="1.0"?>
+<robot name="painted">
+  <material name="orange"><color rgba="1 0.5 0 1"/></material>
+  <link name="base"><visual><geometry><box size="0.1 0.1 0.1"/></geometry><material name="grey"><color rgba="0.3 0.3 0.3 1"/></material></visual>
+    <collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>
+  <link name="arm"><visual><geometry><box size="0.1 0.1 0.1"/></geometry><material name="orange"/></visual>
+    <collision><geometry><box size="0.1 0.1 0.1"/></geometry></collision></link>
+  <link name="tool0"/>
+  <joint name="elbow_joint" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/>
+    <limit lower="-3" upper="3" effort="10" velocity="1"/></joint>
+  <joint name="tool" type="fixed"><parent link="arm"/><child link="tool0"/></joint>
+</robot>
+)";
+  }
+  const auto scene = load_scene_from_string(robot_scene("elbow_joint", "tool0", (folder / "painted.urdf").string()), "scenes/valid.sdf");
+  std::filesystem::remove_all(folder);
+  ASSERT_EQ(scene.robots.size(), 1u);
+  const auto& colors = scene.robots[0].link_colors;
+  ASSERT_EQ(colors.size(), 2u);
+  EXPECT_EQ(colors[0].first, "base");
+  EXPECT_FLOAT_EQ(colors[0].second[0], 0.3f);
+  EXPECT_EQ(colors[1].first, "arm");
+  EXPECT_FLOAT_EQ(colors[1].second[1], 0.5f);
+}
+
 TEST(Scene, MeshingBlockIsReadAndCheckedAtItsLine) {
   std::string text = valid_scene();
   text.replace(text.find("</plugin>\n  </world>"), 0,

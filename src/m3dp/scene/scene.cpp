@@ -11,6 +11,8 @@
 #include <fstream>
 #include <initializer_list>
 #include <iterator>
+#include <map>
+#include <sstream>
 #include <span>
 #include <string_view>
 #include <utility>
@@ -866,6 +868,20 @@ void SceneReader::read_include(const pugi::xml_node& include) {
   }
   check_unique_name(include, robot.name, model_names_);
   for (const auto& link : root.children("link")) robot.link_names.emplace_back(link.attribute("name").value());
+  // Colours for cameras: a link's first visual material, given there or by name at the robot's top level.
+  std::map<std::string, std::string> named_colors;
+  for (const auto& material : root.children("material"))
+    if (const auto color = material.child("color")) named_colors[material.attribute("name").value()] = color.attribute("rgba").value();
+  for (const auto& link : root.children("link")) {
+    const pugi::xml_node material = link.child("visual").child("material");
+    if (!material) continue;
+    std::string rgba = material.child("color").attribute("rgba").value();
+    if (rgba.empty() && named_colors.contains(material.attribute("name").value())) rgba = named_colors[material.attribute("name").value()];
+    std::istringstream values(rgba);
+    std::array<float, 3> color{};
+    if (values >> color[0] >> color[1] >> color[2] && std::all_of(color.begin(), color.end(), [](float c) { return c >= 0 && c <= 1; }))
+      robot.link_colors.emplace_back(link.attribute("name").value(), color);
+  }
   for (const auto& joint : root.children("joint")) {
     const std::string_view type = joint.attribute("type").value();
     if (type == "revolute" || type == "continuous" || type == "prismatic") robot.joint_names.emplace_back(joint.attribute("name").value());

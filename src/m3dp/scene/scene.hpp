@@ -60,6 +60,8 @@ struct RobotInclude {
   Pose pose;                                       // of the URDF root in the world
   std::vector<std::string> joint_names;            // the URDF's movable joints, in file order
   std::vector<std::string> link_names;
+  /// Links whose URDF <visual> gives a <material><color rgba>: linear RGB in [0, 1] (cameras draw them so).
+  std::vector<std::pair<std::string, std::array<float, 3>>> link_colors;
   std::vector<std::pair<std::string, double>> initial_joint_positions;  // rad or m, from the plugin's <robot>
   std::optional<MobileBase> mobile_base;
   SourceLocation where;

@@ -57,7 +57,11 @@ CameraRig::CameraRig(const Simulation& simulation)
   for (std::size_t b = 0; b < layout_.bodies.size(); ++b) {
     const BodyView& body = layout_.bodies[b];
     const std::string kind = body.kind == BodyKind::static_body ? "static" : body.kind == BodyKind::free_body ? "body" : "link";
-    const sensors::Rgb color = body.kind == BodyKind::static_body ? kStaticColor : body.kind == BodyKind::free_body ? kBodyColor : kLinkColor;
+    sensors::Rgb color = body.kind == BodyKind::static_body ? kStaticColor : body.kind == BodyKind::free_body ? kBodyColor : kLinkColor;
+    if (body.kind == BodyKind::robot_link)
+      if (const auto* robot = scene.find_robot(body.robot))
+        for (const auto& [link, rgb] : robot->link_colors)
+          if (body.name == body.robot + "/" + link) color = {rgb[0], rgb[1], rgb[2]};  // the URDF's own colour
     const std::uint16_t segment = add_segment({0, kind, body.name, body.robot, -1, 0, color});
     if (!body.link) {
       renderer_.add_static(transformed(body.triangles, body.fixed_pose), segment);

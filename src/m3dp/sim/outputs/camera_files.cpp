@@ -13,6 +13,7 @@
 #include <cmath>
 
 #include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/background_writer.hpp"
 #include "m3dp/io/image_files.hpp"
 #include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
@@ -98,6 +99,7 @@ class CameraFiles final : public RunObserver {
   void observe(const Simulation& simulation, const StepReport& /*report*/) override { observe_cameras(simulation); }
 
   void finish(const Simulation& simulation, RunSummary& summary) override {
+    writer_.finish();  // every image on disk (or its error thrown) before the summary says so
     CameraRig& rig = simulation.cameras();
     for (std::size_t c = 0; c < cameras_.size(); ++c) {
       const CameraRig::Totals& totals = rig.totals(c);
@@ -126,32 +128,41 @@ class CameraFiles final : public RunObserver {
   }
 
   void write_frame(const Simulation& simulation, CameraRig& rig, std::size_t c, CameraOutput& output) {
-    const sensors::CameraImage& image = rig.image(simulation, c);
     const auto& settings = rig.settings(c);
+    // The images copied, encoded and written on the writer's thread.
+    auto image = std::make_shared<const sensors::CameraImage>(rig.image(simulation, c));
+    std::shared_ptr<const std::vector<sensors::CloudPoint>> points;
+    if (!image->depth.empty() && settings.point_cloud != sensors::CameraSettings::PointCloud::none)
+      points = std::make_shared<const std::vector<sensors::CloudPoint>>(rig.points(simulation, c));
     const std::string index = fmt::format("{:06}", output.frames);
-    if (!image.rgb.empty()) io::write_png(output.folder / fmt::format("rgb_{}.png", index), image.width, image.height, 3, 8, image.rgb.data());
-    io::write_png(output.folder / fmt::format("segmentation_{}.png", index), image.width, image.height, 1, 16, image.segment.data());
-    if (!image.depth.empty()) {
-      io::write_npy(output.folder / fmt::format("depth_{}.npy", index), image.height, image.width, image.depth);
-      depth_mm_.resize(image.depth.size());
-      for (std::size_t p = 0; p < image.depth.size(); ++p)
-        depth_mm_[p] = std::isfinite(image.depth[p]) ? static_cast<std::uint16_t>(std::clamp(std::lround(1000.0 * image.depth[p]), 1L, 65535L)) : 0;
-      io::write_png(output.folder / fmt::format("depth_{}.png", index), image.width, image.height, 1, 16, depth_mm_.data());
-      if (settings.point_cloud != sensors::CameraSettings::PointCloud::none)
-        write_point_cloud(output.folder / fmt::format("points_{}.ply", index), rig.points(simulation, c),
-                          settings.point_cloud == sensors::CameraSettings::PointCloud::world);
-    }
     const Pose optical = sensors::optical_pose(rig.pose(simulation, c));
     const Quat& q = optical.orientation;
     output.frames_csv += fmt::format("{},{:.6f},{:.6f},{:.6f},{:.6f},{:.7f},{:.7f},{:.7f},{:.7f}\n", output.frames, simulation.time(),
                                      optical.position.x(), optical.position.y(), optical.position.z(), q.w(), q.x(), q.y(), q.z());
-    io::write_text_atomically(output.folder / "frames.csv", output.frames_csv);
     ++output.frames;
+    // frames.csv lists a frame once its files are written.
+    writer_.submit([folder = output.folder, index, image, points, world = settings.point_cloud == sensors::CameraSettings::PointCloud::world,
+                    frames_csv = output.frames_csv] {
+      if (!image->rgb.empty()) io::write_png(folder / fmt::format("rgb_{}.png", index), image->width, image->height, 3, 8, image->rgb.data());
+      io::write_png(folder / fmt::format("segmentation_{}.png", index), image->width, image->height, 1, 16, image->segment.data());
+      if (!image->depth.empty()) write_depth(folder, index, *image);
+      if (points) write_point_cloud(folder / fmt::format("points_{}.ply", index), *points, world);
+      io::write_text_atomically(folder / "frames.csv", frames_csv);
+    });
+  }
+
+  /// Depth as float32 metres (.npy) and 16-bit millimetres (PNG, 0 where nothing was hit).
+  static void write_depth(const std::filesystem::path& folder, const std::string& index, const sensors::CameraImage& image) {
+    io::write_npy(folder / fmt::format("depth_{}.npy", index), image.height, image.width, image.depth);
+    std::vector<std::uint16_t> millimetres(image.depth.size());
+    for (std::size_t p = 0; p < image.depth.size(); ++p)
+      millimetres[p] = std::isfinite(image.depth[p]) ? static_cast<std::uint16_t>(std::clamp(std::lround(1000.0 * image.depth[p]), 1L, 65535L)) : 0;
+    io::write_png(folder / fmt::format("depth_{}.png", index), image.width, image.height, 1, 16, millimetres.data());
   }
 
   std::filesystem::path folder_;
   std::vector<CameraOutput> cameras_;
-  std::vector<std::uint16_t> depth_mm_;
+  io::BackgroundWriter writer_{8};
 };
 
 }  // namespace
