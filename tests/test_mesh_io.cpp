@@ -183,9 +183,32 @@ TEST_F(MeshIo, BinaryStlWithWrongSizeIsAnError) {
   EXPECT_NE(message.find("5 triangles"), std::string::npos) << message;
 }
 
+TEST_F(MeshIo, PlyReadsBackWhatItWrote) {
+  // Binary as m3dp writes it, and ASCII with a quad and extra vertex properties as other tools write it.
+  m3dp::TriangleMesh mesh;
+  mesh.vertices = {Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0), Vec3(0, 0, 1)};
+  mesh.triangles = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+  m3dp::io::write_triangle_mesh(folder_ / "tetrahedron.ply", mesh);
+  const auto binary = read_triangle_mesh(folder_ / "tetrahedron.ply");
+  ASSERT_EQ(binary.vertices.size(), 4u);
+  ASSERT_EQ(binary.triangles.size(), 4u);
+  EXPECT_TRUE(binary.vertices[3].isApprox(Vec3(0, 0, 1)));
+  EXPECT_EQ(binary.triangles[3], (std::array<m3dp::Index, 3>{1, 2, 3}));
+  const auto ascii = read_triangle_mesh(write("square.ply", "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+                                                               "property float z\nproperty uchar red\nelement face 1\n"
+                                                               "property list uchar int vertex_indices\nend_header\n"
+                                                               "0 0 0 255\n1 0 0 255\n1 1 0 255\n0 1 0 255\n4 0 1 2 3\n"));
+  ASSERT_EQ(ascii.triangles.size(), 2u);  // the quad fanned
+  EXPECT_TRUE(ascii.vertices[2].isApprox(Vec3(1, 1, 0)));
+  EXPECT_NE(read_error(write("bad.ply", "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nelement face 1\n"
+                                         "property list uchar int vertex_indices\nend_header\n0\n3 0 1 2\n"))
+                .find("a face uses vertex 1 of 1"),
+            std::string::npos);
+}
+
 TEST_F(MeshIo, UnknownExtensionAndMissingFile) {
-  const std::string extension_message = read_error(write("part.ply", "ply\n"));
-  EXPECT_NE(extension_message.find("expected .obj or .stl"), std::string::npos) << extension_message;
+  const std::string extension_message = read_error(write("part.3mf", "PK"));
+  EXPECT_NE(extension_message.find("expected .obj or .ply or .stl"), std::string::npos) << extension_message;
   const std::string missing_message = read_error(folder_ / "nowhere.stl");
   EXPECT_NE(missing_message.find("nowhere.stl"), std::string::npos) << missing_message;
   EXPECT_NE(missing_message.find("no such file"), std::string::npos) << missing_message;
