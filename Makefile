@@ -26,6 +26,7 @@ test: build
 
 demo: build
 	$(M3DP) run scenes/ur10_wall.sdf -o out/ur10_wall
+	@echo "To watch the demo in the browser: $(M3DP) view out/ur10_wall  (then open the address it prints)"
 
 bench: build
 	$(M3DP) bench --particles 50000

@@ -23,6 +23,8 @@ packages=(
   # Cameras: Embree ray casting; images as PNG (libpng), read back in the tests by PIL, numpy and
   # ImageMagick's identify.
   libembree-dev libpng-dev python3-pil python3-numpy imagemagick
+  # The browser viewer's tests: Debian's Chromium, headless (puppeteer-core drives it; npm ci below).
+  chromium
 )
 # Kept at the candidate version: ParaView and the XML parser under its readers. Debian 12's expat
 # security update 2.5.0-1+deb12u5 made ParaView 5.11 unable to read raw appended VTK data; a machine

@@ -4,6 +4,7 @@
 //   m3dp bench [--particles N] [--steps S] ...
 //   m3dp mesh INPUT -o OUT [--method M] ...
 //   m3dp render RUN_DIR [--time T] [--camera NAME | --eye X Y Z --target X Y Z] -o image.png
+//   m3dp view RUN_DIR [--port N]
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
@@ -15,6 +16,8 @@
 #include "bench_command.hpp"
 #include "mesh_command.hpp"
 #include "render_command.hpp"
+#include "view_command.hpp"
+#include "viewer_files.hpp"
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
@@ -96,6 +99,8 @@ int main(int argc, char** argv) {
       ->expected(0, 1)
       ->default_str("8765")
       ->check(CLI::Range(0, 65535));
+  bool view_live = false;
+  run->add_flag("--view", view_live, "Watch the run in the browser while it runs: --serve, and the viewer's page on the same port");
   run->add_option("--live-rate", run_options.live_rate, "Frames per second the live stream sends at most (default 20)")
       ->check(CLI::PositiveNumber);
   run->add_option("--pace", run_options.pace, "Run at most this many times real time (1: real time, to watch it live)")
@@ -113,6 +118,10 @@ int main(int argc, char** argv) {
   auto* mesh = app.add_subcommand("mesh", "Turn saved particle frames (.vtu/.ply, or a .pvd sequence) into surface meshes");
   m3dp::app::add_mesh_options(*mesh, mesh_options);
 
+  m3dp::app::ViewOptions view_options;
+  auto* view = app.add_subcommand("view", "Watch a recorded run in the browser (or Foxglove): its run.mcap played back");
+  m3dp::app::add_view_options(*view, view_options);
+
   m3dp::app::RenderOptions render_options;
   auto* render = app.add_subcommand("render", "A picture of a saved run at a time, from one of its cameras or any eye point");
   m3dp::app::add_render_options(*render, render_options);
@@ -121,13 +130,19 @@ int main(int argc, char** argv) {
   try {
     if (run->parsed()) {
       run_options.show_progress = !quiet;
-      if (run->count("--serve") > 0) run_options.serve_port = static_cast<std::uint16_t>(serve_port.value_or(8765));
+      if (run->count("--serve") > 0 || view_live) run_options.serve_port = static_cast<std::uint16_t>(serve_port.value_or(8765));
+      if (run_options.serve_port) run_options.http = m3dp::app::viewer_file;  // the viewer's page on the stream's port
       return run_command(scene_file, output, threads, run_options);
     }
     if (validate->parsed()) return validate_command(validate_file);
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);
     if (mesh->parsed()) return m3dp::app::mesh_command(mesh_options);
     if (render->parsed()) return m3dp::app::render_command(render_options);
+    if (view->parsed()) {
+      std::signal(SIGINT, request_stop);
+      std::signal(SIGTERM, request_stop);
+      return m3dp::app::view_command(view_options, g_stop_requested);
+    }
   } catch (const m3dp::InputError& error) {
     fmt::print(stderr, "{}\n", error.what());
     fmt::print(stderr, "m3dp: {} problem(s) found\n", error.diagnostics().size());

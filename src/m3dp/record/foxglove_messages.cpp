@@ -228,7 +228,11 @@ std::string encode_run_stats(const RunStats& stats) {
     out.set_x(nozzle.position.x());
     out.set_y(nozzle.position.y());
     out.set_z(nozzle.position.z());
+    out.set_tracking_error(nozzle.tracking_error);
   }
+  message.set_step(stats.step);
+  for (const double density : stats.material_density) message.add_material_density(density);
+  message.set_particle_radius(stats.particle_radius);
   return serialized(message);
 }
 

@@ -73,6 +73,7 @@ struct NozzleStatus {
   bool extruding = false;
   double volume_rate = 0;  // m³/s
   Vec3 position = Vec3::Zero();
+  double tracking_error = 0;  // m from the path's point now
 };
 struct RunStats {
   double time = 0, real_time_factor = 0;
@@ -81,6 +82,9 @@ struct RunStats {
   std::uint32_t pressure_iterations = 0;
   double step_ms = 0, neighbor_ms = 0, pressure_ms = 0, world_ms = 0;
   std::vector<NozzleStatus> nozzles;
+  std::uint64_t step = 0;
+  std::vector<double> material_density;  // kg/m³, by material index
+  double particle_radius = 0;            // m
 };
 [[nodiscard]] std::string encode_run_stats(const RunStats& stats);
 

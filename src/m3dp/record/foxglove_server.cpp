@@ -30,7 +30,8 @@ using Handle = websocketpp::connection_hdl;
 using Clock = std::chrono::steady_clock;
 
 constexpr std::string_view kSubprotocol = "foxglove.websocket.v1";
-constexpr std::uint8_t kMessageData = 0x01, kTime = 0x02;  // the protocol's binary opcodes, server to client
+constexpr std::uint8_t kMessageData = 0x01, kTime = 0x02, kPlaybackState = 0x05;  // the protocol's binary opcodes, server to client
+constexpr std::uint8_t kPlaybackControlRequest = 0x03;                              // client to server
 constexpr std::uint32_t kNoSubscription = 0xFFFFFFFF;       // a queued Time message
 
 template <typename T>
@@ -56,11 +57,15 @@ std::string binary_frame_header(std::uint64_t length) {
   return header;
 }
 
+/// What waits in a client's queue: a channel's message, the clock (Time), or a whole binary
+/// message of the server's own (PlaybackState), which is never dropped.
+enum class Kind { message, time, raw };
 struct Pending {
+  Kind kind = Kind::message;
   std::size_t channel = 0;
   std::uint32_t subscription = kNoSubscription;
   std::uint64_t time_ns = 0;
-  std::shared_ptr<const std::string> data;  // null for a Time message
+  std::shared_ptr<const std::string> data;  // the message's payload, or the raw message
 };
 
 struct Client {
@@ -113,12 +118,18 @@ struct FoxgloveServer::Impl {
       clients.emplace(handle, std::move(client));
       ++statistics.clients;
     }
-    send_text(handle, {{"op", "serverInfo"},
-                       {"name", options.name},
-                       {"capabilities", {"time"}},
-                       {"supportedEncodings", nlohmann::json::array()},
-                       {"metadata", nlohmann::json::object()},
-                       {"sessionId", session_id}});
+    nlohmann::json info = {{"op", "serverInfo"},
+                           {"name", options.name},
+                           {"capabilities", {"time"}},
+                           {"supportedEncodings", nlohmann::json::array()},
+                           {"metadata", nlohmann::json::object()},
+                           {"sessionId", session_id}};
+    if (options.playback_range) {
+      info["capabilities"].push_back("rangedPlayback");
+      info["dataStartTime"] = options.playback_range->first;
+      info["dataEndTime"] = options.playback_range->second;
+    }
+    send_text(handle, info);
     send_text(handle, {{"op", "advertise"}, {"channels", advertised}});
   }
 
@@ -133,12 +144,28 @@ struct FoxgloveServer::Impl {
 
   void on_message(const Handle& handle, const WebSocketServer::message_ptr& message) {
     if (message->get_opcode() != websocketpp::frame::opcode::text) {
+      const std::string& payload = message->get_payload();
+      // PlaybackControlRequest: status u8, speed f32, had_seek u8, seek_time u64 (little-endian).
+      if (options.playback_range && options.on_playback_request && payload.size() >= 15 &&
+          static_cast<std::uint8_t>(payload[0]) == kPlaybackControlRequest) {
+        PlaybackRequest request;
+        request.status = static_cast<std::uint8_t>(payload[1]) == 0 ? PlaybackStatus::playing : PlaybackStatus::paused;
+        std::memcpy(&request.speed, payload.data() + 2, 4);
+        if (payload[6] != 0) {
+          std::uint64_t seek = 0;
+          std::memcpy(&seek, payload.data() + 7, 8);
+          request.seek_time = seek;
+        }
+        options.on_playback_request(request);
+        return;
+      }
       send_text(handle, {{"op", "status"}, {"level", 1}, {"message", "m3dp's server takes no client messages (clientPublish)"}});
       return;
     }
     const nlohmann::json request = nlohmann::json::parse(message->get_payload(), nullptr, false);
     const std::string op = request.is_object() ? request.value("op", "") : "";
     std::vector<std::string> problems;
+    std::vector<std::size_t> subscribed;  // channels newly subscribed to, for on_subscribe
     {
       std::lock_guard lock(mutex);
       const auto found = clients.find(handle);
@@ -162,7 +189,9 @@ struct FoxgloveServer::Impl {
           client.subscription_of_channel[channel] = subscription_id;
           ++subscribers[channel];
           // What a late client needs first: the channel's kept messages.
-          for (const auto& [key, kept] : latched[channel]) enqueue(client, Pending{channel, subscription_id, kept.time_ns, kept.data});
+          for (const auto& [key, kept] : latched[channel])
+            enqueue(client, Pending{Kind::message, channel, subscription_id, kept.time_ns, kept.data});
+          subscribed.push_back(channel);
         }
         post_pump_locked();
       } else if (op == "unsubscribe" && request.contains("subscriptionIds") && request["subscriptionIds"].is_array()) {
@@ -175,7 +204,7 @@ struct FoxgloveServer::Impl {
           client.subscription_of_channel.erase(channel);
           client.channel_of_subscription.erase(subscription);
           const auto kept_end = std::remove_if(client.queue.begin(), client.queue.end(), [&](const Pending& pending) {
-            const bool drop = pending.data && pending.channel == channel;
+            const bool drop = pending.kind == Kind::message && pending.channel == channel;
             if (drop) client.queued_bytes -= pending.data->size();
             return drop;
           });
@@ -187,16 +216,38 @@ struct FoxgloveServer::Impl {
       }
     }
     for (const auto& problem : problems) send_text(handle, {{"op", "status"}, {"level", 2}, {"message", problem}});
+    if (options.on_subscribe)
+      for (const std::size_t channel : subscribed) options.on_subscribe(channel);
+  }
+
+  void on_http(const Handle& handle) {
+    const auto connection = server.get_con_from_hdl(handle);
+    std::string path = connection->get_resource();
+    path = path.substr(0, path.find('?'));
+    std::optional<HttpFile> file;
+    if (options.http) file = options.http(path);
+    if (!file) {
+      connection->set_status(websocketpp::http::status_code::not_found);
+      connection->set_body(fmt::format("{} is not a file of m3dp's viewer\n", path));
+      connection->append_header("Content-Type", "text/plain");
+      return;
+    }
+    connection->set_status(websocketpp::http::status_code::ok);
+    connection->append_header("Content-Type", file->content_type);
+    connection->append_header("Cache-Control", "no-cache");
+    connection->set_body(std::move(file->body));
   }
 
   /// Puts `pending` on the client's queue by its channel's delivery (the lock held).
   void enqueue(Client& client, Pending pending) {
-    const Delivery delivery = pending.data ? channels[pending.channel].delivery : Delivery::latest;
+    const Delivery delivery = pending.kind == Kind::message ? channels[pending.channel].delivery
+                              : pending.kind == Kind::time  ? Delivery::latest
+                                                            : Delivery::latched;  // raw: kept in order, never dropped
     if (delivery == Delivery::latest) {
       // The unsent older message of the channel (or the older time) gives way to this one.
       for (auto& queued : client.queue)
-        if ((queued.data != nullptr) == (pending.data != nullptr) && queued.channel == pending.channel) {
-          if (queued.data) {
+        if (queued.kind == pending.kind && queued.channel == pending.channel) {
+          if (queued.kind == Kind::message) {
             client.queued_bytes -= queued.data->size();
             ++client.dropped;
             ++statistics.messages_dropped;
@@ -263,7 +314,9 @@ struct FoxgloveServer::Impl {
       if (error) continue;
       // The frame prepared here, so websocketpp sends it without another copy.
       std::string payload;
-      if (send.pending.data) {
+      if (send.pending.kind == Kind::raw) {
+        payload = *send.pending.data;
+      } else if (send.pending.kind == Kind::message) {
         payload.reserve(13 + send.pending.data->size());
         put(payload, kMessageData);
         put(payload, send.pending.subscription);
@@ -325,6 +378,7 @@ FoxgloveServer::FoxgloveServer(std::vector<ServerChannel> channels, const Server
   server.set_close_handler([&impl](Handle handle) { impl.on_close(handle); });
   server.set_fail_handler([&impl](Handle handle) { impl.on_close(handle); });
   server.set_message_handler([&impl](Handle handle, WebSocketServer::message_ptr message) { impl.on_message(handle, message); });
+  server.set_http_handler([&impl](Handle handle) { impl.on_http(handle); });
   std::error_code error;
   const auto address = asio::ip::make_address(options.host, error);
   if (error) throw Error(fmt::format("live stream: '{}' is not an IP address", options.host));
@@ -358,14 +412,14 @@ void FoxgloveServer::publish(std::size_t channel, std::uint64_t time_ns, std::sh
   if (impl.channels.at(channel).delivery == Delivery::latched) {
     auto& kept = impl.latched[channel];
     const auto same_key = std::find_if(kept.begin(), kept.end(), [&](const auto& entry) { return entry.first == key; });
-    Pending pending{channel, kNoSubscription, time_ns, data};
+    Pending pending{Kind::message, channel, kNoSubscription, time_ns, data};
     if (same_key != kept.end()) same_key->second = std::move(pending);
     else kept.emplace_back(std::string(key), std::move(pending));
   }
   if (impl.subscribers[channel] == 0) return;
   for (auto& [handle, client] : impl.clients) {
     const auto subscription = client.subscription_of_channel.find(channel);
-    if (subscription != client.subscription_of_channel.end()) impl.enqueue(client, Pending{channel, subscription->second, time_ns, data});
+    if (subscription != client.subscription_of_channel.end()) impl.enqueue(client, Pending{Kind::message, channel, subscription->second, time_ns, data});
   }
   impl.post_pump_locked();
 }
@@ -374,7 +428,22 @@ void FoxgloveServer::publish_time(std::uint64_t time_ns) {
   Impl& impl = *impl_;
   std::lock_guard lock(impl.mutex);
   if (impl.stopping || impl.clients.empty()) return;
-  for (auto& [handle, client] : impl.clients) impl.enqueue(client, Pending{0, kNoSubscription, time_ns, nullptr});
+  for (auto& [handle, client] : impl.clients) impl.enqueue(client, Pending{Kind::time, 0, kNoSubscription, time_ns, nullptr});
+  impl.post_pump_locked();
+}
+
+void FoxgloveServer::publish_playback_state(PlaybackStatus status, std::uint64_t time_ns, float speed) {
+  Impl& impl = *impl_;
+  // status u8, current_time u64, speed f32, request id length u32 (none).
+  auto message = std::make_shared<std::string>();
+  put(*message, kPlaybackState);
+  put(*message, static_cast<std::uint8_t>(status));
+  put(*message, time_ns);
+  put(*message, speed);
+  put(*message, std::uint32_t(0));
+  std::lock_guard lock(impl.mutex);
+  if (impl.stopping || impl.clients.empty()) return;
+  for (auto& [handle, client] : impl.clients) impl.enqueue(client, Pending{Kind::raw, 0, kNoSubscription, time_ns, message});
   impl.post_pump_locked();
 }
 

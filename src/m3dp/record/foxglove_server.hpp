@@ -10,7 +10,9 @@
 // websocketpp and asio stay in foxglove_server.cpp.
 #include <chrono>
 #include <cstdint>
+#include <functional>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -31,12 +33,32 @@ struct ServerChannel {
   Delivery delivery = Delivery::queued;
 };
 
+/// The protocol's playback (capability rangedPlayback): what a client asks of a replay.
+enum class PlaybackStatus : std::uint8_t { playing = 0, paused = 1, buffering = 2, ended = 3 };
+struct PlaybackRequest {
+  PlaybackStatus status = PlaybackStatus::paused;  // playing or paused
+  float speed = 1;                                 // times real time
+  std::optional<std::uint64_t> seek_time;          // ns, when the client seeks
+};
+
+/// A file the server answers a plain HTTP GET with (the viewer's page and scripts).
+struct HttpFile {
+  std::string content_type;
+  std::string body;
+};
+
 struct ServerOptions {
   std::string host = "127.0.0.1";             // localhost only by default
   std::uint16_t port = 8765;                  // 0: any free port (port() says which)
   std::string name = "m3dp";
   std::size_t client_queue_bytes = 64 << 20;  // a client's unsent bytes beyond which queued messages drop
   std::size_t socket_bytes = 8 << 20;         // bytes handed to a client's socket and unsent, beyond which the server waits
+  /// A replay's time range (ns): the server announces rangedPlayback and takes playback requests.
+  std::optional<std::pair<std::uint64_t, std::uint64_t>> playback_range = {};
+  // Called on the server's thread, the server's lock not held.
+  std::function<void(std::size_t channel)> on_subscribe = {};                 // a client subscribed to a channel
+  std::function<void(const PlaybackRequest& request)> on_playback_request = {};
+  std::function<std::optional<HttpFile>(std::string_view path)> http = {};     // plain GETs; none: 404
 };
 
 struct ServerStatistics {
@@ -62,6 +84,8 @@ class FoxgloveServer {
   void publish(std::size_t channel, std::uint64_t time_ns, std::shared_ptr<const std::string> data, std::string_view key = {});
   /// Moves the clients' clocks to `time_ns` (the protocol's Time message).
   void publish_time(std::uint64_t time_ns);
+  /// Tells every client how a replay plays (the protocol's PlaybackState).
+  void publish_playback_state(PlaybackStatus status, std::uint64_t time_ns, float speed);
   /// Waits up to `drain` for the clients' queues to be sent, closes every connection and stops.
   void stop(std::chrono::milliseconds drain = std::chrono::milliseconds(2000));
   [[nodiscard]] ServerStatistics statistics() const;

@@ -4,11 +4,13 @@
 #include <atomic>
 #include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "m3dp/record/foxglove_server.hpp"
 #include "m3dp/sim/meshing_worker.hpp"
 #include "m3dp/sph/measure.hpp"
 #include "m3dp/sph/state.hpp"
@@ -32,6 +34,8 @@ struct RunOptions {
   /// scene's <output><serve> does not give one or to override it; none: no live stream.
   std::optional<std::uint16_t> serve_port;
   double live_rate = 20;  // frames per wall second the live stream sends at most
+  /// Plain HTTP GETs on the live stream's port (the browser viewer's files); none: 404.
+  std::function<std::optional<record::HttpFile>(std::string_view path)> http;
   /// At most this many simulated seconds per wall second (1: real time, to watch a run live); 0: as fast as it can.
   double pace = 0;
 };

@@ -74,7 +74,7 @@ std::vector<record::PointField> camera_point_fields() {
 class RunMessages final : public RunObserver {
  public:
   RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate,
-              const std::vector<scene::CameraEntry>& cameras)
+              const std::vector<scene::CameraEntry>& cameras, const RunOptions& options)
       : period_(period), live_interval_(live_rate > 0 ? 1 / live_rate : 0), topics_(run_topics()) {
     for (const auto& camera : cameras) {
       const auto& settings = camera.settings;
@@ -107,8 +107,12 @@ class RunMessages final : public RunObserver {
       std::vector<record::ServerChannel> channels;
       for (const TopicInfo& topic : topics_)
         channels.push_back({topic.topic, topic.schema, record::schema_descriptor_set(topic.schema), topic.delivery});
-      live_ = std::make_unique<record::FoxgloveServer>(std::move(channels), record::ServerOptions{.port = *serve_port});
-      fmt::print("m3dp: live at ws://127.0.0.1:{} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket)\n", live_->port());
+      record::ServerOptions server_options;
+      server_options.port = *serve_port;
+      server_options.http = options.http;
+      live_ = std::make_unique<record::FoxgloveServer>(std::move(channels), server_options);
+      fmt::print("m3dp: live at ws://127.0.0.1:{} (Foxglove or Lichtblick: Open connection, Foxglove WebSocket){}\n", live_->port(),
+                 options.http ? fmt::format("; the viewer at http://127.0.0.1:{}/", live_->port()) : std::string());
       std::fflush(stdout);
     }
   }
@@ -349,8 +353,14 @@ class RunMessages final : public RunObserver {
       run.pressure_ms = stats->stage_ms[sph::Stage::pressure] + stats->stage_ms[sph::Stage::divergence];
       run.world_ms = simulation.last_world_ms();
     }
-    for (std::size_t n = 0; n < layout_.nozzles.size(); ++n)
-      run.nozzles.push_back({layout_.nozzles[n].name, poses.nozzles[n].extruding, poses.nozzles[n].volume_rate, poses.nozzles[n].pose.position});
+    for (std::size_t n = 0; n < layout_.nozzles.size(); ++n) {
+      const Vec3 wanted = simulation.scene().print_heads[n].trajectory.sample(simulation.time()).position;
+      run.nozzles.push_back({layout_.nozzles[n].name, poses.nozzles[n].extruding, poses.nozzles[n].volume_rate, poses.nozzles[n].pose.position,
+                             double((poses.nozzles[n].pose.position - wanted).norm())});
+    }
+    run.step = static_cast<std::uint64_t>(simulation.solver().state().step);
+    for (const auto& phase : simulation.solver().parameters().phases) run.material_density.push_back(phase.density);
+    run.particle_radius = simulation.solver().parameters().settings.particle_radius;
     return run;
   }
 
@@ -384,7 +394,7 @@ std::unique_ptr<RunObserver> make_run_messages(Simulation& simulation, const Run
   // Frames at the particle period; a scene without particle frames is recorded 20 times a second.
   return std::make_unique<RunMessages>(record ? options.output_directory / "run.mcap" : std::filesystem::path(), serve_port,
                                        output.particles_period > 0 ? output.particles_period : 0.05, options.live_rate,
-                                       simulation.scene().cameras);
+                                       simulation.scene().cameras, options);
 }
 
 }  // namespace m3dp::sim::outputs
