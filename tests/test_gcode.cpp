@@ -179,4 +179,11 @@ TEST(Gcode, BadLinesNameFileAndLine) {
   EXPECT_NE(error_of("G1 X10 F0\n").find("test.gcode:1: error:"), std::string::npos);
   EXPECT_NE(error_of("G1 X10 Y0\nG3 X0 Y30 I-10 J0\n").find("test.gcode:2: error: G3: start and end are not on one circle"),
             std::string::npos);
+  // A number with an exponent: strtod firmwares read 1000, the grammar X1 then E3. Refused, never guessed.
+  const std::string exponent = error_of("G1 X10\nG1 X1e3 Y2\n");
+  EXPECT_NE(exponent.find("test.gcode:2: error: 'X1e3' in 'G1 X1e3 Y2' is ambiguous: 1 with an exponent, or X1 then e3 (E is the "
+                          "extruder's axis)"),
+            std::string::npos)
+      << exponent;
+  EXPECT_NE(error_of("G1 X10E-5\n").find("test.gcode:1: error: 'X10E-5'"), std::string::npos) << error_of("G1 X10E-5\n");
 }

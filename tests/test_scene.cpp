@@ -270,6 +270,24 @@ TEST(Scene, CamerasInGazeboSyntaxAndInThePlugin) {
                   "camera noise 'gaussian_quantized' is not simulated; expected gaussian (or none)");
 }
 
+TEST(Scene, NumbersBeyondWhatAFloatHoldsAreErrorsAtTheirLine) {
+  // Checked in double then stored as float, these had become inf or 0 after the check.
+  expect_error_at(replaced(valid_scene(), "<density>1000</density>", "<density>1e308</density>"), "<density>",
+                  "<density> of 1e+308 kg/m^3 is beyond any density M3DP simulates (at most 100000 kg/m^3)");
+  expect_error_at(replaced(valid_scene(), R"(<viscosity unit="mPa*s">1</viscosity>)", "<viscosity>1e308</viscosity>"), "<viscosity>",
+                  "<viscosity> of 1e+308 Pa*s is beyond any dynamic viscosity M3DP simulates");
+  expect_error_at(replaced(valid_scene(), R"(<particle_radius unit="mm">5</particle_radius>)", "<particle_radius>1e-300</particle_radius>"),
+                  "<particle_radius>", "<particle_radius> of 1e-300 m is below the smallest length M3DP resolves (1e-07 m)");
+  expect_error_at(replaced(valid_scene(), R"(<inner_diameter unit="cm">1</inner_diameter>)", "<inner_diameter>1e30</inner_diameter>"),
+                  "<inner_diameter>", "<inner_diameter> of 1e+30 m is beyond any length M3DP simulates (at most 10000 m)");
+  expect_error_at(replaced(valid_scene(), "<max>0.1 0.1 0.2</max>", "<max>0.1 0.1 1e39</max>"), "<max>0.1 0.1 1e39",
+                  "<max> of 1e+39 m is beyond any length M3DP simulates");
+  expect_error_at(replaced(valid_scene(), "<pose>0 1 0 0 0 0</pose>", "<pose>0 1e300 0 0 0 0</pose>"), "<pose>0 1e300",
+                  "<pose> of 1e+300 m is beyond any length M3DP simulates");
+  // Zero stays a value where the field allows it.
+  EXPECT_NO_THROW(load_scene_from_string(replaced(valid_scene(), "<max>0.1 0.1 0.2</max>", "<max>0.1 0.1 0.2</max>"), "x.sdf"));
+}
+
 TEST(Scene, NegativeParticleRadius) {
   const std::string text = replaced(valid_scene(), R"(<particle_radius unit="mm">5</particle_radius>)",
                                     "<particle_radius>-0.01</particle_radius>");

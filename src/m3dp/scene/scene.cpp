@@ -99,6 +99,36 @@ bool is_kinematic_viscosity_unit(std::string_view symbol) {
 }
 
 /// Allowed range of a value, with the words to explain it.
+/// The magnitudes a quantity may have in a scene: physical bounds, well inside what the engine's
+/// float stores finite and non-zero (about 1e-38 to 3e38). A value below `smallest` (other than 0)
+/// or beyond `largest` is an error at its line: checked in double, a 1e308 density would have run as
+/// inf, a 1e-300 radius as 0.
+struct Magnitude {
+  double smallest, largest;
+};
+Magnitude magnitude(Quantity quantity) {
+  switch (quantity) {
+    case Quantity::length: return {1e-7, 1e4};            // 0.1 µm to 10 km
+    case Quantity::time: return {1e-9, 1e7};              // 1 ns to four months
+    case Quantity::speed: return {1e-9, 1e3};             // m/s
+    case Quantity::acceleration: return {1e-9, 1e5};      // m/s²
+    case Quantity::density: return {1e-3, 1e5};           // kg/m³: thin gases to past osmium
+    case Quantity::dynamic_viscosity: return {1e-9, 1e12};  // Pa·s
+    case Quantity::mass: return {1e-12, 1e7};             // kg
+    case Quantity::stress: return {1e-9, 1e12};           // Pa
+    case Quantity::stress_rate: return {1e-12, 1e9};      // Pa/s
+    case Quantity::rate: return {1e-12, 1e9};             // 1/s
+    case Quantity::consistency: return {1e-9, 1e12};      // Pa·sⁿ
+    case Quantity::surface_tension: return {1e-9, 1e4};   // N/m
+    case Quantity::stiffness: return {1e-9, 1e15};        // N/m
+    case Quantity::area: return {1e-14, 1e8};             // m²
+    case Quantity::angle: return {1e-12, 1e4};            // rad
+    case Quantity::fraction:
+    case Quantity::plain_number: return {1e-12, 1e12};
+  }
+  return {1e-12, 1e12};
+}
+
 struct Limits {
   std::optional<double> greater_than;
   std::optional<double> at_least;
@@ -281,6 +311,8 @@ class SceneReader {
     return std::nullopt;
   }
   std::optional<int> read_int(const pugi::xml_node& parent, const char* name, int minimum);
+  /// Whether `si_value` (of <name> at `element`) is a magnitude the quantity may have; reported if not.
+  bool check_magnitude(const pugi::xml_node& element, std::string_view name, double si_value, Quantity quantity);
   std::optional<double> read_number_attribute(const pugi::xml_node& element, const char* name, Quantity quantity,
                                               const Limits& limits);
   std::optional<bool> read_bool_attribute(const pugi::xml_node& element, const char* name);
@@ -493,8 +525,29 @@ std::optional<std::vector<double>> SceneReader::read_numbers(const pugi::xml_nod
   const auto factor = unit_factor(element, quantity);
   auto values = parse_numbers(element, text, count, format);
   if (!values || !factor) return std::nullopt;
-  for (double& value : *values) value *= *factor;
+  for (double& value : *values) {
+    value *= *factor;
+    if (!check_magnitude(element, element.name(), value, quantity)) return std::nullopt;
+  }
   return values;
+}
+
+bool SceneReader::check_magnitude(const pugi::xml_node& element, std::string_view name, double si_value, Quantity quantity) {
+  const Magnitude bounds = magnitude(quantity);
+  const QuantityInfo info = quantity_info(quantity);
+  const double size = std::abs(si_value);
+  const std::string unit = info.si_symbol.empty() ? "" : fmt::format(" {}", info.si_symbol);
+  if (size > bounds.largest) {
+    report(element, fmt::format("<{}> of {:g}{} is beyond any {} M3DP simulates (at most {:g}{})", name, si_value, unit,
+                                info.name, bounds.largest, unit));
+    return false;
+  }
+  if (size != 0 && size < bounds.smallest) {
+    report(element, fmt::format("<{}> of {:g}{} is below the smallest {} M3DP resolves ({:g}{}); write 0 if it is none", name,
+                                si_value, unit, info.name, bounds.smallest, unit));
+    return false;
+  }
+  return true;
 }
 
 std::optional<double> SceneReader::read_scalar(const pugi::xml_node& parent, const char* name, Quantity quantity,
@@ -517,6 +570,7 @@ std::optional<double> SceneReader::read_scalar(const pugi::xml_node& parent, con
                                 as_written));
     return std::nullopt;
   }
+  if (!check_magnitude(element, name, si_value, quantity)) return std::nullopt;
   return si_value;
 }
 
@@ -578,6 +632,7 @@ std::optional<double> SceneReader::read_number_attribute(const pugi::xml_node& e
                                 limits.describe(info.si_symbol), text));
     return std::nullopt;
   }
+  if (!check_magnitude(element, fmt::format("{} {}", element.name(), name), *value, quantity)) return std::nullopt;
   return value;
 }
 
@@ -608,6 +663,8 @@ Pose SceneReader::read_pose(const pugi::xml_node& parent) {
     const auto values = parse_numbers(element, text, 7, "x y z qx qy qz qw");
     if (!values) return Pose{};
     const auto& v = *values;
+    for (int k = 0; k < 7; ++k)
+      if (!check_magnitude(element, "pose", v[k], k < 3 ? Quantity::length : Quantity::plain_number)) return Pose{};
     const Quat orientation{Real(v[6]), Real(v[3]), Real(v[4]), Real(v[5])};  // Eigen takes w first
     if (orientation.norm() == 0) {
       report(element, "<pose> quaternion must not be zero");
@@ -623,6 +680,8 @@ Pose SceneReader::read_pose(const pugi::xml_node& parent) {
   const auto values = parse_numbers(element, text, 6, "x y z roll pitch yaw");
   if (!values) return Pose{};
   const auto& v = *values;
+  for (int k = 0; k < 6; ++k)
+    if (!check_magnitude(element, "pose", v[k], k < 3 ? Quantity::length : Quantity::angle)) return Pose{};
   const double to_radians = degrees ? kRadiansPerDegree : 1.0;
   return Pose::from_xyz_rpy(Real(v[0]), Real(v[1]), Real(v[2]), Real(v[3] * to_radians), Real(v[4] * to_radians),
                             Real(v[5] * to_radians));

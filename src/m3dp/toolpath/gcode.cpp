@@ -108,6 +108,20 @@ class Parser {
         while (word_end < code.size() && code[word_end] != ' ' && code[word_end] != '\t') ++word_end;
         fail(line_number, fmt::format("'{}{}' in '{}' is not a number", letter, code.substr(i, word_end - i), trimmed(code)));
       }
+      // "X1e3": firmwares that read numbers with strtod take 1000, G-code's grammar X1 and E3 (E is
+      // the extruder's axis). Either reading could be what was meant: refused, never guessed.
+      if (number_end < code.size() && (code[number_end] == 'e' || code[number_end] == 'E')) {
+        std::size_t digit = number_end + 1;
+        if (digit < code.size() && (code[digit] == '+' || code[digit] == '-')) ++digit;
+        if (digit < code.size() && std::isdigit(static_cast<unsigned char>(code[digit]))) {
+          std::size_t word_end = digit;
+          while (word_end < code.size() && std::isdigit(static_cast<unsigned char>(code[word_end]))) ++word_end;
+          fail(line_number, fmt::format("'{}{}' in '{}' is ambiguous: {} with an exponent, or {}{} then {} (E is the extruder's axis); "
+                                        "write the number out, or put a space before the {}",
+                                        letter, code.substr(i, word_end - i), trimmed(code), number, letter, number,
+                                        code.substr(number_end, word_end - number_end), code[number_end]));
+        }
+      }
       i = number_end;
       skip_blanks();
       if (letter == 'N' && words.command.empty()) continue;  // line number
