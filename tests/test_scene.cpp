@@ -288,6 +288,33 @@ TEST(Scene, NumbersBeyondWhatAFloatHoldsAreErrorsAtTheirLine) {
   EXPECT_NO_THROW(load_scene_from_string(replaced(valid_scene(), "<max>0.1 0.1 0.2</max>", "<max>0.1 0.1 0.2</max>"), "x.sdf"));
 }
 
+TEST(Scene, MisspelledSdfElementsAreWarnedWithTheClosestName) {
+  // Outside the plugin a typo would drop a model, a link or a collision without a word.
+  const auto expect_warning = [](const std::string& text, const std::string& message) {
+    const auto scene = load_scene_from_string(text, "x.sdf");
+    ASSERT_EQ(scene.warnings.size(), 1u) << message;
+    EXPECT_EQ(scene.warnings[0].message, message);
+    EXPECT_EQ(scene.warnings[0].location.file, "x.sdf");
+  };
+  std::string misspelled_model = replaced(valid_scene(), R"(<model name="tank">)", R"(<modle name="tank">)");
+  misspelled_model = replaced(misspelled_model, "</model>", "</modle>");
+  expect_warning(misspelled_model, "unknown element <modle> in <world>, ignored; did you mean <model>?");
+  expect_warning(replaced(valid_scene(), R"(<collision name="floor">)", R"(<colision name="x"/><collision name="floor">)"),
+                 "unknown element <colision> in <link>, ignored; did you mean <collision>?");
+  expect_warning(replaced(valid_scene(), "<static>true</static>", "<static>true</static><stattic>true</stattic>"),
+                 "unknown element <stattic> in <model>, ignored; did you mean <static>?");
+  expect_warning(replaced(valid_scene(), "<pose>0 0 -0.01 0 0 0</pose>", "<pos>0 0 -0.01 0 0 0</pos>"),
+                 "unknown element <pos> in <collision>, ignored; did you mean <pose>?");
+  expect_warning(replaced(valid_scene(), "<light name=\"sun\" type=\"directional\"/>", "<rocket/>"),
+                 "unknown element <rocket> in <world>, ignored: SDF has no such element there");
+  // A dynamic model's link is checked too.
+  expect_warning(replaced(replaced(valid_scene(), "<static>true</static>", "<static>false</static>"),
+                          R"(<collision name="ground">
+          <geometry><plane><normal>0 0 2</normal><size>2 2</size></plane></geometry>
+        </collision>)", "<inertia/>"),
+                 "unknown element <inertia> in <link>, ignored; did you mean <inertial>?");
+}
+
 TEST(Scene, NegativeParticleRadius) {
   const std::string text = replaced(valid_scene(), R"(<particle_radius unit="mm">5</particle_radius>)",
                                     "<particle_radius>-0.01</particle_radius>");

@@ -177,6 +177,33 @@ std::optional<double> parse_number(std::string_view word) {
   return value;
 }
 
+/// Levenshtein's edit distance: the fewest letters inserted, deleted or changed to turn a into b.
+std::size_t edit_distance(std::string_view a, std::string_view b) {
+  std::vector<std::size_t> row(b.size() + 1);
+  for (std::size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (std::size_t i = 1; i <= a.size(); ++i) {
+    std::size_t diagonal = row[0];
+    row[0] = i;
+    for (std::size_t j = 1; j <= b.size(); ++j) {
+      const std::size_t above = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diagonal = above;
+    }
+  }
+  return row[b.size()];
+}
+
+/// The children SDF 1.9 gives the elements M3DP reads outside its plugin: what they may hold.
+constexpr std::string_view kWorldElements[] = {"audio", "wind", "include", "gravity", "magnetic_field", "atmosphere", "gui", "physics",
+                                               "scene", "light", "frame", "model", "actor", "plugin", "road", "spherical_coordinates",
+                                               "state", "population", "joint"};
+constexpr std::string_view kModelElements[] = {"static", "self_collide", "allow_auto_disable", "include", "model", "enable_wind", "frame",
+                                               "pose", "link", "joint", "plugin", "gripper"};
+constexpr std::string_view kLinkElements[] = {"gravity", "enable_wind", "self_collide", "kinematic", "must_be_base_link", "velocity_decay",
+                                              "pose", "inertial", "collision", "visual", "sensor", "projector", "audio_sink",
+                                              "audio_source", "battery", "light", "particle_emitter", "frame"};
+constexpr std::string_view kCollisionElements[] = {"laser_retro", "max_contacts", "pose", "geometry", "surface"};
+
 std::optional<bool> parse_bool(std::string_view word) {
   if (word == "true" || word == "1") return true;
   if (word == "false" || word == "0") return false;
@@ -275,6 +302,10 @@ class SceneReader {
   // ---- structure checks ----
   void check_children(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed,
                       std::initializer_list<std::string_view> repeatable = {});
+  /// Outside the plugin, an element SDF does not have where M3DP reads is a warning (not an error:
+  /// the file may be for a newer SDF), naming the known element it is closest to: a typo such as
+  /// <modle> would otherwise delete a model without a word.
+  void warn_unknown_children(const pugi::xml_node& element, std::span<const std::string_view> known);
   void check_attributes(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed);
   pugi::xml_node find_child(const pugi::xml_node& parent, const char* name, Presence presence);
   std::optional<std::string> read_attribute(const pugi::xml_node& element, const char* name, Presence presence);
@@ -743,8 +774,27 @@ Scene SceneReader::read() {
   return std::move(scene_);
 }
 
+void SceneReader::warn_unknown_children(const pugi::xml_node& element, std::span<const std::string_view> known) {
+  for (const auto& child : element.children()) {
+    if (child.type() != pugi::node_element) continue;
+    const std::string_view name = child.name();
+    if (std::find(known.begin(), known.end(), name) != known.end()) continue;
+    std::string_view closest;
+    std::size_t best = 3;  // at most two letters off
+    for (const auto candidate : known)
+      if (const std::size_t distance = edit_distance(name, candidate); distance < best) {
+        best = distance;
+        closest = candidate;
+      }
+    scene_.warnings.push_back({where(child), closest.empty()
+                                                 ? fmt::format("unknown element <{}> in <{}>, ignored: SDF has no such element there", name, element.name())
+                                                 : fmt::format("unknown element <{}> in <{}>, ignored; did you mean <{}>?", name, element.name(), closest)});
+  }
+}
+
 void SceneReader::read_world(const pugi::xml_node& world) {
   scene_.world_name = world.attribute("name").value();
+  warn_unknown_children(world, kWorldElements);
   if (const auto gravity = read_vector(world, "gravity", Quantity::acceleration, Presence::optional)) {
     scene_.solver.gravity = *gravity;
   }
@@ -781,6 +831,7 @@ void SceneReader::read_model(const pugi::xml_node& model) {
   body.name = read_attribute(model, "name", Presence::required).value_or("");
   body.where = where(model);
   if (!body.name.empty()) check_unique_name(model, body.name, model_names_);
+  warn_unknown_children(model, kModelElements);
   if (!read_bool(model, "static").value_or(false)) {
     read_dynamic_model(model, body.name);
     return;
@@ -816,6 +867,7 @@ void SceneReader::read_dynamic_model(const pugi::xml_node& model, const std::str
     if (child.type() == pugi::node_element && (std::string_view(child.name()) == "model" || std::string_view(child.name()) == "include"))
       report(child, fmt::format("<{}> inside a dynamic model is not supported", child.name()));
   const pugi::xml_node link = links.front();
+  warn_unknown_children(link, kLinkElements);
   body.pose = read_pose(model) * read_pose(link);
   const pugi::xml_node inertial = link.child("inertial");
   if (!inertial) {
@@ -841,6 +893,7 @@ void SceneReader::read_dynamic_model(const pugi::xml_node& model, const std::str
     }
   }
   for (const auto& collision : child_elements(link, "collision")) {
+    warn_unknown_children(collision, kCollisionElements);
     const std::string collision_name = read_attribute(collision, "name", Presence::required).value_or("");
     const pugi::xml_node geometry = find_child(collision, "geometry", Presence::required);
     if (!geometry) continue;
@@ -1191,7 +1244,9 @@ void SceneReader::read_link(const pugi::xml_node& link, const Pose& model_pose, 
                             StaticBody& body) {
   const std::string link_name = read_attribute(link, "name", Presence::required).value_or("");
   const Pose link_pose = model_pose * read_pose(link);
+  warn_unknown_children(link, kLinkElements);
   for (const auto& collision : child_elements(link, "collision")) {
+    warn_unknown_children(collision, kCollisionElements);
     const std::string collision_name = read_attribute(collision, "name", Presence::required).value_or("");
     const Pose collision_pose = link_pose * read_pose(collision);
     const pugi::xml_node geometry = find_child(collision, "geometry", Presence::required);
