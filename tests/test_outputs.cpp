@@ -126,6 +126,58 @@ TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
   fs::remove_all(directory);
 }
 
+TEST(Outputs, AMeshThatCannotBeWrittenFailsTheRun) {
+  // A directory where the second mesh goes: the first is written, the second (and the final state's,
+  // which takes its name) fail, and the run says failed (exit 3 from m3dp run), not completed.
+  scene::Scene scene = meshed_tank(0.1, Real(0.04));
+  scene.meshing.format = "stl";
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("mesh_fails");
+  fs::create_directories(directory / "meshes" / "mesh_000001.stl");
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  options.wait_for_meshes = true;
+  const auto summary = sim::run_simulation(simulation, options);
+  EXPECT_EQ(summary.status, sim::RunStatus::failed);
+  EXPECT_NE(summary.error.find("mesh at t = 0.08"), std::string::npos) << summary.error;
+  EXPECT_NE(summary.error.find("mesh_000001.stl"), std::string::npos) << summary.error;
+  EXPECT_NEAR(summary.simulated_time, 0.1, 0.01);  // the simulation itself went on to the end
+  EXPECT_EQ(summary.meshes_written, 1u);           // t = 0.04 only
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  EXPECT_EQ(json["status"], "failed");
+  EXPECT_EQ(json["error"], summary.error);
+  EXPECT_NE(sim::format_summary(summary, directory).find("Run failed"), std::string::npos);
+  fs::remove_all(directory);
+}
+
+TEST(Outputs, AFrameThatCannotBeWrittenStopsTheRunAndTheOutputsStillFinish) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  setup.end_time = 0.1;
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.output.particles_period = Real(0.025);
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("frame_fails");
+  fs::create_directories(directory / "particles" / "particles_000002.vtu");
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  const auto summary = sim::run_simulation(simulation, options);
+  EXPECT_EQ(summary.status, sim::RunStatus::failed);
+  EXPECT_NE(summary.error.find("particles_000002.vtu"), std::string::npos) << summary.error;
+  EXPECT_NEAR(summary.simulated_time, 0.05, 0.005);
+  // The frames before it are listed and the summary and timing table are whole.
+  const std::string pvd = read_text(directory / "particles.pvd");
+  EXPECT_NE(pvd.find("particles_000001.vtu"), std::string::npos);
+  EXPECT_EQ(pvd.find("particles_000002.vtu"), std::string::npos);
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  EXPECT_EQ(json["status"], "failed");
+  const std::string timing = read_text(directory / "timing.csv");
+  EXPECT_EQ(static_cast<std::int64_t>(std::count(timing.begin(), timing.end(), '\n')), summary.steps + 1);
+  fs::remove_all(directory);
+}
+
 TEST(Outputs, MeshingRegionSelectsTheParticlesInside) {
   scene::Scene scene = meshed_tank(0.02, Real(1));  // only the final state is meshed
   scene.meshing.material = scene.materials.front().material.name;

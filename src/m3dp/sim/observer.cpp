@@ -2,6 +2,7 @@
 
 #include <chrono>
 #include <cmath>
+#include <exception>
 
 #include "m3dp/sim/simulation.hpp"
 
@@ -30,6 +31,9 @@ void ObserverSchedule::after_step(const Simulation& simulation, const sph::StepS
   using Clock = std::chrono::steady_clock;
   const double time = simulation.time();
   StepReport report{stats};
+  // Every observer sees the step even when one before it fails (the timing row of the step a frame
+  // failed in is still written); the first failure is thrown after them all.
+  std::exception_ptr first_failure;
   for (Entry& entry : entries_) {
     const double period = entry.observer->period();
     if (period > 0) {
@@ -37,13 +41,25 @@ void ObserverSchedule::after_step(const Simulation& simulation, const sph::StepS
       while (entry.next_time <= time + kTimeSlack) entry.next_time += period;
     }
     const auto begin = Clock::now();
-    entry.observer->observe(simulation, report);
+    try {
+      entry.observer->observe(simulation, report);
+    } catch (const std::exception&) {
+      if (!first_failure) first_failure = std::current_exception();
+    }
     if (entry.observer->is_output()) report.output_ms += std::chrono::duration<double, std::milli>(Clock::now() - begin).count();
   }
+  if (first_failure) std::rethrow_exception(first_failure);
 }
 
 void ObserverSchedule::finish(const Simulation& simulation, RunSummary& summary) {
-  for (Entry& entry : entries_) entry.observer->finish(simulation, summary);
+  // Every observer finishes even when one before it fails: the summary file, last, says it failed.
+  for (Entry& entry : entries_) {
+    try {
+      entry.observer->finish(simulation, summary);
+    } catch (const std::exception& error) {
+      summary.fail(error.what());
+    }
+  }
 }
 
 }  // namespace m3dp::sim

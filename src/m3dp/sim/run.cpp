@@ -49,7 +49,9 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
       }
       schedule.after_step(simulation, simulation.step());
     }
-  } catch (const SimulationError& error) {
+  } catch (const std::exception& error) {
+    // The state blew up (SimulationError), or an output could not be written (a full disk, a file in
+    // the way): the run stops as failed, and every output still finishes what it has.
     summary.status = RunStatus::failed;
     summary.error = error.what();
   }

@@ -45,7 +45,12 @@ enum class RunStatus { completed, interrupted, failed };
 
 struct RunSummary {
   RunStatus status = RunStatus::completed;
-  std::string error;            // what failed, if status == failed
+  std::string error;            // what failed, if status == failed (each failure, "; " between)
+  /// Marks the run failed (also an interrupted one: what it wrote is not whole) and adds what failed.
+  void fail(std::string_view what) {
+    status = RunStatus::failed;
+    error += error.empty() ? std::string(what) : "; " + std::string(what);
+  }
   double simulated_time = 0;    // s
   double end_time = 0;          // s
   std::int64_t steps = 0;

@@ -52,7 +52,8 @@ class PrintedMesh final : public RunObserver {
     summary.meshes_written = summary.meshes.size();
     summary.meshes_skipped = worker_.skipped();
     summary.meshes_inserted = inserted_count_;
-    if (!worker_.error().empty() && summary.error.empty()) summary.error = worker_.error();
+    // A mesh that could not be made or written leaves a gap in meshes/: the run did not do all it was asked.
+    if (!worker_.error().empty()) summary.fail(worker_.error());
   }
 
  private:
