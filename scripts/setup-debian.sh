@@ -25,6 +25,8 @@ packages=(
   libembree-dev libpng-dev python3-pil python3-numpy imagemagick
   # The browser viewer's tests: Debian's Chromium, headless (puppeteer-core drives it; npm ci below).
   chromium
+  # Real slicers with their printer profiles: the G-code reader's test slices with both.
+  prusa-slicer slic3r
 )
 # Kept at the candidate version: ParaView and the XML parser under its readers. Debian 12's expat
 # security update 2.5.0-1+deb12u5 made ParaView 5.11 unable to read raw appended VTK data; a machine

@@ -4,6 +4,7 @@
 
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <regex>
 #include <set>
 #include <sstream>
@@ -30,6 +31,8 @@ double slicer_total(const std::string& text, const std::string& key) {
   if (!std::regex_search(text, match, pattern)) ADD_FAILURE() << "no '" << key << "' in the slicer file";
   return std::stod(match[1]);
 }
+
+constexpr double kPiDouble = 3.14159265358979323846;
 
 GcodeProgram parse(const std::string& text, GcodeSettings settings = {}) { return parse_gcode(text, "test.gcode", settings); }
 
@@ -186,4 +189,148 @@ TEST(Gcode, BadLinesNameFileAndLine) {
             std::string::npos)
       << exponent;
   EXPECT_NE(error_of("G1 X10E-5\n").find("test.gcode:1: error: 'X10E-5'"), std::string::npos) << error_of("G1 X10E-5\n");
+}
+
+TEST(Gcode, RealPrinterProfilesLoadWithTheSlicersMaterial) {
+  // Files that PrusaSlicer and Slic3r sliced with their printer profiles (tests/e2e/
+  // slice_printer_profiles.py, run by ctest before this test): start and end G-code of real printers
+  // (firmware checks, messages, macros, tool changes), every flavour, volumetric E, 2.85 mm filament,
+  // extrusion on A. Each loads with the scene saying nothing about E, and lays the material the slicer
+  // counted (its own moves: the printers' custom start G-code, ;TYPE:Custom, is not in its total).
+  const char* directory = std::getenv("M3DP_SLICED_GCODE");
+  ASSERT_NE(directory, nullptr) << "M3DP_SLICED_GCODE is not set: run this test through ctest";
+  std::ifstream index(std::filesystem::path(directory) / "index.tsv");
+  std::string row;
+  int files = 0;
+  std::set<std::string> macros;
+  while (std::getline(index, row)) {
+    // name \t printer and options \t what it must be refused for (empty: it loads)
+    const std::size_t tab = row.find('\t'), second_tab = row.find('\t', tab + 1);
+    const std::string name = row.substr(0, tab), printer = row.substr(tab + 1, second_tab - tab - 1);
+    const std::string refusal = row.substr(second_tab + 1);
+    const auto file = std::filesystem::path(directory) / (name + ".gcode");
+    const std::string text = read_text(file);
+    SCOPED_TRACE(row);
+    ++files;
+    GcodeProgram program;
+    try {
+      program = read_gcode(file, GcodeSettings{});
+    } catch (const InputError& error) {
+      std::printf("%-16s %-80s refused: %s\n", name.c_str(), printer.c_str(), error.what());
+      EXPECT_FALSE(refusal.empty()) << error.what();
+      EXPECT_NE(std::string(error.what()).find(refusal), std::string::npos) << error.what();
+      continue;
+    }
+    EXPECT_TRUE(refusal.empty()) << "loaded, but should be refused: " << refusal;
+    // The slicer's total: "; filament used [mm] = 178.32" (PrusaSlicer), "; filament used = 64.6mm (0.5cm3)" (Slic3r).
+    std::smatch match;
+    ASSERT_TRUE(std::regex_search(text, match, std::regex(R"(; filament used(?: \[mm\])? = ([0-9.]+))")));
+    const double filament_mm = std::stod(match[1]);
+    ASSERT_TRUE(std::regex_search(text, match, std::regex(R"(; filament_diameter = ([0-9.]+))")));
+    const double diameter_mm = std::stod(match[1]);
+    const double expected = filament_mm * kPi * diameter_mm * diameter_mm / 4 * 1e-9;  // m³
+    double laid = 0;
+    for (const GcodeMove& move : program.moves)
+      if (move.feature != "Custom") laid += move.material_volume;
+    std::printf("%-16s %-80s %6.1f mm³ laid, the slicer's %6.1f (%+.2f %%), %zu warnings\n", name.c_str(), printer.c_str(), laid * 1e9, expected * 1e9, 100 * (laid / expected - 1),
+                program.warnings.size());
+    EXPECT_NEAR(laid / expected, 1.0, 0.01);
+    for (const auto& warning : program.warnings)
+      if (warning.message.find("firmware macro") != std::string::npos) macros.insert(warning.message.substr(0, warning.message.find(' ')));
+  }
+  EXPECT_GE(files, 30);
+  // Klipper printers' start G-code calls their macros (Voron's print_start, RatRig's START_PRINT).
+  EXPECT_TRUE(macros.count("PRINT_START") && macros.count("START_PRINT")) << macros.size() << " macros";
+}
+
+TEST(Gcode, FirmwareTextMacrosAndSignsAreSkippedOrReadNeverAnError) {
+  const auto program = parse(
+      "M117 Printing... 50% done; a message\nM862.3 P \"MK3S\" ; printer model check\nM115 U3.9.0\nM84 X Y E\n"
+      "PRINT_START BED=60 EXTRUDER=210\nEXCLUDE_OBJECT_START NAME=cube_id_0\nexclude_object_end NAME=cube_id_0\n"
+      "G1 X+30 Y-2 F600\nG1 X+40 E+1\nM118 E1 hello\n");
+  ASSERT_EQ(program.moves.size(), 2u);
+  EXPECT_NEAR(program.moves[1].end.x(), 0.040, 1e-7);  // "+40" is 40
+  EXPECT_NEAR(program.moves[1].extrusion, 1.0, 1e-12);
+  std::map<std::string, int> first_line;
+  for (const auto& warning : program.warnings) first_line[warning.message.substr(0, warning.message.find(' '))] = warning.location.line;
+  for (const auto& [command, line] : std::map<std::string, int>{{"M117", 1}, {"M862.3", 2}, {"M115", 3}, {"M84", 4}, {"PRINT_START", 5},
+                                                                {"EXCLUDE_OBJECT_START", 6}, {"EXCLUDE_OBJECT_END", 7}, {"M118", 10}})
+    EXPECT_EQ(first_line[command], line) << command;
+  bool macro_named = false;
+  for (const auto& warning : program.warnings)
+    macro_named |= warning.message.rfind("PRINT_START is a firmware macro", 0) == 0;
+  EXPECT_TRUE(macro_named);
+}
+
+TEST(Gcode, ArcsInEachPlane) {
+  // A half circle of radius 5 mm in each plane, from the origin: G17 XY (I J), G18 ZX (K I), G19 YZ (J K).
+  const auto xy = parse("G17\nG1 X0 Y0 Z0 F600\nG3 X10 Y0 I5 J0\n");
+  const auto zx = parse("G18\nG1 X0 Y0 Z0 F600\nG2 X10 Z0 I5 K0\n");
+  const auto yz = parse("G19\nG1 X0 Y0 Z0 F600\nG2 Y10 Z0 J5 K0\n");
+  for (const auto* program : {&xy, &zx, &yz}) {
+    double length = 0;
+    for (const auto& move : program->moves) length += (move.end - move.start).norm();
+    EXPECT_NEAR(length * 1e3, kPi * 5, 0.01);
+  }
+  // Counter-clockwise seen from +Z (G3) from (0,0) to (10,0) around (5,0) passes y = −5; clockwise
+  // seen from +Y (G2 in ZX: +X turns to +Z) passes z = −5; clockwise seen from +X (G2 in YZ: +Y
+  // turns to −Z) passes z = +5.
+  auto extreme = [](const GcodeProgram& program, int axis) {
+    double lowest = 0, highest = 0;
+    for (const auto& move : program.moves) {
+      lowest = std::min<double>(lowest, move.end[axis]);
+      highest = std::max<double>(highest, move.end[axis]);
+    }
+    return std::abs(lowest) > highest ? lowest : highest;
+  };
+  EXPECT_NEAR(extreme(xy, 1) * 1e3, -5, 1e-3);
+  EXPECT_NEAR(extreme(zx, 2) * 1e3, -5, 1e-3);
+  EXPECT_NEAR(extreme(yz, 2) * 1e3, 5, 1e-3);
+  EXPECT_NE(error_of("G18\nG2 X10 J5\n").find("G2 needs a centre (K and I) or a radius (R)"), std::string::npos);
+}
+
+TEST(Gcode, TheSlicersCountOfEIsFollowedOrTheContradictionRefused) {
+  const std::string moves = "G1 X0 Y0 F600\nG1 X10 E2\n";
+  const double filament_mm3 = 2 * kPiDouble * 1.75 * 1.75 / 4;
+  // Volumetric E in the slicer's settings, the scene silent: E is mm³.
+  EXPECT_NEAR(parse(moves + "; use_volumetric_e = 1\n").material_volume * 1e9, 2.0, 1e-9);
+  EXPECT_NEAR(parse(";FLAVOR:UltiGCode\n" + moves).material_volume * 1e9, 2.0, 1e-9);  // Cura's UltiGCode
+  EXPECT_NEAR(parse(moves + "; use_volumetric_e = 0\n").material_volume * 1e9, filament_mm3, 1e-6);
+  // The file's filament diameter where the scene gives none.
+  EXPECT_NEAR(parse(moves + "; filament_diameter = 2.85\n").material_volume * 1e9, 2 * kPiDouble * 2.85 * 2.85 / 4, 1e-6);
+  // The scene and the file disagree: refused at the file's line, with the ratio.
+  GcodeSettings filament;
+  filament.volumetric_extrusion = false;
+  auto error_with = [](const std::string& text, const GcodeSettings& settings) {
+    try {
+      (void)parse(text, settings);
+    } catch (const InputError& error) {
+      return std::string(error.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error_with(moves + "; use_volumetric_e = 1\n", filament)
+                .find("test.gcode:3: error: the slicer wrote E as mm³ of material (volumetric E) but the scene says mm of filament"),
+            std::string::npos);
+  GcodeSettings thin;
+  thin.filament_diameter = Real(1.75e-3);
+  const std::string diameter_error = error_with(moves + "; filament_diameter = 2.85\n", thin);
+  EXPECT_NE(diameter_error.find("test.gcode:3: error: the slicer counted E in mm of 2.85 mm filament but the scene says 1.75 mm: "
+                                "the material would be 0.377 times"),
+            std::string::npos)
+      << diameter_error;
+  // Extrusion on A: followed where the slicer says so (mach3 and machinekit flavours), refused where not.
+  EXPECT_NEAR(parse("G1 X0 Y0 F600\nG1 X10 A2\n; gcode_flavor = mach3\n").material_volume * 1e9, filament_mm3, 1e-6);
+  EXPECT_NE(error_of("G1 X0 Y0 F600\nG1 X10 A2\n").find("test.gcode:2: error: G1 moves the A axis, which this reader does not follow"),
+            std::string::npos);
+  EXPECT_NE(error_of("G1 X10 E1\n; gcode_flavor = no-extrusion\n").find("test.gcode:2: error: the slicer wrote this file without extrusion"),
+            std::string::npos);
+}
+
+TEST(Gcode, ARetractionIsPushedBackBeforeMaterialAndAPrimeComesOutWithTheNextMove) {
+  // Retract 1, restart with 1.05 (0.05 extra), extrude 2: 2.05 laid; a wipe's retraction on a move lays nothing.
+  const auto program = parse("M83\nG1 X0 F600\nG1 E-1\nG1 E1.05\nG1 X10 E2\nG1 X12 E-0.5\nG1 E0.5\nG1 X20 E1\n");
+  const double per_mm = kPiDouble * 1.75 * 1.75 / 4 * 1e-9;
+  EXPECT_NEAR(program.material_volume / per_mm, 3.05, 1e-6);
+  EXPECT_NEAR(program.net_extrusion, 3.05, 1e-9);
 }

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <map>
 #include <optional>
+#include <utility>
 
 #include "m3dp/core/text.hpp"
 
@@ -34,12 +35,16 @@ class Parser {
   }
 
   GcodeProgram parse(std::string_view text) {
+    read_slicer_settings(text);
     for_each_line(text, [this](std::string_view line, int line_number) { parse_line(line, line_number); });
-    for (const auto& [command, skipped] : skipped_)
-      program_.warnings.push_back(Diagnostic{SourceLocation{file_.string(), skipped.first_line},
-                                             fmt::format("{} is not simulated (only moves, arcs, dwells and modes are); "
-                                                         "skipped ({} time{})",
-                                                         command, skipped.count, skipped.count == 1 ? "" : "s")});
+    for (const auto& [command, skipped] : skipped_) {
+      const bool macro = command.size() > 1 && !std::isdigit(static_cast<unsigned char>(command[1]));
+      program_.warnings.push_back(Diagnostic{
+          SourceLocation{file_.string(), skipped.first_line},
+          fmt::format("{} {} not simulated (only moves, arcs, dwells and modes are); skipped ({} time{})",
+                      command, macro ? "is a firmware macro (Klipper, RepRapFirmware), " : "is", skipped.count,
+                      skipped.count == 1 ? "" : "s")});
+    }
     std::sort(program_.warnings.begin(), program_.warnings.end(),
               [](const Diagnostic& a, const Diagnostic& b) { return a.location.line < b.location.line; });
     program_.layers = layer_ + 1;
@@ -49,6 +54,71 @@ class Parser {
  private:
   [[noreturn]] void fail(int line, const std::string& message) const {
     throw InputError(SourceLocation{file_.string(), line}, message);
+  }
+
+  /// The slicer's own record of how it counted E, read before any move: PrusaSlicer and Slic3r end
+  /// the file with their settings ("; use_volumetric_e = 1", "; filament_diameter = 2.85",
+  /// "; extrusion_axis = A"), Cura starts it with ";FLAVOR:UltiGCode" (E in mm³). The file is
+  /// followed where the scene says nothing; where the scene says otherwise it is refused, since one
+  /// of the two is wrong and the material would be off by their ratio.
+  void read_slicer_settings(std::string_view text) {
+    std::optional<bool> file_volumetric;
+    std::optional<double> file_diameter;
+    int volumetric_line = 0, diameter_line = 0, flavor_line = 0;
+    std::optional<char> file_axis;
+    std::string flavor;
+    for_each_line(text, [&](std::string_view line, int line_number) {
+      if (line.empty() || line.front() != ';') return;
+      line.remove_prefix(1);
+      while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.remove_suffix(1);
+      while (!line.empty() && line.front() == ' ') line.remove_prefix(1);
+      if (line == "FLAVOR:UltiGCode") {
+        file_volumetric = true;
+        volumetric_line = line_number;
+        return;
+      }
+      const std::size_t equals = line.find(" = ");
+      if (equals == std::string_view::npos) return;
+      const std::string_view key = line.substr(0, equals), value = line.substr(equals + 3);
+      if (key == "use_volumetric_e") {
+        file_volumetric = value == "1";
+        volumetric_line = line_number;
+      } else if (key == "filament_diameter") {
+        double diameter = 0;  // mm; the first extruder's ("1.75,1.75" for two)
+        const std::string_view first = value.substr(0, value.find(','));
+        const auto [end, error] = std::from_chars(first.data(), first.data() + first.size(), diameter);
+        if (error == std::errc() && diameter > 0 && std::isfinite(diameter)) {
+          file_diameter = diameter;
+          diameter_line = line_number;
+        }
+      } else if (key == "extrusion_axis" && value.size() == 1 && std::isalpha(static_cast<unsigned char>(value[0]))) {
+        file_axis = static_cast<char>(std::toupper(static_cast<unsigned char>(value[0])));
+      } else if (key == "gcode_flavor") {
+        flavor = std::string(value);
+        flavor_line = line_number;
+      }
+    });
+    // The slicers put mach3's and machinekit's extrusion on A whatever extrusion_axis says.
+    extrusion_axis_ = flavor == "mach3" || flavor == "machinekit" ? 'A' : file_axis.value_or('E');
+    if (flavor == "no-extrusion")
+      fail(flavor_line, "the slicer wrote this file without extrusion (gcode_flavor = no-extrusion): it would print nothing; "
+                        "slice it with the flavour of an extruding printer");
+    volumetric_ = settings_.volumetric_extrusion.value_or(file_volumetric.value_or(false));
+    if (settings_.volumetric_extrusion && file_volumetric && *settings_.volumetric_extrusion != *file_volumetric)
+      fail(volumetric_line,
+           fmt::format("the slicer wrote E as {} but the scene says {}: one of the two is wrong and the material would be off by "
+                       "the filament's cross-section; remove <volumetric_extrusion> from the scene to follow the file",
+                       *file_volumetric ? "mm³ of material (volumetric E)" : "mm of filament",
+                       *settings_.volumetric_extrusion ? "volumetric E" : "mm of filament"));
+    // The scene's diameter to 6 digits: a float's 1.75e-3 m is 1.7500000540 mm.
+    filament_diameter_mm_ = settings_.filament_diameter ? std::round(double(*settings_.filament_diameter) * 1e9) / 1e6
+                                                        : file_diameter.value_or(1.75);
+    if (!volumetric_ && settings_.filament_diameter && file_diameter &&
+        std::abs(*file_diameter / filament_diameter_mm_ - 1) > 1e-3)
+      fail(diameter_line,
+           fmt::format("the slicer counted E in mm of {} mm filament but the scene says {} mm: the material would be {:.3g} times "
+                       "what the slicer meant; remove <filament_diameter> from the scene to follow the file, or slice for {} mm",
+                       *file_diameter, filament_diameter_mm_, std::pow(filament_diameter_mm_ / *file_diameter, 2), filament_diameter_mm_));
   }
 
   void read_comment(std::string_view comment) {
@@ -81,6 +151,18 @@ class Parser {
       while (i < code.size() && (code[i] == ' ' || code[i] == '\t')) ++i;
     };
     skip_blanks();
+    // A firmware macro (Klipper's PRINT_START BED=60, EXCLUDE_OBJECT_START NAME=…): a name, not a
+    // letter and a number. It may do anything on the printer; here it is skipped with a warning.
+    if (i + 1 < code.size() && std::isalpha(static_cast<unsigned char>(code[i])) &&
+        (std::isalpha(static_cast<unsigned char>(code[i + 1])) || code[i + 1] == '_')) {
+      std::size_t name_end = i;
+      while (name_end < code.size() && code[name_end] != ' ' && code[name_end] != '\t') ++name_end;
+      std::string name = code.substr(i, name_end - i);
+      for (char& c : name) c = static_cast<char>(std::toupper(static_cast<unsigned char>(c)));
+      auto& skipped = skipped_[name];
+      if (skipped.count++ == 0) skipped.first_line = line_number;
+      return;
+    }
     while (i < code.size()) {
       const char letter = static_cast<char>(std::toupper(static_cast<unsigned char>(code[i])));
       if (letter < 'A' || letter > 'Z')
@@ -92,8 +174,10 @@ class Parser {
                                           code[number_end] == '-' || code[number_end] == '+'))
         ++number_end;
       const std::string number = code.substr(i, number_end - i);
+      // "X+30": a sign from_chars does not take (it takes '-' only).
+      const std::size_t digits = !number.empty() && number[0] == '+' ? 1 : 0;
       double value = 0;
-      const auto [end, error] = std::from_chars(number.data(), number.data() + number.size(), value);
+      const auto [end, error] = std::from_chars(number.data() + digits, number.data() + number.size(), value);
       if (number.empty() || error != std::errc() || end != number.data() + number.size()) {
         // Parameterless words (e.g. "G28 X" = home X) carry no number: allowed only after a command,
         // and only as a whole word.
@@ -127,6 +211,14 @@ class Parser {
       if (letter == 'N' && words.command.empty()) continue;  // line number
       if ((letter == 'G' || letter == 'M' || letter == 'T') && words.command.empty()) {
         words.command = fmt::format("{}{}", letter, number);
+        // A command that does not move the nozzle or change how moves are read is skipped whole:
+        // its parameters may be free text (M117 Printing…, M862.3 P "MK3S", M115 U3.12) or axis
+        // letters alone (M84 X Y E).
+        if (!is_read(words.command)) {
+          auto& skipped = skipped_[words.command];
+          if (skipped.count++ == 0) skipped.first_line = line_number;
+          return;
+        }
         continue;
       }
       if (words.command.empty())
@@ -148,8 +240,17 @@ class Parser {
     return value.value_or(0);
   }
 
+  /// The commands this reader follows; every other one is skipped with a warning.
+  static bool is_read(std::string_view command) {
+    static constexpr std::array<std::string_view, 20> kRead{"G0",  "G1",  "G00", "G01", "G2",  "G3",  "G02",
+                                                             "G03", "G4",  "G04", "G90", "G91", "M82", "M83",
+                                                             "G20", "G21", "G92", "G17", "G18", "G19"};
+    return std::find(kRead.begin(), kRead.end(), command) != kRead.end();
+  }
+
   void execute(const Words& words, int line_number) {
     const std::string& command = words.command;
+    if (command == "G17" || command == "G18" || command == "G19") { plane_ = command[2] - '7'; return; }
     if (command == "G0" || command == "G1" || command == "G00" || command == "G01") return linear_move(words, line_number);
     if (command == "G2" || command == "G3" || command == "G02" || command == "G03") return arc_move(words, line_number);
     if (command == "G4" || command == "G04") return dwell(words, line_number);
@@ -162,12 +263,24 @@ class Parser {
     if (command == "G92") {
       for (int axis = 0; axis < 3; ++axis)
         if (words["XYZ"[axis]]) position_[axis] = number(words, "XYZ"[axis], line_number) * unit_to_mm_;
-      if (words['E']) e_ = number(words, 'E', line_number) * unit_to_mm_;
-      if (!words['X'] && !words['Y'] && !words['Z'] && !words['E']) { position_ = {0, 0, 0}; e_ = 0; }
+      if (words[extrusion_axis_]) e_ = number(words, extrusion_axis_, line_number) * unit_to_mm_;
+      if (!words['X'] && !words['Y'] && !words['Z'] && !words[extrusion_axis_]) { position_ = {0, 0, 0}; e_ = 0; }
       return;
     }
-    auto& skipped = skipped_[command];
-    if (skipped.count++ == 0) skipped.first_line = line_number;
+  }
+
+  /// Axes a move may name that this reader does not follow: rotary A B C, secondary U V W, and E
+  /// where the slicer put the extrusion on another axis. Ignoring one would print the wrong thing.
+  void check_axes(const Words& words, int line_number) const {
+    for (const char axis : std::string_view("ABCUVWE")) {
+      if (axis == extrusion_axis_ || !words[axis]) continue;
+      if (axis == 'E')
+        fail(line_number, fmt::format("{} moves E, but the file's slicer settings put the extrusion on {} (extrusion_axis = {})",
+                                      words.command, extrusion_axis_, extrusion_axis_));
+      fail(line_number, fmt::format("{} moves the {} axis, which this reader does not follow; if the file extrudes on {} (Slic3r's "
+                                    "mach3 or machinekit flavour), it needs its slicer settings at the end (; extrusion_axis = {})",
+                                    words.command, axis, axis, axis));
+    }
   }
 
   /// Target of a move in mm (G-code frame) and its E, from the words and the modes.
@@ -181,8 +294,9 @@ class Parser {
     return target;
   }
   double e_target(const Words& words, int line_number) const {
-    if (!words['E']) return e_;
-    const double value = number(words, 'E', line_number) * unit_to_mm_;
+    check_axes(words, line_number);
+    if (!words[extrusion_axis_]) return e_;
+    const double value = number(words, extrusion_axis_, line_number) * unit_to_mm_;
     return absolute_e_ ? value : e_ + value;
   }
   void update_feed_rate(const Words& words, int line_number) {
@@ -201,10 +315,23 @@ class Parser {
 
   double volume_of(double extrusion_mm) const {
     if (extrusion_mm <= 0) return 0;
-    const double mm3 = settings_.volumetric_extrusion
-                           ? extrusion_mm
-                           : extrusion_mm * kPiDouble * std::pow(settings_.filament_diameter * 1e3, 2) / 4;
+    const double mm3 = volumetric_ ? extrusion_mm : extrusion_mm * kPiDouble * filament_diameter_mm_ * filament_diameter_mm_ / 4;
     return mm3 * 1e-9 * std::pow(static_cast<double>(settings_.geometry_scale), 3);  // m³
+  }
+
+  /// E units of material a move lays out of its `extrusion`: retracted filament is pushed back
+  /// first; what an E-only move (`moving` false) pushes beyond that (a restart's extra length, a
+  /// prime) comes out with the next extruding move, where the slicers count it too.
+  double laid_by(double extrusion, bool moving) {
+    if (extrusion < 0) {
+      retracted_ -= extrusion;
+      return 0;
+    }
+    const double refill = std::min(extrusion, retracted_);
+    retracted_ -= refill;
+    primed_ += extrusion - refill;
+    if (!moving || primed_ == 0) return 0;
+    return std::exchange(primed_, 0.0);
   }
 
   /// Adds one straight piece from position_ to `target` with `extrusion` E units.
@@ -222,7 +349,7 @@ class Parser {
     const double travel_mm = length_mm > 0 ? length_mm : std::abs(extrusion);
     move.duration = travel_mm / feed_rate_ * 60;
     move.dwell = length_mm == 0;
-    move.material_volume = length_mm > 0 ? volume_of(extrusion) : 0;
+    move.material_volume = volume_of(laid_by(extrusion, length_mm > 0));
     program_.net_extrusion += extrusion;
     program_.material_volume += move.material_volume;
     program_.duration += move.duration;
@@ -243,41 +370,49 @@ class Parser {
     const bool clockwise = words.command == "G2" || words.command == "G02";
     const auto target = target_of(words, line_number);
     const double e_target_value = e_target(words, line_number);
-    const double sx = position_[0], sy = position_[1];
-    double cx = 0, cy = 0;
-    if (words['I'] || words['J']) {
-      cx = sx + number(words, 'I', line_number) * unit_to_mm_;
-      cy = sy + number(words, 'J', line_number) * unit_to_mm_;
+    // The arc's plane (G17 XY, G18 ZX, G19 YZ): its two axes in the order that makes the third the
+    // normal (right-handed), the centre's offset letters, and the axis moved linearly (a helix).
+    static constexpr std::array<std::array<int, 3>, 3> kPlaneAxes{{{0, 1, 2}, {2, 0, 1}, {1, 2, 0}}};
+    static constexpr std::array<std::array<char, 2>, 3> kOffsetLetters{{{'I', 'J'}, {'K', 'I'}, {'J', 'K'}}};
+    const auto [u, v, normal] = kPlaneAxes[plane_];
+    const auto [u_letter, v_letter] = kOffsetLetters[plane_];
+    const double su = position_[u], sv = position_[v];
+    double cu = 0, cv = 0;
+    if (words[u_letter] || words[v_letter]) {
+      cu = su + number(words, u_letter, line_number) * unit_to_mm_;
+      cv = sv + number(words, v_letter, line_number) * unit_to_mm_;
     } else if (words['R']) {
       // Centre from the radius: on the chord's bisector; R < 0 picks the larger arc.
       const double radius = number(words, 'R', line_number) * unit_to_mm_;
-      const double dx = target[0] - sx, dy = target[1] - sy, chord = std::hypot(dx, dy);
+      const double du = target[u] - su, dv = target[v] - sv, chord = std::hypot(du, dv);
       if (chord == 0 || std::abs(radius) < chord / 2)
         fail(line_number, fmt::format("{} R{}: the radius is shorter than half the chord ({} mm)", words.command, radius, chord / 2));
       const double offset = std::sqrt(radius * radius - chord * chord / 4) * ((clockwise == (radius > 0)) ? -1 : 1);
-      cx = sx + dx / 2 - offset * dy / chord;
-      cy = sy + dy / 2 + offset * dx / chord;
+      cu = su + du / 2 - offset * dv / chord;
+      cv = sv + dv / 2 + offset * du / chord;
     } else {
-      fail(line_number, fmt::format("{} needs a centre (I and J) or a radius (R)", words.command));
+      fail(line_number, fmt::format("{} needs a centre ({} and {}) or a radius (R)", words.command, u_letter, v_letter));
     }
-    const double radius = std::hypot(sx - cx, sy - cy);
-    const double end_radius = std::hypot(target[0] - cx, target[1] - cy);
+    const double radius = std::hypot(su - cu, sv - cv);
+    const double end_radius = std::hypot(target[u] - cu, target[v] - cv);
     if (radius == 0 || std::abs(end_radius - radius) > 0.01 * radius + 0.02)
       fail(line_number, fmt::format("{}: start and end are not on one circle around ({}, {}) (radii {} and {} mm)", words.command,
-                                    cx, cy, radius, end_radius));
-    const double start_angle = std::atan2(sy - cy, sx - cx);
-    double sweep = std::atan2(target[1] - cy, target[0] - cx) - start_angle;
+                                    cu, cv, radius, end_radius));
+    const double start_angle = std::atan2(sv - cv, su - cu);
+    double sweep = std::atan2(target[v] - cv, target[u] - cu) - start_angle;
     if (clockwise && sweep >= 0) sweep -= 2 * kPiDouble;
     if (!clockwise && sweep <= 0) sweep += 2 * kPiDouble;
     const double arc_mm = std::abs(sweep) * radius;
     const int pieces = std::max(
         1, static_cast<int>(std::ceil(arc_mm * settings_.length_scale * settings_.geometry_scale / settings_.arc_segment_length)));
-    const double start_z = position_[2], total_e = e_target_value - e_;
+    const double start_normal = position_[normal], total_e = e_target_value - e_;
     for (int k = 1; k <= pieces; ++k) {
       const double fraction = double(k) / pieces;
       const double angle = start_angle + sweep * fraction;
-      std::array<double, 3> point{cx + radius * std::cos(angle), cy + radius * std::sin(angle),
-                                  start_z + (target[2] - start_z) * fraction};
+      std::array<double, 3> point{};
+      point[u] = cu + radius * std::cos(angle);
+      point[v] = cv + radius * std::sin(angle);
+      point[normal] = start_normal + (target[normal] - start_normal) * fraction;
       if (k == pieces) point = target;
       add_piece(point, total_e / pieces, line_number);
     }
@@ -313,6 +448,11 @@ class Parser {
   double feed_rate_;                          // G-code mm/min
   double unit_to_mm_ = 1;
   bool absolute_xyz_ = true, absolute_e_ = true;
+  int plane_ = 0;                    // arcs in 0: XY (G17), 1: ZX (G18), 2: YZ (G19)
+  double retracted_ = 0, primed_ = 0;  // E units pulled back, and pushed out beyond that, not yet laid
+  char extrusion_axis_ = 'E';        // 'A' for Slic3r's mach3 and machinekit flavours
+  bool volumetric_ = false;          // E in mm³ (from the scene, else the file)
+  double filament_diameter_mm_ = 1.75;
   int layer_ = -1;
   std::string feature_;
   std::map<std::string, Skipped> skipped_;
@@ -340,7 +480,8 @@ std::vector<PathSegment> GcodeProgram::path_segments() const {
 }
 
 GcodeProgram parse_gcode(std::string_view text, const fs::path& file, const GcodeSettings& settings) {
-  if (!(settings.length_scale > 0) || !(settings.filament_diameter > 0) || !(settings.default_feed_rate > 0) ||
+  if (!(settings.length_scale > 0) || (settings.filament_diameter && !(*settings.filament_diameter > 0)) ||
+      !(settings.default_feed_rate > 0) ||
       !(settings.arc_segment_length > 0) || !(settings.geometry_scale > 0))
     throw Error("G-code settings: length_scale, geometry_scale, filament_diameter, default_feed_rate and arc_segment_length "
                 "must be > 0");

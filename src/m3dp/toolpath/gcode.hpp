@@ -1,11 +1,12 @@
 #pragma once
 // G-code → timed nozzle moves with the material they lay down. Reads what slicers write
-// (PrusaSlicer/Slic3r, Cura): G0/G1 with X Y Z E F, G2/G3 arcs (I J or R, XY plane, helical Z),
+// (PrusaSlicer/Slic3r, Cura): G0/G1 with X Y Z E F, G2/G3 arcs (centre offsets or R, helical),
 // G90/G91, M82/M83, G92, G4 dwell, G20/G21 units, ';' and '(…)' comments, N line numbers and '*'
 // checksums, and the slicers' layer (;LAYER_CHANGE, ;LAYER:n) and feature (;TYPE:…) comments.
 // Other commands (temperatures, fans, homing, …) do not move the nozzle: they are skipped with a
 // warning naming file:line. A line that cannot be read is an InputError naming file:line.
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -17,8 +18,11 @@
 namespace m3dp::toolpath {
 
 struct GcodeSettings {
-  Real filament_diameter = Real(1.75e-3);  // m; in filament mode E counts millimetres of this filament
-  bool volumetric_extrusion = false;       // true: E counts mm³ of material (slicers' "volumetric E")
+  // How E counts material. Unset: as the slicer's settings in the file say (PrusaSlicer's and Slic3r's
+  // "; filament_diameter = …", "; use_volumetric_e = …", Cura's ";FLAVOR:UltiGCode"), else 1.75 mm
+  // filament. Set and contradicted by the file: an InputError, since one of them is wrong.
+  std::optional<Real> filament_diameter;    // m; in filament mode E counts millimetres of this filament
+  std::optional<bool> volumetric_extrusion; // true: E counts mm³ of material (slicers' "volumetric E")
   Pose placement;                          // the G-code frame (scaled to m) → world: where the build plate is
   Real length_scale = Real(1e-3);          // G-code millimetres → m (G20 switches to inches)
   Real geometry_scale = 1;                 // enlarges the part: lengths and speeds × s, volumes × s³
