@@ -180,6 +180,10 @@ TEST(Gcode, BadLinesNameFileAndLine) {
   EXPECT_NE(error_of("G1 X10\n\nX5 Y5\n").find("test.gcode:3: error: 'X5 Y5' has parameters but no G or M command"),
             std::string::npos);
   EXPECT_NE(error_of("G1 X10 F0\n").find("test.gcode:1: error:"), std::string::npos);
+  // A centre a kilometre off: ~10⁷ lines, refused before they are made.
+  EXPECT_NE(error_of("G1 X0 Y0\nG2 X0 Y0 I1000000 J0\n").find("test.gcode:2: error: G2: an arc of 6.283e+06 mm (radius 1e+06 mm) would be"),
+            std::string::npos)
+      << error_of("G1 X0 Y0\nG2 X0 Y0 I1000000 J0\n");
   EXPECT_NE(error_of("G1 X10 Y0\nG3 X0 Y30 I-10 J0\n").find("test.gcode:2: error: G3: start and end are not on one circle"),
             std::string::npos);
   // A number with an exponent: strtod firmwares read 1000, the grammar X1 then E3. Refused, never guessed.

@@ -288,6 +288,32 @@ TEST(Scene, NumbersBeyondWhatAFloatHoldsAreErrorsAtTheirLine) {
   EXPECT_NO_THROW(load_scene_from_string(replaced(valid_scene(), "<max>0.1 0.1 0.2</max>", "<max>0.1 0.1 0.2</max>"), "x.sdf"));
 }
 
+TEST(Scene, SizesAreEstimatedBeforeAnythingIsAllocated) {
+  // A micrometre radius in a 10 cm block: ~10¹⁴ particles, refused at the block's line with the estimate.
+  const std::string tiny = replaced(valid_scene(), "<particle_radius unit=\"mm\">5</particle_radius>",
+                                    "<particle_radius>1e-6</particle_radius>");
+  const std::string tiny_error = load_error(tiny).what();
+  EXPECT_CONTAINS(tiny_error, location_of(tiny, "<fluid_block name=\"column\"") +
+                                  " error: the scene would hold about 2.53e+14 particles at a particle radius of 1e-06 m, 2.5e+14 of them "
+                                  "from <fluid_block name=\"column\"> (0.002 m³); at most ");
+  EXPECT_CONTAINS(tiny_error, "GB of memory at about 2048 bytes a particle): use a larger <particle_radius>");
+  // A kilometre nozzle: the print head's extrusion is the largest part.
+  const std::string nozzle = replaced(valid_scene(), "<inner_diameter unit=\"cm\">1</inner_diameter>",
+                                      "<inner_diameter>1000</inner_diameter>");
+  EXPECT_CONTAINS(load_error(nozzle).what(), location_of(nozzle, "<print_head name=\"head\"") + " error: the scene would hold about");
+  // The limit is a setting: this scene's 1,600 fluid and ~10⁵ extruded particles are more than 1,000.
+  const std::string limited = replaced(valid_scene(), "<end_time>2</end_time>", "<end_time>2</end_time><max_particles>1000</max_particles>");
+  EXPECT_CONTAINS(load_error(limited).what(), "at most 1e+03 fit (<max_particles>)");
+  EXPECT_NO_THROW(load_scene_from_string(replaced(valid_scene(), "<end_time>2</end_time>",
+                                                  "<end_time>2</end_time><max_particles>1e7</max_particles>"),
+                                         "ok.sdf"));
+  // A billion-layer wall is refused at <layers> before its path is made.
+  const std::string wall = replaced(valid_scene(), "<line><start>0 0 0.1</start><end>0.1 0 0.1</end></line>",
+                                    "<wall><corner>0 0 0</corner><size>0.1 0.1</size><layers>2000000000</layers>"
+                                    "<layer_height unit=\"mm\">1</layer_height></wall>");
+  EXPECT_CONTAINS(load_error(wall).what(), location_of(wall, "<layers>") + " error: a wall of 2000000000 layers is a path of 1e+10 points");
+}
+
 TEST(Scene, MisspelledSdfElementsAreWarnedWithTheClosestName) {
   // Outside the plugin a typo would drop a model, a link or a collision without a word.
   const auto expect_warning = [](const std::string& text, const std::string& message) {
@@ -456,6 +482,45 @@ TEST(Scene, BrokenUrdfIsReportedAtItsOwnLine) {
   const InputError error = load_error(text);
   std::filesystem::remove_all(folder);
   EXPECT_CONTAINS(error.what(), (folder / "broken.urdf").string() + ":4: error: the URDF is not well-formed XML");
+}
+
+TEST(Scene, WhatDartsUrdfLoaderWouldRefuseOrDropIsAnErrorAtTheUrdfsLine) {
+  // urdfdom's own messages name neither file nor line, and a missing mesh would only drop a shape.
+  const auto folder = std::filesystem::temp_directory_path() / ("m3dp_bad_urdf_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(folder);
+  std::ofstream(folder / "bad.urdf") << R"(<?xml version="1.0"?>
+<robot name="bad">
+  <link name="base">
+    <collision><geometry><mesh filename="meshes/missing.stl"/></geometry></collision>
+  </link>
+  <link name="arm">
+    <inertial><mass value="abc"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial>
+    <visual><geometry><box size="0.1 0 0.1"/></geometry></visual>
+  </link>
+  <joint name="j1" type="revolut">
+    <parent link="base"/><child link="arms"/>
+    <origin xyz="0 0 1e400"/>
+  </joint>
+  <joint name="j2" type="revolute">
+    <parent link="base"/><child link="base"/>
+  </joint>
+</robot>
+)";
+  const std::string text = robot_scene("elbow_joint", "tool0", (folder / "bad.urdf").string());
+  const std::string errors = load_error(text).what();
+  std::filesystem::remove_all(folder);
+  const std::string file = (folder / "bad.urdf").string();
+  for (const std::string expected :
+       {file + ":4: error: <mesh filename=\"meshes/missing.stl\">: not found (looked for " + (folder / "meshes/missing.stl").string() +
+            "); the collision shape would be missing",
+        file + ":7: error: <mass value=\"abc\">: 'abc' is not a finite number",
+        file + ":8: error: <box size=\"0.1 0 0.1\">: must be > 0",
+        file + ":10: error: <joint name=\"j1\" type=\"revolut\">: expected type revolute, continuous, prismatic, fixed, floating or planar",
+        file + ":11: error: joint 'j1': no <link name=\"arms\"> in the robot",
+        file + ":12: error: <origin xyz=\"0 0 1e400\">: '1e400' is not a finite number",
+        file + ":14: error: revolute joint 'j2' needs a <limit lower upper effort velocity/>",
+        file + ":3: error: link 'base' is its own ancestor: the joints form a loop"})
+    EXPECT_CONTAINS(errors, expected);
 }
 
 TEST(Scene, UrdfColoursAreKeptForCameras) {

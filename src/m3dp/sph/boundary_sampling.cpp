@@ -177,6 +177,32 @@ void remove_close_points(SurfaceSamples& samples, Real min_distance) {
   samples.normals.resize(kept);
 }
 
+double shape_surface_area(const Shape& shape) {
+  constexpr double pi = 3.14159265358979323846;
+  return std::visit(
+      [&](const auto& concrete) -> double {
+        using T = std::decay_t<decltype(concrete)>;
+        if constexpr (std::is_same_v<T, BoxShape>) {
+          const double x = concrete.size.x(), y = concrete.size.y(), z = concrete.size.z();
+          return 2 * (x * y + y * z + z * x);
+        } else if constexpr (std::is_same_v<T, SphereShape>) {
+          return 4 * pi * double(concrete.radius) * concrete.radius;
+        } else if constexpr (std::is_same_v<T, CylinderShape>) {
+          return 2 * pi * double(concrete.radius) * (concrete.radius + concrete.length);
+        } else if constexpr (std::is_same_v<T, PlaneShape>) {
+          return double(concrete.size_x) * concrete.size_y;
+        } else {
+          double area = 0;
+          for (const auto& t : concrete.mesh.triangles)
+            area += 0.5 * (concrete.mesh.vertices[t[1]] - concrete.mesh.vertices[t[0]]).template cast<double>()
+                              .cross((concrete.mesh.vertices[t[2]] - concrete.mesh.vertices[t[0]]).template cast<double>())
+                              .norm();
+          return area;
+        }
+      },
+      shape);
+}
+
 std::vector<Vec3> lattice_in_box(const Aabb& box, Real spacing) {
   std::vector<Vec3> points;
   const Vec3 size = box.size();

@@ -24,6 +24,8 @@ struct SurfaceSamples {
 };
 
 SurfaceSamples sample_shape_surface(const Shape& shape, Real spacing, Real offset = 0);
+/// The shape's surface area (m², in double: a scene's sizes are checked before anything is sampled).
+double shape_surface_area(const Shape& shape);
 SurfaceSamples sample_box_surface(const BoxShape& box, Real spacing, Real offset = 0);
 SurfaceSamples sample_sphere_surface(const SphereShape& sphere, Real spacing, Real offset = 0);
 SurfaceSamples sample_cylinder_surface(const CylinderShape& cylinder, Real spacing, Real offset = 0);

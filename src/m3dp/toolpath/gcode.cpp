@@ -19,6 +19,7 @@ namespace fs = std::filesystem;
 namespace {
 
 constexpr double kPiDouble = 3.14159265358979323846;
+constexpr double kMaxArcPieces = 1e6;  // lines one arc is split into: more is a centre far off, not a print
 
 /// One parsed line: its command (e.g. "G1") and the values of its parameter letters.
 struct Words {
@@ -403,8 +404,11 @@ class Parser {
     if (clockwise && sweep >= 0) sweep -= 2 * kPiDouble;
     if (!clockwise && sweep <= 0) sweep += 2 * kPiDouble;
     const double arc_mm = std::abs(sweep) * radius;
-    const int pieces = std::max(
-        1, static_cast<int>(std::ceil(arc_mm * settings_.length_scale * settings_.geometry_scale / settings_.arc_segment_length)));
+    const double chords = std::ceil(arc_mm * settings_.length_scale * settings_.geometry_scale / settings_.arc_segment_length);
+    if (!(chords <= kMaxArcPieces))
+      fail(line_number, fmt::format("{}: an arc of {:.4g} mm (radius {:.4g} mm) would be {:.3g} lines of {} m; is its centre right?",
+                                    words.command, arc_mm, radius, chords, settings_.arc_segment_length));
+    const int pieces = std::max(1, static_cast<int>(chords));
     const double start_normal = position_[normal], total_e = e_target_value - e_;
     for (int k = 1; k <= pieces; ++k) {
       const double fraction = double(k) / pieces;
