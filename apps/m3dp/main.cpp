@@ -103,6 +103,9 @@ int main(int argc, char** argv) {
   run->add_flag("--view", view_live, "Watch the run in the browser while it runs: --serve, and the viewer's page on the same port");
   run->add_option("--live-rate", run_options.live_rate, "Frames per second the live stream sends at most (default 20)")
       ->check(CLI::PositiveNumber);
+  run->add_flag("--hash", run_options.hash,
+                "Print a hash of the state after every step (also hashes.csv): the same scene gives the same hashes at a "
+                "fixed thread count; meshes then join the world at the step they were asked for");
   run->add_option("--pace", run_options.pace, "Run at most this many times real time (1: real time, to watch it live)")
       ->check(CLI::PositiveNumber);
 

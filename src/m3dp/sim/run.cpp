@@ -15,7 +15,7 @@ namespace {
 /// meshes they count, the summary file last.
 constexpr outputs::MakeOutput kOutputs[] = {
     outputs::make_density_check, outputs::make_particle_frames, outputs::make_world_frames, outputs::make_printed_mesh,
-    outputs::make_camera_files,  outputs::make_run_messages,    outputs::make_timing_table, outputs::make_run_figures,
+    outputs::make_camera_files,  outputs::make_run_messages,    outputs::make_timing_table, outputs::make_state_hash, outputs::make_run_figures,
     outputs::make_progress_bar,  outputs::make_summary_file,    outputs::make_pace,
 };
 }  // namespace

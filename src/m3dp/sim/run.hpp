@@ -38,6 +38,9 @@ struct RunOptions {
   std::function<std::optional<record::HttpFile>(std::string_view path)> http;
   /// At most this many simulated seconds per wall second (1: real time, to watch a run live); 0: as fast as it can.
   double pace = 0;
+  /// A hash of the state after every step, in hashes.csv and on stdout (`m3dp run --hash`); the
+  /// run then also waits for its meshes (wait_for_meshes), which is what makes it reproducible.
+  bool hash = false;
 };
 
 enum class RunStatus { completed, interrupted, failed };

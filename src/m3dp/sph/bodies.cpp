@@ -1,5 +1,5 @@
 // Stage "bodies": the boundary particles of moving bodies follow their poses, and the grids the
-// neighbour search reads them from; the fluid's force and torque on each body, summed per thread.
+// neighbour search reads them from; the fluid's force and torque on each body, summed per chunk of particles in a fixed order.
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
@@ -78,20 +78,27 @@ void move_bodies(const Model& model, State& state, Workspace& workspace) {
   workspace.moving_boundary_grid.build(boundary.position, workspace.moving_boundary_indices, cell_size);
 }
 
-void reset_body_wrenches(const Model& /*model*/, State& state, Workspace& workspace) {
-  for (auto& wrenches : workspace.body_wrench_per_thread) wrenches.assign(state.bodies.size(), Wrench{});
+void reset_body_wrenches(const Model& /*model*/, State& /*state*/, Workspace& workspace) { workspace.body_wrench_chunks_used = 0; }
+
+void prepare_wrench_chunks(const State& state, Workspace& workspace, std::size_t chunks) {
+  const std::size_t bodies = state.bodies.size();
+  if (chunks <= workspace.body_wrench_chunks_used) return;
+  if (workspace.body_wrench_chunks.size() < chunks * bodies) workspace.body_wrench_chunks.resize(chunks * bodies);
+  std::fill(workspace.body_wrench_chunks.begin() + std::ptrdiff_t(workspace.body_wrench_chunks_used * bodies),
+            workspace.body_wrench_chunks.begin() + std::ptrdiff_t(chunks * bodies), Wrench{});
+  workspace.body_wrench_chunks_used = chunks;
 }
 
 void collect_body_wrenches(const Model& /*model*/, State& state, Workspace& workspace) {
-  for (auto& body : state.bodies) {
-    body.fluid_force.setZero();
-    body.fluid_torque.setZero();
-  }
-  for (const auto& wrenches : workspace.body_wrench_per_thread)
-    for (std::size_t b = 0; b < wrenches.size() && b < state.bodies.size(); ++b) {
-      state.bodies[b].fluid_force += wrenches[b].force;
-      state.bodies[b].fluid_torque += wrenches[b].torque;
+  const std::size_t bodies = state.bodies.size();
+  for (std::size_t b = 0; b < bodies; ++b) {
+    state.bodies[b].fluid_force.setZero();
+    state.bodies[b].fluid_torque.setZero();
+    for (std::size_t chunk = 0; chunk < workspace.body_wrench_chunks_used; ++chunk) {
+      state.bodies[b].fluid_force += workspace.body_wrench_chunks[chunk * bodies + b].force;
+      state.bodies[b].fluid_torque += workspace.body_wrench_chunks[chunk * bodies + b].torque;
     }
+  }
 }
 
 }  // namespace m3dp::sph::stages

@@ -20,8 +20,7 @@ void keep_out_of_boundaries(const Model& model, State& state, Workspace& workspa
   const Real surface_share = model.boundary_share_at_surface;
   with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
     const Real inverse_time_step = Real(1) / state.time_step;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-      std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+    for_each_wrench_chunk(state, workspace, state.active_count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
       // A few Newton steps: one lands short where the share is curved (edges, corners).
       for (int iteration = 0; iteration < 3; ++iteration) {

@@ -1,6 +1,10 @@
 #pragma once
 // Every stage of a step: a free function over (model, state, workspace), run in the order of
 // Solver::step. Each lives in a file named after its stage or its method's paper.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
 #include <span>
 
 #include "m3dp/sph/model.hpp"
@@ -103,17 +107,32 @@ void choose_granular_time_step(const Model& model, State& state, Workspace& work
 void integrate_granular(const Model& model, State& state, Workspace& workspace);
 
 // ---- body wrenches (bodies.cpp) ----
-/// Clears the per-thread wrench accumulators (sized to the bodies).
+/// Starts the step's wrench accumulators (see for_each_wrench_chunk).
 void reset_body_wrenches(const Model& model, State& state, Workspace& workspace);
-/// Sums the per-thread wrenches into each body's fluid_force / fluid_torque.
+/// Sums the chunks' wrenches, in order, into each body's fluid_force / fluid_torque.
 void collect_body_wrenches(const Model& model, State& state, Workspace& workspace);
 
 // ---- helpers the stages share ----
-/// This thread's wrench accumulator, one entry per body (sized on a thread's first use only).
-inline std::vector<Wrench>& thread_body_wrenches(const State& state, Workspace& workspace) {
-  std::vector<Wrench>& wrenches = workspace.body_wrench_per_thread.local();
-  if (wrenches.size() != state.bodies.size()) wrenches.assign(state.bodies.size(), Wrench{});
-  return wrenches;
+/// Particles per wrench chunk. Each chunk of consecutive particles sums its share of the body
+/// wrenches apart, in index order, and collect_body_wrenches adds the chunks in order: the bodies
+/// feel the same force, bit for bit, on any number of threads (per-thread sums depended on which
+/// thread took which range, so a robot touching the print moved differently on 1 and 2 threads).
+inline constexpr std::size_t kWrenchChunk = 512;
+/// Makes room for `chunks` wrench accumulators (zeroed) beyond those this step already uses.
+void prepare_wrench_chunks(const State& state, Workspace& workspace, std::size_t chunks);
+/// Runs body(range, wrenches) over the particles [0, count) in parallel, in whole chunks of
+/// kWrenchChunk, `wrenches` being that chunk's accumulator (one entry per body).
+template <class Body>
+void for_each_wrench_chunk(const State& state, Workspace& workspace, std::size_t count, Body&& body) {
+  const std::size_t bodies = state.bodies.size();
+  const std::size_t chunks = (count + kWrenchChunk - 1) / kWrenchChunk;
+  prepare_wrench_chunks(state, workspace, chunks);
+  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, chunks, 1), [&](const tbb::blocked_range<std::size_t>& chunk_range) {
+    for (std::size_t chunk = chunk_range.begin(); chunk != chunk_range.end(); ++chunk) {
+      const tbb::blocked_range<std::size_t> range(chunk * kWrenchChunk, std::min(count, (chunk + 1) * kWrenchChunk));
+      body(range, std::span<Wrench>(workspace.body_wrench_chunks.data() + chunk * bodies, bodies));
+    }
+  });
 }
 /// Whether particle i of a yield-stress material is unyielded at `time` (s): its shear stress μ γ̇
 /// below its yield stress, aged since its birth. False for materials without a yield stress.

@@ -187,7 +187,8 @@ struct Workspace {
   };
   static constexpr Index kSeveralBodies = ~Index(0);
   std::vector<WallSums> solver_wall_sums;  // (n)
-  tbb::enumerable_thread_specific<std::vector<Wrench>> body_wrench_per_thread;
+  std::vector<Wrench> body_wrench_chunks;  // (chunks × bodies) the particle chunks' shares of the body wrenches
+  std::size_t body_wrench_chunks_used = 0;  // chunks zeroed and in use this step
   Real largest_kinematic_viscosity = 0;  // m²/s, this step's largest μ/ρ (the explicit viscosity's time-step limit)
   std::vector<std::uint64_t> sort_keys;
   std::vector<Index> permutation;

@@ -12,7 +12,7 @@ namespace {
 class PrintedMesh final : public RunObserver {
  public:
   PrintedMesh(Simulation& simulation, const RunOptions& options)
-      : simulation_(simulation), settings_(simulation.scene().meshing), wait_(options.wait_for_meshes),
+      : simulation_(simulation), settings_(simulation.scene().meshing), wait_(options.wait_for_meshes || options.hash),
         worker_(surface_settings(simulation), options.output_directory / "meshes", settings_.format) {
     // The particles the meshing block asks for: one material, one region, or all.
     for (std::size_t m = 0; m < simulation.scene().materials.size(); ++m)

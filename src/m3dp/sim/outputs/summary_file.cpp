@@ -137,6 +137,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"robots", robots},
       {"meshes", meshes},
       {"meshes_skipped", summary.meshes_skipped},
+      {"meshes_inserted", summary.meshes_inserted},  // joined the world as the printed body
       {"recording", recording},
       {"live", live},
       {"cameras", cameras},

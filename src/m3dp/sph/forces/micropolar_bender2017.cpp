@@ -32,8 +32,7 @@ void apply_micropolar(const Model& model, State& state, Workspace& workspace) {
   auto& next = workspace.scratch_vec3;
   next.resize(count);
   with_kernel(model.settings.kernel, support_radius, [&](const auto& kernel) {
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-      std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+    for_each_wrench_chunk(state, workspace, count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const FluidPhase& phase = model.phases[fluid.phase[i]];
         if (!phase.micropolar.enabled) {

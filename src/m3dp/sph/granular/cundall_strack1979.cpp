@@ -63,8 +63,7 @@ void compute_granular_contacts(const Model& model, State& state, Workspace& work
   const Real diameter = 2 * settings.particle_radius;
   const auto& fluid_lists = workspace.fluid_neighbors;
   const auto& boundary_lists = workspace.boundary_neighbors;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 256), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+  for_each_wrench_chunk(state, workspace, state.active_count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const GranularContact& contact_i = phases[fluid.phase[i]];
       const Real mass_i = fluid.mass[i];

@@ -160,8 +160,7 @@ Real sum_over_rates(const SolverView& view, const tbb::blocked_range<std::size_t
 /// the bodies (the volume correction moves particles without a force, and has none).
 template <bool kWallReaction = true>
 void apply_pressure_velocity_update(const SolverView& view, State& state, Workspace& workspace, Real time_step) {
-  for_each_particle_range(state.active_count, [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+  for_each_wrench_chunk(state, workspace, state.active_count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const Real weighted_kappa_i = view.kappa[i];  // m_i κ_i
       const Vec4 position_i = view.position[i];

@@ -110,8 +110,7 @@ void add_wall_adhesion(const Model& model, State& state, Workspace& workspace) {
   const Real h = model.support_radius;
   const Real inverse_volume = 1 / model.particle_volume;
   const auto& boundary_lists = workspace.boundary_neighbors;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+  for_each_wrench_chunk(state, workspace, state.active_count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const FluidPhase& phase_i = model.phases[fluid.phase[i]];
       if (phase_i.adhesion <= 0) continue;

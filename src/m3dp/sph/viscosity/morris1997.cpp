@@ -32,8 +32,7 @@ void add_gravity_and_explicit_viscosity(const Model& model, State& state, Worksp
   // (m_j/ρ_j) ∇W_ij = (ρ0/ρ_j) · pair_gradient · x_ij.
   const auto& fluid_lists = workspace.fluid_neighbors;
   const auto& boundary_lists = workspace.boundary_neighbors;
-  tbb::parallel_for(tbb::blocked_range<std::size_t>(0, state.active_count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-    std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+  for_each_wrench_chunk(state, workspace, state.active_count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
     for (std::size_t i = range.begin(); i != range.end(); ++i) {
       const FluidPhase& phase = model.phases[fluid.phase[i]];
       const Vec3 position_i = fluid.position[i];

@@ -17,8 +17,7 @@ void add_wall_reaction(const Model& model, State& state, Workspace& workspace) {
   // Wall friction as a reaction on the bodies: the body feels −F_ib = (c_ib/Δt) x xᵀ (v_i − v_b).
   if (model.any_wall_friction && !state.bodies.empty()) {
     const Real inverse_time_step = Real(1) / time_step;
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 128), [&](const tbb::blocked_range<std::size_t>& range) {
-      std::vector<Wrench>& wrenches = thread_body_wrenches(state, workspace);
+    for_each_wrench_chunk(state, workspace, count, [&](const tbb::blocked_range<std::size_t>& range, std::span<Wrench> wrenches) {
       for (std::size_t i = range.begin(); i != range.end(); ++i) {
         const std::size_t boundary_first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
