@@ -6,7 +6,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 M3DP = $(BUILD_DIR)/apps/m3dp/m3dp
 
-.PHONY: all setup configure build test demo bench clean
+.PHONY: all setup configure build test demo bench fuzz clean
 
 all: build
 
@@ -23,6 +23,13 @@ build: configure
 
 test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900
+	bash scripts/fuzz.sh $(FUZZ_SECONDS)
+
+# The readers under AddressSanitizer and UndefinedBehaviorSanitizer, fuzzed FUZZ_SECONDS a target
+# (make test runs it; FUZZ_SECONDS=3600 make fuzz for a long run).
+FUZZ_SECONDS ?= 60
+fuzz: setup
+	bash scripts/fuzz.sh $(FUZZ_SECONDS)
 
 demo: build
 	$(M3DP) run scenes/ur10_wall.sdf -o out/ur10_wall
@@ -34,4 +41,4 @@ bench: build
 	$(BUILD_DIR)/bench/bench_sph
 
 clean:
-	rm -rf $(BUILD_DIR)
+	rm -rf $(BUILD_DIR) build-fuzz

@@ -27,6 +27,8 @@ packages=(
   chromium
   # Real slicers with their printer profiles: the G-code reader's test slices with both.
   prusa-slicer slic3r
+  # The readers fuzzed with libFuzzer under AddressSanitizer and UndefinedBehaviorSanitizer (scripts/fuzz.sh).
+  clang libclang-rt-14-dev
 )
 # Kept at the candidate version: ParaView and the XML parser under its readers. Debian 12's expat
 # security update 2.5.0-1+deb12u5 made ParaView 5.11 unable to read raw appended VTK data; a machine

@@ -1,6 +1,8 @@
 // Reading OBJ and STL (ASCII and binary) triangle meshes, and the errors for bad files.
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <bit>
 #include <cstdint>
 #include <cstring>
@@ -206,6 +208,29 @@ TEST_F(MeshIo, PlyReadsBackWhatItWrote) {
             std::string::npos);
 }
 
+TEST_F(MeshIo, PlyHeadersAndNumbersThatCannotBeRightAreErrors) {
+  // Found by fuzz_mesh: a face index of −1.2e9 was cast to an unsigned vertex number (undefined
+  // behaviour); an element without properties or with more items than the body has bytes looped
+  // for nothing; a NaN vertex went through.
+  const std::string header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n";
+  const std::string faces = "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+  EXPECT_NE(read_error(write("index.ply", header + faces + "0 0 0\n1 0 0\n0 1 0\n3 0 1 -1157630000\n"))
+                .find("face 0 uses vertex -1157630000: expected a vertex number"),
+            std::string::npos);
+  EXPECT_NE(read_error(write("count.ply", header + faces + "0 0 0\n1 0 0\n0 1 0\n-3 0 1 2\n"))
+                .find("a list of -3 in element 'face'"),
+            std::string::npos);
+  EXPECT_NE(read_error(write("empty.ply", "ply\nformat ascii 1.0\nelement vertex 1000000000000\nend_header\n"))
+                .find("element 'vertex' has 1000000000000 items and no properties"),
+            std::string::npos);
+  const std::string ten = "ply\nformat ascii 1.0\nelement vertex 10\nproperty float x\nproperty float y\nproperty float z\nend_header\n0 0 0\n";
+  EXPECT_NE(read_error(write("many.ply", ten)).find("element 'vertex' has 10 items; the file's body has 6 bytes"), std::string::npos);
+  const float nan_vertex[3] = {0, std::numeric_limits<float>::quiet_NaN(), 0};
+  std::string binary = "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+  binary.append(reinterpret_cast<const char*>(nan_vertex), sizeof nan_vertex);
+  EXPECT_NE(read_error(write("nan.ply", binary)).find("vertex 0 is not a finite point"), std::string::npos);
+}
+
 TEST_F(MeshIo, UnknownExtensionAndMissingFile) {
   const std::string extension_message = read_error(write("part.3mf", "PK"));
   EXPECT_NE(extension_message.find("expected .obj or .ply or .stl"), std::string::npos) << extension_message;
@@ -345,7 +370,7 @@ TEST_F(MeshIo, DamagedFramesNameTheArray) {
   const std::size_t points_at = text.find('\n', text.find("<Points>") + 20) + 1;
   const std::string truncated = error_of(text.substr(0, points_at + 80) + "</DataArray></Points></Piece></UnstructuredGrid></VTKFile>");
   EXPECT_NE(truncated.find("damaged.vtu"), std::string::npos) << truncated;
-  EXPECT_NE(truncated.find("array points: a compressed array's base64 data is cut short"), std::string::npos) << truncated;
+  EXPECT_NE(truncated.find("array points: a compressed array's header names more compressed bytes than the file holds (truncated?)"), std::string::npos) << truncated;
   // A character that is not base64 inside the data.
   std::string garbled = text;
   garbled[points_at + 50] = '%';
@@ -356,6 +381,44 @@ TEST_F(MeshIo, DamagedFramesNameTheArray) {
   lz4.replace(lz4.find("vtkZLibDataCompressor"), 21, "vtkLZ4DataCompressor");
   const std::string lz4_error = error_of(lz4);
   EXPECT_NE(lz4_error.find("compressor 'vtkLZ4DataCompressor' is not supported"), std::string::npos) << lz4_error;
+}
+
+TEST_F(MeshIo, AParticleAtANonFinitePositionIsAnError) {
+  // A NaN position read from a frame would poison `m3dp mesh`'s surface grid or a camera's bounds.
+  const std::vector<Vec3> points{Vec3(0, 0, 0), Vec3(0, std::numeric_limits<m3dp::Real>::infinity(), 0)};
+  const auto file = write("nan.vtu", raw_appended_frame(points, {1, 2}));
+  try {
+    (void)m3dp::io::read_particle_frame(file);
+    ADD_FAILURE() << "a frame with an infinite position was read";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("particle 1 is not at a finite position"), std::string::npos) << error.what();
+  }
+}
+
+TEST_F(MeshIo, ACompressedArrayThatClaimsMoreThanZlibCanInflateIsAnError) {
+  // Found by fuzz_particles: a header whose block size says 2^38 bytes made the reader allocate
+  // it before inflating a byte. Patch the points' header words (blocks, block size, last size).
+  const std::vector<Vec3> points(4000, Vec3(1, 2, 3));
+  const fs::path file = folder_ / "frame.vtu";
+  m3dp::io::write_vtu(file, points, {}, {});
+  std::ifstream stream(file, std::ios::binary);
+  std::string text{std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+  const std::size_t points_at = text.find_first_not_of(" \n", text.find('>', text.find("<DataArray", text.find("<Points>"))) + 1);
+  std::string words;
+  ASSERT_TRUE(m3dp::io::decode_base64(text.substr(points_at, 32), words));  // 24 bytes: three UInt64 words
+  ASSERT_EQ(words.size(), 24U);
+  const std::uint64_t block_size = std::uint64_t(1) << 38, last_size = 0;
+  std::memcpy(words.data() + 8, &block_size, 8);
+  std::memcpy(words.data() + 16, &last_size, 8);
+  std::string patched;
+  m3dp::io::append_base64(words, patched);
+  text.replace(points_at, 32, patched);
+  try {
+    (void)m3dp::io::read_particle_frame(write("huge_block.vtu", text));
+    ADD_FAILURE() << "a frame whose header claims 256 GiB was read";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("more than zlib can inflate to"), std::string::npos) << error.what();
+  }
 }
 
 TEST(Base64, MatchesRfc4648Vectors) {

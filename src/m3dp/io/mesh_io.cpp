@@ -342,6 +342,13 @@ TriangleMesh read_ply(const fs::path& file) {
   if (format != "binary_little_endian" && format != "ascii")
     fail(file, 0, fmt::format("PLY format '{}'; expected binary_little_endian or ascii", format));
   const bool binary = format == "binary_little_endian";
+  // Every item reads at least a byte (binary) or a number (ASCII): an element with no properties,
+  // or more items than the body has bytes, is a header that cannot be right (and would loop or
+  // allocate for nothing).
+  for (const Element& element : elements)
+    if (element.count > 0 && (element.properties.empty() || element.count > bytes.size() - std::min(bytes.size(), body)))
+      fail(file, 0, fmt::format("element '{}' has {} items{}; the file's body has {} bytes", element.name, element.count,
+                                element.properties.empty() ? " and no properties" : "", bytes.size() - std::min(bytes.size(), body)));
   auto type_bytes = [&](const std::string& type) -> std::size_t {
     if (type == "char" || type == "uchar" || type == "int8" || type == "uint8") return 1;
     if (type == "short" || type == "ushort" || type == "int16" || type == "uint16") return 2;
@@ -384,11 +391,16 @@ TriangleMesh read_ply(const fs::path& file) {
       std::vector<Index> polygon;
       for (const Property& property : element.properties) {
         if (!property.count_type.empty()) {
-          const auto count = static_cast<std::size_t>(next(property.count_type));
-          for (std::size_t k = 0; k < count; ++k) {
+          const double count = next(property.count_type);
+          if (!(count >= 0 && count <= double(bytes.size())) || count != std::floor(count))
+            fail(file, 0, fmt::format("a list of {} in element '{}': expected a count from 0 to the file's size", count, element.name));
+          for (std::size_t k = 0; k < static_cast<std::size_t>(count); ++k) {
             const double index = next(property.type);
-            if (element.name == "face" && (property.name == "vertex_indices" || property.name == "vertex_index"))
+            if (element.name == "face" && (property.name == "vertex_indices" || property.name == "vertex_index")) {
+              if (!(index >= 0 && index < 4294967296.0) || index != std::floor(index))
+                fail(file, 0, fmt::format("face {} uses vertex {}: expected a vertex number", item, index));
               polygon.push_back(static_cast<Index>(index));
+            }
           }
           continue;
         }
@@ -399,7 +411,10 @@ TriangleMesh read_ply(const fs::path& file) {
           else if (property.name == "z") vertex.z() = static_cast<Real>(value);
         }
       }
-      if (element.name == "vertex") mesh.vertices.push_back(vertex);
+      if (element.name == "vertex") {
+        if (!vertex.allFinite()) fail(file, 0, fmt::format("vertex {} is not a finite point", item));
+        mesh.vertices.push_back(vertex);
+      }
       for (std::size_t k = 2; k < polygon.size(); ++k) mesh.triangles.push_back({polygon[0], polygon[k - 1], polygon[k]});
     }
   }

@@ -1,5 +1,6 @@
 #include "m3dp/io/particle_reader.hpp"
 
+#include <cmath>
 #include <fmt/format.h>
 #include <pugixml.hpp>
 
@@ -269,9 +270,16 @@ ParticleFrame read_ply_points(const fs::path& file) {
 
 ParticleFrame read_particle_frame(const fs::path& file) {
   const std::string extension = file.extension().string();
-  if (extension == ".vtu" || extension == ".vtp") return read_vtk_xml(file);
-  if (extension == ".ply") return read_ply_points(file);
-  fail(file, 0, fmt::format("unsupported particle file extension '{}'; expected .vtu, .vtp, .ply or a .pvd collection", extension));
+  ParticleFrame frame;
+  if (extension == ".vtu" || extension == ".vtp") frame = read_vtk_xml(file);
+  else if (extension == ".ply") frame = read_ply_points(file);
+  else fail(file, 0, fmt::format("unsupported particle file extension '{}'; expected .vtu, .vtp, .ply or a .pvd collection", extension));
+  // A NaN or infinite position would poison a surface grid or a renderer's bounds downstream.
+  for (std::size_t i = 0; i < frame.positions.size(); ++i)
+    if (!frame.positions[i].allFinite()) fail(file, 0, fmt::format("particle {} is not at a finite position", i));
+  if (frame.particle_radius && !(std::isfinite(*frame.particle_radius) && *frame.particle_radius > 0))
+    fail(file, 0, fmt::format("particle_radius {} in the FieldData: expected a finite length > 0", *frame.particle_radius));
+  return frame;
 }
 
 std::vector<CollectionEntry> read_pvd(const fs::path& file) {

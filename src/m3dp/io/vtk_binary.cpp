@@ -216,7 +216,12 @@ bool decode_vtk_array(std::string_view data, const VtkPayloadFormat& format, std
   const std::uint64_t block_size = read_header_word(header.data() + word, word);
   const std::uint64_t last_size = read_header_word(header.data() + 2 * word, word);
   std::uint64_t compressed_total = 0;
-  for (std::uint64_t b = 0; b < blocks; ++b) compressed_total += read_header_word(header.data() + (3 + b) * word, word);
+  for (std::uint64_t b = 0; b < blocks; ++b) {
+    const std::uint64_t size = read_header_word(header.data() + (3 + b) * word, word);
+    compressed_total += size;  // cannot wrap: each size is checked against the file's size
+    if (size > data.size() || compressed_total > data.size())
+      return error = "a compressed array's header names more compressed bytes than the file holds (truncated?)", false;
+  }
   std::string decoded;
   if (format.base64) {
     if (!decode_prefix(data, compressed_total, decoded)) return error = "a compressed array's base64 data is cut short", false;
@@ -227,7 +232,12 @@ bool decode_vtk_array(std::string_view data, const VtkPayloadFormat& format, std
   }
   if (block_size == 0 && blocks > 0) return error = "a compressed array with a block size of 0", false;
   const std::uint64_t total = blocks == 0 ? 0 : (blocks - 1) * block_size + (last_size > 0 ? last_size : block_size);
-  if (total > (std::uint64_t(1) << 40)) return error = "a compressed array larger than a terabyte", false;
+  // Deflate expands at most 1032:1 (RFC 1951's longest match per shortest code), plus the zlib
+  // header: a header that claims more cannot be right, so nothing that large is allocated.
+  if (total > compressed_total * 1032 + blocks * 64)
+    return error = fmt::format("a compressed array's header claims {} bytes from {} compressed bytes, more than zlib can inflate to",
+                               total, compressed_total),
+           false;
   out.assign(total, '\0');
   std::size_t read = 0;
   for (std::uint64_t b = 0; b < blocks; ++b) {

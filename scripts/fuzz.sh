@@ -1,0 +1,51 @@
+#!/usr/bin/env bash
+# Builds the readers with AddressSanitizer and UndefinedBehaviorSanitizer (clang, build-fuzz/), runs
+# the G-code reader's unit tests under them, then fuzzes each reader for SECONDS (default 30) from
+# seeds the project wrote (its G-code, waypoint CSV, meshes and particle frames) and the corpus of
+# earlier runs. Exits non-zero on any finding: libFuzzer leaves the input as build-fuzz/crash-*.
+# Usage: scripts/fuzz.sh [SECONDS] [TARGET...]   (make test runs it for 60 s a target)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+seconds=${1:-30}
+shift || true
+targets=("$@")
+[ ${#targets[@]} -gt 0 ] || targets=(fuzz_gcode fuzz_waypoints fuzz_mesh fuzz_particles)
+build=build-fuzz
+if [ ! -f $build/build.ninja ]; then
+  CXX=clang++ cmake -S . -B $build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DM3DP_FUZZ=ON > /dev/null
+fi
+cmake --build $build -j "$(nproc)" > $build/build.log 2>&1 || { tail -n 30 $build/build.log; exit 1; }
+
+export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
+# The reader's unit tests under the sanitizers (the sliced-profile test is in the main build's suite).
+$build/test_gcode --gtest_filter=-*RealPrinterProfiles* --gtest_brief=1
+
+# Seeds: the project's own files, and what its writers write.
+seeds=$build/seeds
+rm -rf "$seeds" && mkdir -p "$seeds/fuzz_gcode" "$seeds/fuzz_waypoints"
+cp scenes/gcode/*.gcode "$seeds/fuzz_gcode/"
+printf 'x,y,z,speed,extrude\n0,0,0.1,0.05,1\n0.1,0,0.1,0.05,1\n0.1,0.1,0.1,0.05,0\n' > "$seeds/fuzz_waypoints/seed.csv"
+find scenes tests -name '*.csv' -size -64k -exec cp {} "$seeds/fuzz_waypoints/" \;
+$build/fuzz/fuzz_seeds "$seeds/generated"
+mv "$seeds/generated/mesh" "$seeds/fuzz_mesh" && mv "$seeds/generated/particles" "$seeds/fuzz_particles"
+
+status=0
+for target in "${targets[@]}"; do
+  corpus=$build/corpus/$target
+  mkdir -p "$corpus"
+  log=$build/$target.log
+  # Bytes: enough for every format's structure; G-code's meaning is line by line, and its seed's
+  # 7,000 lines would slow each run tenfold.
+  max_len=16384
+  [ "$target" = fuzz_gcode ] && max_len=2048
+  if (cd $build && ./fuzz/$target -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 -max_len=$max_len \
+        -print_final_stats=1 "corpus/$target" "seeds/$target") > "$log" 2>&1; then
+    runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
+    echo "fuzz: $target: $runs inputs in ${seconds} s, no finding"
+  else
+    echo "fuzz: $target: FINDING (input saved as build-fuzz/crash-* or leak-*/oom-*/timeout-*):"
+    grep -E "ERROR|runtime error|==ABORTING|SUMMARY|uncaught|terminate" "$log" | head -n 20
+    status=1
+  fi
+done
+exit $status
