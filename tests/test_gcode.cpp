@@ -1,5 +1,6 @@
 // G-code: a real slicer's file read back to the slicer's own totals; arcs, modes, comments; errors
 // with file:line.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -169,6 +170,32 @@ TEST(Gcode, CuraCommentsDwellRetractionAndPlacement) {
   const Vec3 before = trajectory.sample(dwell_start + 0.01).position, after = trajectory.sample(dwell_start + 0.49).position;
   EXPECT_LT((before - after).norm(), 1e-9);
   EXPECT_FALSE(trajectory.sample(dwell_start + 0.2).extruding);
+}
+
+TEST(Gcode, APathTooLargeToHoldIsRefusedAtItsLine) {
+  // A file's moves are counted as they are made: the line that passes GcodeSettings::max_moves is
+  // refused, and an arc before a single piece of it is made.
+  GcodeSettings settings;
+  settings.max_moves = 100;
+  std::string lines = "G1 X0 Y0 F600\n";
+  for (int k = 1; k <= 101; ++k) lines += fmt::format("G1 X{} Y0 E{}\n", k, 0.1 * k);  // line 1 does not move
+  try {
+    (void)parse(lines, settings);
+    ADD_FAILURE() << "101 moves were read with a limit of 100";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("test.gcode:102: error: the path would be more than 100 moves here (100 so far, 1 more"),
+              std::string::npos)
+        << error.what();
+  }
+  try {
+    (void)parse("G1 X0 Y0 F600\nG1 X10 Y0 E1\nG2 X10 Y0 I-5 J0 E3\n", settings);  // 31.4 mm in 0.5 mm lines: 63
+    (void)parse("G1 X0 Y0 F600\nG1 X10 Y0 E1\nG2 X10 Y0 I-50 J0 E30\n", settings);  // 314 mm: 629
+    ADD_FAILURE() << "an arc of 629 lines was read with a limit of 100 moves";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("test.gcode:3: error: the path would be more than 100 moves here (1 so far, 629 more"),
+              std::string::npos)
+        << error.what();
+  }
 }
 
 TEST(Gcode, BadLinesNameFileAndLine) {

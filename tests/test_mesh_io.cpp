@@ -38,6 +38,14 @@ class MeshIo : public ::testing::Test {
     fs::remove_all(folder_, ignored);
   }
 
+  /// The text of a particle frame m3dp writes (compressed base64 arrays) of `count` equal points.
+  std::string written_frame(std::size_t count) const {
+    const fs::path file = folder_ / "frame.vtu";
+    m3dp::io::write_vtu(file, std::vector<Vec3>(count, Vec3(1, 2, 3)), {}, {});
+    std::ifstream stream(file, std::ios::binary);
+    return {std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+  }
+
   fs::path write(const std::string& name, const std::string& contents) const {
     const fs::path file = folder_ / name;
     std::ofstream(file, std::ios::binary) << contents;
@@ -353,11 +361,7 @@ TEST_F(MeshIo, LargeFramesRoundTripInEveryEncoding) {
 }
 
 TEST_F(MeshIo, DamagedFramesNameTheArray) {
-  const std::vector<Vec3> points(4000, Vec3(1, 2, 3));
-  const fs::path file = folder_ / "frame.vtu";
-  m3dp::io::write_vtu(file, points, {}, {});
-  std::ifstream stream(file, std::ios::binary);
-  const std::string text{std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+  const std::string text = written_frame(4000);
   auto error_of = [&](const std::string& contents) {
     try {
       (void)m3dp::io::read_particle_frame(write("damaged.vtu", contents));
@@ -398,11 +402,7 @@ TEST_F(MeshIo, AParticleAtANonFinitePositionIsAnError) {
 TEST_F(MeshIo, ACompressedArrayThatClaimsMoreThanZlibCanInflateIsAnError) {
   // Found by fuzz_particles: a header whose block size says 2^38 bytes made the reader allocate
   // it before inflating a byte. Patch the points' header words (blocks, block size, last size).
-  const std::vector<Vec3> points(4000, Vec3(1, 2, 3));
-  const fs::path file = folder_ / "frame.vtu";
-  m3dp::io::write_vtu(file, points, {}, {});
-  std::ifstream stream(file, std::ios::binary);
-  std::string text{std::istreambuf_iterator<char>(stream), std::istreambuf_iterator<char>()};
+  std::string text = written_frame(4000);
   const std::size_t points_at = text.find_first_not_of(" \n", text.find('>', text.find("<DataArray", text.find("<Points>"))) + 1);
   std::string words;
   ASSERT_TRUE(m3dp::io::decode_base64(text.substr(points_at, 32), words));  // 24 bytes: three UInt64 words
@@ -418,6 +418,36 @@ TEST_F(MeshIo, ACompressedArrayThatClaimsMoreThanZlibCanInflateIsAnError) {
     ADD_FAILURE() << "a frame whose header claims 256 GiB was read";
   } catch (const InputError& error) {
     EXPECT_NE(std::string(error.what()).find("more than zlib can inflate to"), std::string::npos) << error.what();
+  }
+}
+
+TEST_F(MeshIo, APointCountTheArraysCannotHoldIsAnError) {
+  // Found by fuzz_particles: NumberOfPoints="126666666666666" allocated its values before the
+  // array's bytes were decoded. Binary and ascii arrays alike.
+  std::string text = written_frame(40);
+  const std::string count = "NumberOfPoints=\"40\"";
+  const std::size_t at = text.find(count);
+  ASSERT_NE(at, std::string::npos);
+  text.replace(at, count.size(), "NumberOfPoints=\"126666666666666\"");
+  try {
+    (void)m3dp::io::read_particle_frame(write("huge_count.vtu", text));
+    ADD_FAILURE() << "a frame of 126666666666666 points was read";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("the points array holds 480 bytes, 379999999999998 values of Float32 need"), std::string::npos) << error.what();
+  }
+  const std::string ascii = R"(<?xml version="1.0"?>
+<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian">
+  <PolyData><Piece NumberOfPoints="900000000000">
+    <Points><DataArray type="Float32" NumberOfComponents="3" format="ascii">0 0 0 1 1 1</DataArray></Points>
+  </Piece></PolyData>
+</VTKFile>
+)";
+  try {
+    (void)m3dp::io::read_particle_frame(write("huge_ascii.vtp", ascii));
+    ADD_FAILURE() << "an ascii frame of 9e11 points was read";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("the points array's 11 characters cannot hold 2700000000000 values"), std::string::npos)
+        << error.what();
   }
 }
 

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <limits>
 #include <sstream>
 #include <string>
 #include <type_traits>
@@ -80,11 +81,18 @@ std::vector<T> read_data_array(const fs::path& file, const pugi::xml_node& array
   const std::string type = array.attribute("type").as_string();
   const std::size_t element = vtk_type_bytes(type);
   if (element == 0) fail(file, 0, fmt::format("array '{}' of unknown type '{}'", name, type));
+  // Nothing is allocated for a count the array cannot hold: ascii takes at least two characters a
+  // value, binary its decoded bytes (checked below, before the values are made).
+  if (count > std::numeric_limits<std::size_t>::max() / 16 / static_cast<std::size_t>(components))
+    fail(file, 0, fmt::format("{} points cannot be right", count));
   const std::size_t total = count * static_cast<std::size_t>(components);
-  std::vector<T> values(total);
   const std::string format = array.attribute("format").as_string();
   if (format == "ascii") {
-    std::istringstream text(array.text().as_string());
+    const std::string_view characters = array.text().as_string();
+    if (total > characters.size() / 2 + 1)
+      fail(file, 0, fmt::format("the {} array's {} characters cannot hold {} values", name, characters.size(), total));
+    std::vector<T> values(total);
+    std::istringstream text{std::string(characters)};
     for (std::size_t n = 0; n < total; ++n) {
       std::conditional_t<std::is_floating_point_v<T>, double, long long> value;
       if (!(text >> value)) fail(file, 0, fmt::format("the {} array ends after {} of {} values", name, n, total));
@@ -109,6 +117,7 @@ std::vector<T> read_data_array(const fs::path& file, const pugi::xml_node& array
   }
   if (decoded.size() < total * element)
     fail(file, 0, fmt::format("the {} array holds {} bytes, {} values of {} need {}", name, decoded.size(), total, type, total * element));
+  std::vector<T> values(total);
   for (std::size_t n = 0; n < total; ++n) values[n] = read_element<T>(decoded.data() + n * element, type);
   return values;
 }

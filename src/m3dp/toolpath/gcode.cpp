@@ -336,6 +336,13 @@ class Parser {
   }
 
   /// Adds one straight piece from position_ to `target` with `extrusion` E units.
+  /// The file would make more moves than GcodeSettings::max_moves allows.
+  [[noreturn]] void fail_move_count(int line_number, double adding) const {
+    fail(line_number, fmt::format("the path would be more than {} moves here ({} so far, {:.3g} more on this line; arcs are split "
+                                  "into {} m lines): too large to hold in memory",
+                                  settings_.max_moves, program_.moves.size(), adding, settings_.arc_segment_length));
+  }
+
   void add_piece(const std::array<double, 3>& target, double extrusion, int line_number) {
     const double length_mm = std::sqrt(std::pow(target[0] - position_[0], 2) + std::pow(target[1] - position_[1], 2) +
                                        std::pow(target[2] - position_[2], 2));
@@ -354,7 +361,10 @@ class Parser {
     program_.net_extrusion += extrusion;
     program_.material_volume += move.material_volume;
     program_.duration += move.duration;
-    if (move.duration > 0) program_.moves.push_back(std::move(move));
+    if (move.duration > 0) {
+      if (program_.moves.size() >= settings_.max_moves) fail_move_count(line_number, 1);
+      program_.moves.push_back(std::move(move));
+    }
     position_ = target;
   }
 
@@ -408,6 +418,8 @@ class Parser {
     if (!(chords <= kMaxArcPieces))
       fail(line_number, fmt::format("{}: an arc of {:.4g} mm (radius {:.4g} mm) would be {:.3g} lines of {} m; is its centre right?",
                                     words.command, arc_mm, radius, chords, settings_.arc_segment_length));
+    if (chords > double(settings_.max_moves - std::min(settings_.max_moves, program_.moves.size())))
+      fail_move_count(line_number, chords);
     const int pieces = std::max(1, static_cast<int>(chords));
     const double start_normal = position_[normal], total_e = e_target_value - e_;
     for (int k = 1; k <= pieces; ++k) {
@@ -436,6 +448,7 @@ class Parser {
     move.line = line_number;
     move.feature = feature_;
     program_.duration += seconds;
+    if (program_.moves.size() >= settings_.max_moves) fail_move_count(line_number, 1);
     program_.moves.push_back(std::move(move));
   }
 

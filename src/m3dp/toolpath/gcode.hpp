@@ -29,6 +29,9 @@ struct GcodeSettings {
                                            // (a desktop slicer's G-code printed at construction scale)
   Real default_feed_rate = Real(0.025);    // m/s until the first F word (1500 mm/min)
   Real arc_segment_length = Real(0.5e-3);  // m, longest chord when arcs are split into lines
+  // Moves (lines, arc pieces, dwells) a file may make, about 100 bytes each: more is refused at the
+  // line that passes it, before it is allocated (a construction print is 10⁵–10⁶ moves).
+  std::size_t max_moves = 20'000'000;
 };
 
 struct GcodeMove {
