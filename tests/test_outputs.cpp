@@ -4,11 +4,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 
 #include "m3dp/core/progress.hpp"
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/vtk_writer.hpp"
 #include "m3dp/sim/presets.hpp"
@@ -317,4 +319,73 @@ TEST(Outputs, MaterialAtRestIsMeshedIncrementallyAndGivesTheWholeFramesMesh) {
   EXPECT_EQ(written.triangles.size(), whole.triangles.size());
   EXPECT_NEAR(surface::signed_volume(written), surface::signed_volume(whole), 1e-4 * surface::signed_volume(whole));
   fs::remove_all(directory);
+}
+
+TEST(Checkpoint, ASimulationLoadedFromItsStateStepsOnBitForBit) {
+  // A gantry nozzle printing clay: emission, implicit viscosity with its warm starts, material coming
+  // to rest, kept neighbour lists. One simulation saves its state (and drops its caches, as a run
+  // that writes a checkpoint does), another made from the same scene loads it: they step on the same.
+  sim::WallPrintSetup setup;
+  setup.layers = 2;
+  setup.particle_radius = Real(0.002);
+  const scene::Scene scene = sim::wall_print_scene(setup);
+  sim::Simulation original(scene);
+  while (original.solver().fluid().size() < 300) original.step();
+  StateWriter saved;
+  original.save_state(saved);
+  original.drop_caches();
+  sim::Simulation resumed(scene);
+  StateReader reader(saved.bytes(), "test checkpoint");
+  resumed.load_state(reader);
+  EXPECT_EQ(reader.remaining(), 0u);
+  ASSERT_GT(original.solver().state().active_count, 0u);
+  EXPECT_EQ(resumed.time(), original.time());
+  for (int step = 0; step < 150; ++step) {
+    original.step();
+    resumed.step();
+  }
+  const auto& a = original.solver().fluid();
+  const auto& b = resumed.solver().fluid();
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_GT(a.size(), 300u);  // printing went on
+  EXPECT_EQ(std::memcmp(a.position.data(), b.position.data(), a.size() * sizeof(Vec3)), 0);
+  EXPECT_EQ(std::memcmp(a.velocity.data(), b.velocity.data(), a.size() * sizeof(Vec3)), 0);
+  EXPECT_EQ(a.id, b.id);
+  EXPECT_EQ(original.solver().state().active_count, resumed.solver().state().active_count);
+  EXPECT_EQ(original.time(), resumed.time());
+}
+
+TEST(Checkpoint, DamagedOrForeignCheckpointsAreErrorsThatNameTheFile) {
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.01);
+  const scene::Scene scene = sim::hydrostatic_scene(setup);
+  sim::Simulation simulation(scene);
+  simulation.step();
+  StateWriter saved;
+  simulation.save_state(saved);
+  auto error_loading = [&](std::string_view bytes) -> std::string {
+    sim::Simulation other(scene);
+    StateReader reader(bytes, "run/checkpoint.bin");
+    try {
+      other.load_state(reader);
+    } catch (const InputError& error) {
+      return error.what();
+    }
+    return "no error";
+  };
+  const std::string& bytes = saved.bytes();
+  EXPECT_NE(error_loading(std::string_view(bytes).substr(0, bytes.size() / 2)).find("run/checkpoint.bin: error: damaged checkpoint: "),
+            std::string::npos);
+  using namespace std::string_view_literals;
+  EXPECT_EQ(error_loading("\x0a\0\0\0\0\0\0\0simulaXion"sv).find("run/checkpoint.bin: error: not a checkpoint this version of m3dp can continue"),
+            0u);
+  // Another scene's state: another number of bodies.
+  sim::HydrostaticSetup wider = setup;
+  wider.width = Real(0.2);
+  sim::Simulation other_scene(sim::hydrostatic_scene(wider));
+  other_scene.step();
+  StateWriter foreign;
+  other_scene.save_state(foreign);
+  const std::string mismatch = error_loading(foreign.bytes());
+  EXPECT_NE(mismatch.find("run/checkpoint.bin: error: damaged checkpoint"), std::string::npos) << mismatch;
 }

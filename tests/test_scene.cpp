@@ -219,6 +219,14 @@ TEST(Scene, OutputRecordsAndServes) {
                   "<serve>", "<serve> is a TCP port, 0 (any free one) to 65535, got 70000");
   expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<mcap>yes</mcap>"),
                   "<mcap>", "<mcap> must be true or false (or 1 or 0), got 'yes'");
+  EXPECT_EQ(load_scene_from_string(valid_scene(), "scenes/valid.sdf").output.checkpoint_period, 0.0);
+  EXPECT_EQ(load_scene_from_string(replaced(valid_scene(), "<particles>true</particles>",
+                                            "<particles>true</particles><checkpoint_period>0.5</checkpoint_period>"),
+                                   "scenes/valid.sdf")
+                .output.checkpoint_period,
+            0.5);
+  expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<checkpoint_period>-1</checkpoint_period>"),
+                  "<checkpoint_period>", "<checkpoint_period> must be >= 0 s, got -1");
 }
 
 TEST(Scene, CamerasInGazeboSyntaxAndInThePlugin) {
@@ -510,7 +518,7 @@ TEST(Scene, WhatDartsUrdfLoaderWouldRefuseOrDropIsAnErrorAtTheUrdfsLine) {
   const std::string errors = load_error(text).what();
   std::filesystem::remove_all(folder);
   const std::string file = (folder / "bad.urdf").string();
-  for (const std::string expected :
+  for (const std::string& expected :
        {file + ":4: error: <mesh filename=\"meshes/missing.stl\">: not found (looked for " + (folder / "meshes/missing.stl").string() +
             "); the collision shape would be missing",
         file + ":7: error: <mass value=\"abc\">: 'abc' is not a finite number",

@@ -1,5 +1,6 @@
 // m3dp — command-line front end.
-//   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N] [--record] [--serve [PORT]] [--pace F]
+//   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N] [--record] [--serve [PORT]] [--pace F] [--checkpoint-period S]
+//   m3dp run --resume RUN_DIR
 //   m3dp validate SCENE
 //   m3dp bench [--particles N] [--steps S] ...
 //   m3dp mesh INPUT -o OUT [--method M] ...
@@ -21,6 +22,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/checkpoint.hpp"
 #include "m3dp/sim/robots.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
@@ -40,7 +42,8 @@ int run_command(const std::filesystem::path& scene_file, std::filesystem::path o
   const scene::Scene scene = scene::load_scene(scene_file);
   for (const auto& warning : scene.warnings) fmt::print(stderr, "{}: warning: {}\n", warning.location.str(), warning.message);
   if (output.empty()) output = std::filesystem::path("out") / scene_file.stem();
-  fmt::print(stderr, "m3dp: {} → {} ({} threads)\n", scene_file.string(), output.string(), ThreadLimit::active_threads());
+  fmt::print(stderr, "m3dp: {} → {} ({} threads){}\n", scene_file.string(), output.string(), ThreadLimit::active_threads(),
+             options.resume ? " resumed from its checkpoint" : "");
   sim::Simulation simulation(scene);
   fmt::print(stderr, "m3dp: {} fluid particles, {} boundary particles in {} bodies, particle radius {} m\n",
              simulation.solver().fluid().size(), simulation.solver().boundary().size(), simulation.solver().bodies().size(),
@@ -88,7 +91,14 @@ int main(int argc, char** argv) {
   m3dp::sim::RunOptions run_options;
   std::optional<int> serve_port;
   auto* run = app.add_subcommand("run", "Run a scene and write its results folder");
-  run->add_option("scene", scene_file, "Scene file (.sdf)")->required()->check(CLI::ExistingFile);
+  run->add_option("scene", scene_file, "Scene file (.sdf)")->check(CLI::ExistingFile);
+  std::filesystem::path resume_folder;
+  run->add_option("--resume", resume_folder,
+                  "Go on with the run in this folder from its last checkpoint, with the scene and options it was started with")
+      ->check(CLI::ExistingDirectory);
+  run->add_option("--checkpoint-period", run_options.checkpoint_period,
+                  "Simulated seconds between checkpoints (checkpoint.bin; default the scene's <output><checkpoint_period>, 0: none)")
+      ->check(CLI::NonNegativeNumber);
   run->add_option("-o,--output", output, "Output folder (default out/<scene name>)");
   run->add_option("--until", run_options.until, "Stop at this simulated time in seconds (default: the scene's end_time)")
       ->check(CLI::PositiveNumber);
@@ -135,6 +145,32 @@ int main(int argc, char** argv) {
       run_options.show_progress = !quiet;
       if (run->count("--serve") > 0 || view_live) run_options.serve_port = static_cast<std::uint16_t>(serve_port.value_or(8765));
       if (run_options.serve_port) run_options.http = m3dp::app::viewer_file;  // the viewer's page on the stream's port
+      if (!resume_folder.empty()) {
+        // The scene and options the run was started with; a different thread count is allowed but
+        // ends differently (bit for bit) from a run never stopped.
+        if (!scene_file.empty() || !output.empty() || run_options.until || run_options.checkpoint_period || run_options.record || run_options.hash)
+          throw m3dp::Error("--resume takes the scene, the output folder and the options from the checkpoint: give only the folder "
+                            "(and --threads, -q, --serve, --view, --pace)");
+        const m3dp::sim::CheckpointRun saved = m3dp::sim::read_checkpoint_run(resume_folder);
+        if (run->count("--threads") > 0 && threads != saved.threads)
+          fmt::print(stderr, "m3dp: warning: the run was checkpointed with --threads {}; with {} it will not end bit for bit as it would have\n",
+                     saved.threads, threads);
+        else
+          threads = saved.threads;
+        scene_file = saved.scene_file;
+        output = resume_folder;
+        run_options.until = saved.until;
+        run_options.hash = saved.hash;
+        run_options.record = saved.record;
+        run_options.wait_for_meshes = saved.wait_for_meshes;
+        run_options.checkpoint_period = saved.checkpoint_period;
+        run_options.live_rate = saved.live_rate;
+        run_options.resume = true;
+        fmt::print(stderr, "m3dp: resuming {} at {:.4f} s (step {})\n", resume_folder.string(), saved.time, saved.step);
+      } else if (scene_file.empty()) {
+        throw m3dp::Error("run: give a scene file (or --resume RUN_DIR)");
+      }
+      run_options.threads = threads;
       return run_command(scene_file, output, threads, run_options);
     }
     if (validate->parsed()) return validate_command(validate_file);

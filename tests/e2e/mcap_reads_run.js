@@ -11,7 +11,7 @@
 //   point cloud well formed and as many as the run's summary says, times that advance, the joints'
 //   positions, velocities and efforts (the shoulder holding the arm up), the cameras' images sized as
 //   their calibrations say, in their optical frames.
-// With --killed the file is what a run killed by SIGKILL left: no summary, and every record up to
+// With --killed the file is what a run killed by SIGKILL left: summary.json says "running" (no final figures), and every record up to
 // the cut must still read and decode.
 "use strict";
 const fs = require("fs");

@@ -189,6 +189,29 @@ void write_vtm(const std::filesystem::path& file, const std::vector<Block>& bloc
 
 void PvdCollection::add(double time, const std::filesystem::path& dataset_file) {
   entries_.push_back({time, std::filesystem::relative(dataset_file, file_.parent_path()).generic_string()});
+  write();
+}
+
+void PvdCollection::save(StateWriter& out) const {
+  out.put(static_cast<std::uint64_t>(entries_.size()));
+  for (const Entry& entry : entries_) {
+    out.put(entry.time);
+    out.put(entry.relative_file);
+  }
+}
+
+void PvdCollection::load(StateReader& in) {
+  const auto count = in.get<std::uint64_t>();
+  if (count > in.remaining()) in.fail("a time series longer than the file");
+  entries_.resize(count);
+  for (Entry& entry : entries_) {
+    in.get(entry.time);
+    in.get(entry.relative_file);
+  }
+  write();
+}
+
+void PvdCollection::write() const {
   std::string text = "<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n  <Collection>\n";
   for (const auto& entry : entries_)
     text += fmt::format("    <DataSet timestep=\"{:.9g}\" group=\"\" part=\"0\" file=\"{}\"/>\n", entry.time, entry.relative_file);

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/core/types.hpp"
 
 namespace m3dp::io {
@@ -80,8 +81,12 @@ class PvdCollection {
   /// `dataset_file` is stored relative to the .pvd's folder.
   void add(double time, const std::filesystem::path& dataset_file);
   [[nodiscard]] std::size_t size() const { return entries_.size(); }
+  /// A checkpoint: its entries; load() takes them back and writes the .pvd as it was then.
+  void save(StateWriter& out) const;
+  void load(StateReader& in);
 
  private:
+  void write() const;
   struct Entry {
     double time;
     std::string relative_file;

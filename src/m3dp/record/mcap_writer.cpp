@@ -1,5 +1,7 @@
 #include "m3dp/record/mcap_writer.hpp"
 
+#include <array>
+
 #include <fmt/format.h>
 #include <libdeflate.h>
 #include <zstd.h>
@@ -68,6 +70,73 @@ struct McapWriter::ZstdContext {
 McapWriter::McapWriter(const std::filesystem::path& file, const McapOptions& options)
     : file_(file), stream_(file, std::ios::binary | std::ios::trunc), options_(options) {
   if (!stream_) throw Error(fmt::format("{}: cannot create the MCAP file", file.string()));
+  start_compression();
+  std::string start(kMagic);
+  std::string content;
+  put_string(content, options_.profile);
+  put_string(content, "m3dp");
+  put_record(start, header, content);
+  write_bytes(start);
+}
+
+McapWriter::McapWriter(const std::filesystem::path& file, StateReader& saved, const McapOptions& options) : file_(file), options_(options) {
+  saved.get(offset_);
+  saved.get(data_crc_);
+  saved.get(schemas_);
+  saved.get(channels_);
+  saved.get(schema_count_);
+  saved.get(channel_count_);
+  saved.get(sequence_);
+  std::vector<std::pair<std::uint16_t, std::uint64_t>> counts;
+  saved.get(counts);
+  channel_message_counts_ = {counts.begin(), counts.end()};
+  saved.get(message_count_);
+  saved.get(first_time_);
+  saved.get(last_time_);
+  const auto chunks = saved.get<std::uint64_t>();
+  if (chunks > saved.remaining()) saved.fail("more MCAP chunks than the file holds");
+  chunk_indexes_.resize(chunks);
+  for (ChunkIndex& chunk : chunk_indexes_) {
+    const auto values = saved.get<std::array<std::uint64_t, 7>>();
+    chunk.start_time = values[0], chunk.end_time = values[1], chunk.offset = values[2], chunk.length = values[3];
+    chunk.message_index_length = values[4], chunk.compressed_size = values[5], chunk.uncompressed_size = values[6];
+    std::vector<std::pair<std::uint16_t, std::uint64_t>> offsets;
+    saved.get(offsets);
+    chunk.message_index_offsets = {offsets.begin(), offsets.end()};
+  }
+  std::error_code error;
+  const auto size = std::filesystem::file_size(file, error);
+  if (error || size < offset_)
+    throw InputError({file.string(), 0}, "shorter than when the checkpoint was written: the recording cannot be resumed");
+  std::filesystem::resize_file(file, offset_);
+  stream_.open(file, std::ios::binary | std::ios::in | std::ios::out);
+  stream_.seekp(0, std::ios::end);
+  if (!stream_) throw Error(fmt::format("{}: cannot reopen the MCAP file", file.string()));
+  start_compression();
+}
+
+void McapWriter::save(StateWriter& out) {
+  flush();
+  out.put(offset_);
+  out.put(data_crc_);
+  out.put(schemas_);
+  out.put(channels_);
+  out.put(schema_count_);
+  out.put(channel_count_);
+  out.put(sequence_);
+  out.put(std::vector<std::pair<std::uint16_t, std::uint64_t>>(channel_message_counts_.begin(), channel_message_counts_.end()));
+  out.put(message_count_);
+  out.put(first_time_);
+  out.put(last_time_);
+  out.put(static_cast<std::uint64_t>(chunk_indexes_.size()));
+  for (const ChunkIndex& chunk : chunk_indexes_) {
+    out.put(std::array<std::uint64_t, 7>{chunk.start_time, chunk.end_time, chunk.offset, chunk.length, chunk.message_index_length,
+                                         chunk.compressed_size, chunk.uncompressed_size});
+    out.put(std::vector<std::pair<std::uint16_t, std::uint64_t>>(chunk.message_index_offsets.begin(), chunk.message_index_offsets.end()));
+  }
+}
+
+void McapWriter::start_compression() {
   if (options_.zstd_level > 0) {
     zstd_ = std::make_unique<ZstdContext>();
     ZSTD_CCtx_setParameter(zstd_->context, ZSTD_c_compressionLevel, options_.zstd_level);
@@ -75,12 +144,6 @@ McapWriter::McapWriter(const std::filesystem::path& file, const McapOptions& opt
     const int threads = options_.zstd_threads > 0 ? options_.zstd_threads : ThreadLimit::active_threads();
     if (threads > 1) ZSTD_CCtx_setParameter(zstd_->context, ZSTD_c_nbWorkers, threads);
   }
-  std::string start(kMagic);
-  std::string content;
-  put_string(content, options_.profile);
-  put_string(content, "m3dp");
-  put_record(start, header, content);
-  write_bytes(start);
 }
 
 McapWriter::~McapWriter() {

@@ -15,6 +15,8 @@
 #include <string_view>
 #include <vector>
 
+#include "m3dp/core/state_io.hpp"
+
 namespace m3dp::record {
 
 struct McapOptions {
@@ -28,6 +30,9 @@ class McapWriter {
  public:
   /// Creates `file` (its folder must exist) and writes the magic and the header. Throws m3dp::Error.
   McapWriter(const std::filesystem::path& file, const McapOptions& options = {});
+  /// Goes on with `file` from a checkpoint (save()): cut back to its length then, and appended to, so
+  /// that the recording ends as if the run had never stopped. Throws InputError if it is shorter.
+  McapWriter(const std::filesystem::path& file, StateReader& saved, const McapOptions& options = {});
   ~McapWriter();  // closes the file if close() was not called
   McapWriter(const McapWriter&) = delete;
   McapWriter& operator=(const McapWriter&) = delete;
@@ -43,12 +48,15 @@ class McapWriter {
   void flush();
   /// Closes the open chunk and writes data end, summary and footer. Further calls do nothing.
   void close();
+  /// A checkpoint: flushes, then saves how far the file got and what its summary will list.
+  void save(StateWriter& out);
 
   [[nodiscard]] std::uint64_t message_count() const { return message_count_; }
   [[nodiscard]] std::uint64_t bytes_written() const { return offset_; }
   [[nodiscard]] std::uint32_t chunk_count() const { return static_cast<std::uint32_t>(chunk_indexes_.size()); }
 
  private:
+  void start_compression();
   void write_bytes(std::string_view bytes);
   void add_to_chunk(std::string_view bytes);  // uncompressed bytes of the open chunk's records
   void close_chunk();

@@ -122,6 +122,7 @@ struct OutputSettings {
   bool write_particles = true;
   bool mcap = false;                   // run.mcap: the run in Foxglove's messages (also `m3dp run --record`)
   std::optional<std::uint16_t> serve_port;  // a live Foxglove WebSocket stream on this port (0: any free one)
+  double checkpoint_period = 0;        // s of simulated time between checkpoints (m3dp run --resume); 0 = none
 };
 
 /// Surface meshes made during the run (issue 4): every `period` seconds of simulated time the fluid

@@ -1,5 +1,7 @@
 #include "m3dp/sim/camera_rig.hpp"
 
+#include "m3dp/core/state_io.hpp"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -214,6 +216,16 @@ double CameraRig::take_render_ms() {
   const double ms = render_ms_;
   render_ms_ = 0;
   return ms;
+}
+
+void CameraRig::save_totals(StateWriter& out) const {
+  out.put(static_cast<std::uint64_t>(cameras_.size()));
+  for (const Camera& camera : cameras_) out.put(camera.totals);
+}
+
+void CameraRig::load_totals(StateReader& in) {
+  if (in.get<std::uint64_t>() != cameras_.size()) in.fail("another number of cameras than the scene has");
+  for (Camera& camera : cameras_) in.get(camera.totals);
 }
 
 }  // namespace m3dp::sim

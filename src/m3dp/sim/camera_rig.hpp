@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "m3dp/sensors/renderer.hpp"
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/sim/world_view.hpp"
 
 namespace m3dp::sim {
@@ -73,6 +74,9 @@ class CameraRig {
   };
   [[nodiscard]] const Totals& totals(std::size_t camera) const { return cameras_.at(camera).totals; }
   [[nodiscard]] const sensors::RenderStats& last_stats() const { return renderer_.last_stats(); }
+  /// A checkpoint: every camera's totals (the frame count seeds its noise), and back.
+  void save_totals(StateWriter& out) const;
+  void load_totals(StateReader& in);
 
  private:
   struct Camera {

@@ -11,7 +11,7 @@
 namespace m3dp::sim {
 
 MeshingWorker::MeshingWorker(surface::SurfaceSettings settings, std::filesystem::path folder, std::string format)
-    : settings_(settings.resolved()), folder_(std::move(folder)), format_(std::move(format)), surface_(settings_) {
+    : settings_(settings.resolved()), folder_(std::move(folder)), format_(std::move(format)), surface_(std::make_unique<surface::IncrementalSurface>(settings_)) {
   std::filesystem::create_directories(folder_);
   thread_ = std::thread([this] { run(); });
 }
@@ -59,6 +59,19 @@ std::size_t MeshingWorker::skipped() const {
   return skipped_;
 }
 
+void MeshingWorker::forget_kept_field() {
+  wait_idle();
+  surface_ = std::make_unique<surface::IncrementalSurface>(settings_);
+}
+
+void MeshingWorker::resume(std::vector<Mesh> meshes, std::size_t skipped, std::shared_ptr<const TriangleMesh> latest) {
+  wait_idle();
+  std::lock_guard lock(mutex_);
+  meshes_ = std::move(meshes);
+  skipped_ = skipped;
+  latest_ = std::move(latest);
+}
+
 std::shared_ptr<const TriangleMesh> MeshingWorker::latest_mesh() const {
   std::lock_guard lock(mutex_);
   return latest_;
@@ -94,7 +107,7 @@ void MeshingWorker::run() {
     std::string failure;
     try {
       surface::SurfaceStats stats;
-      surface = std::make_shared<TriangleMesh>(surface_.reconstruct(moving, resting, resting_ids, &stats));
+      surface = std::make_shared<TriangleMesh>(surface_->reconstruct(moving, resting, resting_ids, &stats));
       mesh.reused_particles = stats.reused_particles;
       mesh.tiles = stats.mesh_tiles;
       mesh.remeshed_tiles = stats.remeshed_tiles;

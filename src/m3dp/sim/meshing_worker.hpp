@@ -43,6 +43,11 @@ class MeshingWorker {
               std::span<const std::uint64_t> resting_ids = {});
   /// Blocks until the worker is idle.
   void wait_idle();
+  /// Waits, then drops the resting particles' field kept between meshes: the next mesh is made whole
+  /// (at a checkpoint, as a resumed run's first one is).
+  void forget_kept_field();
+  /// A resumed run's worker: the meshes made before the checkpoint, the skips, and the newest mesh.
+  void resume(std::vector<Mesh> meshes, std::size_t skipped, std::shared_ptr<const TriangleMesh> latest);
 
   [[nodiscard]] std::vector<Mesh> meshes() const;
   [[nodiscard]] std::size_t skipped() const;
@@ -65,7 +70,7 @@ class MeshingWorker {
   // Filled by submit, swapped out by the worker.
   std::vector<Vec3> pending_moving_, pending_resting_;
   std::vector<std::uint64_t> pending_resting_ids_;
-  surface::IncrementalSurface surface_;   // used by the worker thread only
+  std::unique_ptr<surface::IncrementalSurface> surface_;   // used by the worker thread only (or while idle)
   std::vector<Mesh> meshes_;
   std::size_t skipped_ = 0;
   std::shared_ptr<const TriangleMesh> latest_;

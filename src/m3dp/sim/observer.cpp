@@ -3,6 +3,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <typeinfo>
 
 #include "m3dp/sim/simulation.hpp"
 
@@ -49,6 +50,32 @@ void ObserverSchedule::after_step(const Simulation& simulation, const sph::StepS
     if (entry.observer->is_output()) report.output_ms += std::chrono::duration<double, std::milli>(Clock::now() - begin).count();
   }
   if (first_failure) std::rethrow_exception(first_failure);
+}
+
+void ObserverSchedule::save(StateWriter& out) {
+  out.section("observers");
+  out.put(static_cast<std::uint64_t>(entries_.size()));
+  for (Entry& entry : entries_) {
+    StateWriter part;
+    entry.observer->save(part);
+    out.put(std::string(typeid(*entry.observer).name()));
+    out.put(entry.next_time);
+    out.put(part.bytes());
+  }
+}
+
+void ObserverSchedule::resume(const Simulation& simulation, StateReader& in) {
+  in.section("observers");
+  if (in.get<std::uint64_t>() != entries_.size()) in.fail("another set of outputs than the checkpoint's run had");
+  for (Entry& entry : entries_) {
+    std::string name, bytes;
+    in.get(name);
+    if (name != typeid(*entry.observer).name()) in.fail("another set of outputs than the checkpoint's run had");
+    in.get(entry.next_time);
+    in.get(bytes);
+    StateReader part(bytes, in.source());
+    entry.observer->resume(simulation, part);
+  }
 }
 
 void ObserverSchedule::finish(const Simulation& simulation, RunSummary& summary) {

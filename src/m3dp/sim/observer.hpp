@@ -6,6 +6,7 @@
 #include <memory>
 #include <vector>
 
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sph/state.hpp"
 
@@ -30,6 +31,15 @@ class RunObserver {
   virtual void observe(const Simulation& simulation, const StepReport& report) = 0;
   /// The run has ended (summary.status says how): complete its files, add its figures to the summary.
   virtual void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) {}
+
+  /// A checkpoint is written after this step: finish what is in flight (queued files, a mesh being
+  /// made), then save what it needs to go on: its counters, and how far its files got. Files are
+  /// made in start(), never in the constructor, so that a resumed run finds them as they were.
+  virtual void save(StateWriter& /*out*/) {}
+  /// Instead of start(), in a run resumed from a checkpoint (the simulation already restored): take
+  /// back what save() wrote, and put its files back to what they were then. Observers without files
+  /// or sums just start again.
+  virtual void resume(const Simulation& simulation, StateReader& /*in*/) { start(simulation); }
 };
 
 /// The observers of one run, in the order they were added (which is the order they observe in).
@@ -39,6 +49,9 @@ class ObserverSchedule {
   void start(const Simulation& simulation);
   void after_step(const Simulation& simulation, const sph::StepStats& stats);
   void finish(const Simulation& simulation, RunSummary& summary);
+  /// Every observer's save(), each as its own part of `out`; resume() takes them back in order.
+  void save(StateWriter& out);
+  void resume(const Simulation& simulation, StateReader& in);
 
  private:
   struct Entry {

@@ -2,7 +2,11 @@
 // kOutputs, and the summary says what happened (also when interrupted, or when the state blows up).
 #include <fmt/format.h>
 
+#include <cmath>
+
 #include "m3dp/core/error.hpp"
+#include "m3dp/io/atomic_file.hpp"
+#include "m3dp/sim/checkpoint.hpp"
 #include "m3dp/sim/observer.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/simulation.hpp"
@@ -29,6 +33,27 @@ std::string_view to_string(RunStatus status) {
   return "unknown";
 }
 
+namespace {
+/// Writes the run folder's checkpoint.bin after this step: the outputs finish what is in flight and
+/// save their part, then the simulation's state, then the caches are dropped, as a resumed run will
+/// start without them.
+void write_checkpoint(Simulation& simulation, ObserverSchedule& schedule, CheckpointRun run, const RunOptions& options) {
+  StateWriter observers;
+  schedule.save(observers);  // first: the printed mesh in flight joins the world
+  run.time = simulation.time();
+  run.step = simulation.solver().state().step;
+  StateWriter out;
+  run.save(out);
+  simulation.save_state(out);
+  out.section("outputs");
+  out.put(observers.bytes());
+  io::write_file_atomically(options.output_directory / kCheckpointFile, [&](std::ostream& stream) {
+    stream.write(out.bytes().data(), static_cast<std::streamsize>(out.bytes().size()));
+  }, true);
+  simulation.drop_caches();
+}
+}  // namespace
+
 RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   RunSummary summary;
   const double end_time = options.until.value_or(simulation.scene().end_time);
@@ -40,7 +65,39 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   ObserverSchedule schedule;
   for (const outputs::MakeOutput make : kOutputs)
     if (auto observer = make(simulation, options)) schedule.add(std::move(observer));
-  schedule.start(simulation);
+  CheckpointRun checkpoint;
+  checkpoint.scene_file = std::filesystem::absolute(simulation.scene().file);
+  checkpoint.threads = options.threads;
+  checkpoint.until = end_time;
+  checkpoint.hash = options.hash;
+  checkpoint.record = options.record;
+  checkpoint.wait_for_meshes = options.wait_for_meshes;
+  checkpoint.checkpoint_period = options.checkpoint_period.value_or(simulation.scene().output.checkpoint_period);
+  checkpoint.live_rate = options.live_rate;
+  if (checkpoint.checkpoint_period > 0 && options.output_directory.empty())
+    throw Error("checkpoints need an output folder: the run writes checkpoint.bin there");
+  if (options.resume) {
+    // The caller made the simulation from the checkpoint's scene, with its options.
+    const std::string bytes = read_checkpoint_bytes(options.output_directory);
+    StateReader in(bytes, (options.output_directory / kCheckpointFile).string());
+    CheckpointRun saved;
+    saved.load(in);
+    if (!simulation.scene().file.empty() && file_hash(simulation.scene().file) != saved.scene_hash)
+      throw InputError({simulation.scene().file.string(), 0},
+                       fmt::format("the scene changed since the checkpoint in {} was written: it cannot be resumed", options.output_directory.string()));
+    checkpoint.scene_hash = saved.scene_hash;
+    simulation.load_state(in);
+    in.section("outputs");
+    std::string observers;
+    in.get(observers);
+    StateReader observers_in(observers, in.source());
+    schedule.resume(simulation, observers_in);
+  } else {
+    if (checkpoint.checkpoint_period > 0 && !simulation.scene().file.empty()) checkpoint.scene_hash = file_hash(simulation.scene().file);
+    schedule.start(simulation);
+  }
+  double next_checkpoint =
+      checkpoint.checkpoint_period > 0 ? checkpoint.checkpoint_period * (std::floor(simulation.time() / checkpoint.checkpoint_period + 1e-9) + 1) : 0;
   try {
     while (simulation.time() < end_time - 1e-12) {
       if (options.stop_requested && options.stop_requested->load()) {
@@ -48,6 +105,10 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
         break;
       }
       schedule.after_step(simulation, simulation.step());
+      if (checkpoint.checkpoint_period > 0 && simulation.time() + 1e-12 >= next_checkpoint && simulation.time() < end_time - 1e-12) {
+        write_checkpoint(simulation, schedule, checkpoint, options);
+        while (next_checkpoint <= simulation.time() + 1e-12) next_checkpoint += checkpoint.checkpoint_period;
+      }
     }
   } catch (const std::exception& error) {
     // The state blew up (SimulationError), or an output could not be written (a full disk, a file in
@@ -56,6 +117,11 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     summary.error = error.what();
   }
   schedule.finish(simulation, summary);
+  // A run that ended has nothing to resume; an interrupted or failed one keeps its last checkpoint.
+  if (summary.status == RunStatus::completed && checkpoint.checkpoint_period > 0) {
+    std::error_code ignored;
+    std::filesystem::remove(options.output_directory / kCheckpointFile, ignored);
+  }
   return summary;
 }
 

@@ -41,6 +41,13 @@ struct RunOptions {
   /// A hash of the state after every step, in hashes.csv and on stdout (`m3dp run --hash`); the
   /// run then also waits for its meshes (wait_for_meshes), which is what makes it reproducible.
   bool hash = false;
+  /// Simulated seconds between checkpoints (checkpoint.bin in the output folder, replaced each time);
+  /// none: the scene's <output><checkpoint_period>; 0: none.
+  std::optional<double> checkpoint_period;
+  /// Go on from the output folder's checkpoint.bin (m3dp run --resume) instead of the scene's start:
+  /// the simulation (made from the same scene) and every output take back their state and files.
+  bool resume = false;
+  int threads = 0;  // the worker threads the caller set (0: all cores), kept in a checkpoint
 };
 
 enum class RunStatus { completed, interrupted, failed };

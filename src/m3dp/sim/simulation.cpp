@@ -1,5 +1,7 @@
 #include "m3dp/sim/simulation.hpp"
 
+#include "m3dp/core/state_io.hpp"
+
 #include <fmt/format.h>
 
 #include <chrono>
@@ -125,6 +127,43 @@ CameraRig& Simulation::cameras() const {
   if (!cameras_) cameras_ = std::make_unique<CameraRig>(*this);
   return *cameras_;
 }
+
+void Simulation::save_state(StateWriter& out) const {
+  out.section("simulation");
+  sph::save_state(solver_.state(), out);
+  world_.save_state(out);
+  out.put(static_cast<std::uint64_t>(printed_mesh_version_));
+  out.put(printed_mesh_ != nullptr);
+  if (printed_mesh_) {
+    out.put(printed_mesh_->vertices);
+    out.put(printed_mesh_->triangles);
+  }
+  out.put(cameras_ != nullptr);
+  if (cameras_) cameras_->save_totals(out);
+}
+
+void Simulation::load_state(StateReader& in) {
+  in.section("simulation");
+  sph::State state = solver_.state();
+  sph::load_state(in, state);
+  solver_.restore(state);
+  world_.load_state(in);
+  const auto mesh_version = in.get<std::uint64_t>();
+  if (in.get<bool>()) {
+    auto mesh = std::make_shared<TriangleMesh>();
+    in.get(mesh->vertices);
+    in.get(mesh->triangles);
+    for (const auto& triangle : mesh->triangles)
+      for (const Index vertex : triangle)
+        if (vertex >= mesh->vertices.size()) in.fail("a printed-mesh triangle with a vertex it does not have");
+    set_printed_mesh(std::move(mesh));
+  }
+  printed_mesh_version_ = mesh_version;
+  if (in.get<bool>()) cameras().load_totals(in);
+  density_measurement_.step = -1;
+}
+
+void Simulation::drop_caches() { solver_.drop_caches(); }
 
 void Simulation::set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh) {
   world_.set_static_mesh("printed_material", *mesh);

@@ -47,6 +47,14 @@ class Simulation {
   /// The scene's cameras (camera_rig.hpp), made on first use: each renders the simulation as it is,
   /// once a step, when asked. Observers share it, as they share the measured density.
   [[nodiscard]] CameraRig& cameras() const;
+
+  /// A checkpoint of everything that evolves: the fluid's state, the world's, the printed mesh in
+  /// it and the cameras' frame counts; and back into a simulation made from the same scene. Caches
+  /// are not saved: a run that writes a checkpoint drops them there (drop_caches), so that it goes on
+  /// bit for bit as a run resumed from it.
+  void save_state(StateWriter& out) const;
+  void load_state(StateReader& in);
+  void drop_caches();
   /// The printed material's mesh in the world now (null before the first), and how many were set.
   [[nodiscard]] const std::shared_ptr<const TriangleMesh>& printed_mesh() const { return printed_mesh_; }
   [[nodiscard]] std::size_t printed_mesh_version() const { return printed_mesh_version_; }

@@ -35,6 +35,11 @@ class Solver {
   /// included (benchmarks that time the same step).
   void restore(const State& saved, const Workspace& saved_workspace);
 
+  /// Drops the workspace's caches (kept neighbour lists, fixed grids, the viscosity's coarse level) as
+  /// a restore does: a run that writes a checkpoint calls it there, so that it goes on exactly as a
+  /// run resumed from that checkpoint will.
+  void drop_caches() { workspace_.invalidate(); }
+
   /// Advances by one adaptive (CFL) time step: the stages in order. Throws SimulationError on NaN or explosion.
   const StepStats& step();
 

@@ -2,6 +2,8 @@
 
 #include <numeric>
 
+#include "m3dp/core/state_io.hpp"
+
 namespace m3dp::sph {
 
 void NozzleState::end_blockage(double now) {
@@ -62,6 +64,112 @@ void Workspace::reserve(std::size_t capacity) {
   for (auto* vector : {&system.rhs, &system.residual, &system.preconditioned, &system.product, &system.start_velocity,
                        &system.aggregate_offset})
     vector->reserve(capacity);
+}
+
+}  // namespace m3dp::sph
+
+namespace m3dp::sph {
+
+void save_state(const State& state, StateWriter& out) {
+  out.section("sph.state");
+  const_cast<FluidParticles&>(state.fluid).for_each_field([&](const auto& field) { out.put(field); });
+  out.put(state.active_count);
+  out.put(state.resting_woken);
+  out.put(state.next_load_check_time);
+  out.put(state.boundary.local_position);
+  out.put(state.boundary.position);
+  out.put(state.boundary.velocity);
+  out.put(state.boundary.volume);
+  out.put(state.boundary.body);
+  out.put(static_cast<std::uint64_t>(state.bodies.size()));
+  for (const BoundaryBody& body : state.bodies) {
+    out.put(body.name);
+    out.put(body.is_static);
+    out.put(body.first_particle);
+    out.put(body.particle_count);
+    out.put(body.pose);
+    out.put(body.local_bounds);
+    out.put(body.near_fluid);
+    out.put(body.linear_velocity);
+    out.put(body.angular_velocity);
+    out.put(body.fluid_force);
+    out.put(body.fluid_torque);
+  }
+  out.put(state.nozzles);
+  out.put(state.time);
+  out.put(state.step);
+  out.put(state.time_step);
+  out.put(state.next_particle_id);
+  out.put(state.particles_removed_total);
+  out.put(state.mass_removed_total);
+  out.put(state.mass_emitted_total);
+  out.put(state.last_step);
+  out.put(state.skin_in_use);
+  out.put(state.calm_steps);
+  out.put(state.skin_cooldown);
+  out.put(state.skin_backoff);
+  out.put(state.skin_since_step);
+  out.put(state.recent_searches);
+  out.put(state.neighbor_searches);
+  out.put(state.previous_viscosity_iterations);
+}
+
+void load_state(StateReader& in, State& state) {
+  in.section("sph.state");
+  state.fluid.for_each_field([&](auto& field) { in.get(field); });
+  const std::size_t count = state.fluid.size();
+  state.fluid.for_each_field([&](const auto& field) {
+    if (field.size() != count) in.fail("particle fields of different lengths");
+  });
+  state.fluid.watch_slots(0, 0);
+  in.get(state.active_count);
+  if (state.active_count > count) in.fail("more active particles than particles");
+  in.get(state.resting_woken);
+  in.get(state.next_load_check_time);
+  const std::size_t boundary_particles = state.boundary.size();
+  in.get(state.boundary.local_position);
+  if (state.boundary.local_position.size() != boundary_particles) in.fail("another set of walls and bodies than the scene makes");
+  in.get(state.boundary.position);
+  in.get(state.boundary.velocity);
+  in.get(state.boundary.volume);
+  in.get(state.boundary.body);
+  if (state.boundary.position.size() != boundary_particles || state.boundary.velocity.size() != boundary_particles ||
+      state.boundary.volume.size() != boundary_particles || state.boundary.body.size() != boundary_particles)
+    in.fail("another set of walls and bodies than the scene makes");
+  const auto bodies = in.get<std::uint64_t>();
+  if (bodies != state.bodies.size()) in.fail("a different number of boundary bodies than the scene makes");
+  for (BoundaryBody& body : state.bodies) {
+    in.get(body.name);
+    in.get(body.is_static);
+    in.get(body.first_particle);
+    in.get(body.particle_count);
+    in.get(body.pose);
+    in.get(body.local_bounds);
+    in.get(body.near_fluid);
+    in.get(body.linear_velocity);
+    in.get(body.angular_velocity);
+    in.get(body.fluid_force);
+    in.get(body.fluid_torque);
+  }
+  const std::size_t nozzles = state.nozzles.size();
+  in.get(state.nozzles);
+  if (state.nozzles.size() != nozzles) in.fail("a different number of nozzles than the scene makes");
+  in.get(state.time);
+  in.get(state.step);
+  in.get(state.time_step);
+  in.get(state.next_particle_id);
+  in.get(state.particles_removed_total);
+  in.get(state.mass_removed_total);
+  in.get(state.mass_emitted_total);
+  in.get(state.last_step);
+  in.get(state.skin_in_use);
+  in.get(state.calm_steps);
+  in.get(state.skin_cooldown);
+  in.get(state.skin_backoff);
+  in.get(state.skin_since_step);
+  in.get(state.recent_searches);
+  in.get(state.neighbor_searches);
+  in.get(state.previous_viscosity_iterations);
 }
 
 }  // namespace m3dp::sph

@@ -17,6 +17,11 @@
 #include "m3dp/sph/neighbors/neighbor_search.hpp"
 #include "m3dp/sph/particles.hpp"
 
+namespace m3dp {
+class StateWriter;
+class StateReader;
+}  // namespace m3dp
+
 namespace m3dp::sph {
 
 struct NozzleState {
@@ -111,6 +116,11 @@ struct State {
   std::uint64_t neighbor_searches = 0;  // steps that searched the grids for every particle
   int previous_viscosity_iterations = 0;  // CG iterations of the last implicit viscosity solve
 };
+
+/// The state as a checkpoint's bytes, and back into a state made by the same scene (the same bodies
+/// and nozzles; a damaged or foreign checkpoint is an InputError).
+void save_state(const State& state, StateWriter& out);
+void load_state(StateReader& in, State& state);
 
 namespace stages {
 class CoarseViscosityLevel;  // the implicit viscosity's coarse level (viscosity/coarse_level.hpp)

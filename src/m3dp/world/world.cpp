@@ -11,6 +11,7 @@
 #include <fmt/ranges.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -18,6 +19,7 @@
 #include <variant>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/world/controllers/base_tracking_kanayama1990.hpp"
 #include "m3dp/world/controllers/joint_servo.hpp"
 #include "m3dp/world/controllers/tool_ik.hpp"
@@ -867,6 +869,96 @@ void World::step_to(double time) {
 }
 
 double World::time() const { return impl_->world->getTime(); }
+
+namespace {
+void put_vector(StateWriter& out, const Eigen::VectorXd& vector) {
+  out.put(std::vector<double>(vector.data(), vector.data() + vector.size()));
+}
+/// `expected_size` < 0: any.
+void get_vector(StateReader& in, Eigen::VectorXd& vector, Eigen::Index expected_size) {
+  std::vector<double> values;
+  in.get(values);
+  if (expected_size >= 0 && static_cast<Eigen::Index>(values.size()) != expected_size)
+    in.fail("a robot or body with another number of joints than the scene's");
+  vector = Eigen::Map<const Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
+}
+}  // namespace
+
+void World::save_state(StateWriter& out) const {
+  out.section("world");
+  out.put(impl_->world->getTime());
+  auto put_skeleton = [&](const dart::dynamics::Skeleton& skeleton) {
+    put_vector(out, skeleton.getPositions());
+    put_vector(out, skeleton.getVelocities());
+  };
+  out.put(static_cast<std::uint64_t>(impl_->bodies.size()));
+  for (const auto& body : impl_->bodies) put_skeleton(*body);
+  out.put(static_cast<std::uint64_t>(impl_->links.size()));
+  for (const auto& link : impl_->links) {
+    out.put(link.force);
+    out.put(link.torque);
+  }
+  out.put(static_cast<std::uint64_t>(impl_->robots.size()));
+  for (const auto& robot : impl_->robots) {
+    put_skeleton(*robot.skeleton);
+    put_vector(out, robot.position_targets);
+    out.put(robot.contacts);
+    out.put(robot.drive.has_value());
+    if (robot.drive) {
+      const auto& drive = *robot.drive;
+      out.put(std::array<double, 8>{drive.odometry_x, drive.odometry_y, drive.odometry_heading, drive.last_left, drive.last_right,
+                                    drive.requested_speed, drive.requested_turn, drive.distance});
+      out.put(drive.tracking);
+    }
+    for (const auto& controller : robot.controllers) controller->save(out);
+  }
+  out.put(static_cast<std::uint64_t>(impl_->tools.size()));
+  for (const auto& tool : impl_->tools) {
+    put_vector(out, tool.solution);
+    out.put(tool.tracking);
+  }
+}
+
+void World::load_state(StateReader& in) {
+  in.section("world");
+  const auto time = in.get<double>();
+  auto get_skeleton = [&](dart::dynamics::Skeleton& skeleton) {
+    Eigen::VectorXd positions, velocities;
+    get_vector(in, positions, static_cast<Eigen::Index>(skeleton.getNumDofs()));
+    get_vector(in, velocities, static_cast<Eigen::Index>(skeleton.getNumDofs()));
+    skeleton.setPositions(positions);
+    skeleton.setVelocities(velocities);
+  };
+  if (in.get<std::uint64_t>() != impl_->bodies.size()) in.fail("another number of bodies than the scene makes");
+  for (const auto& body : impl_->bodies) get_skeleton(*body);
+  if (in.get<std::uint64_t>() != impl_->links.size()) in.fail("another number of links than the scene makes");
+  for (auto& link : impl_->links) {
+    in.get(link.force);
+    in.get(link.torque);
+  }
+  if (in.get<std::uint64_t>() != impl_->robots.size()) in.fail("another number of robots than the scene makes");
+  for (auto& robot : impl_->robots) {
+    get_skeleton(*robot.skeleton);
+    get_vector(in, robot.position_targets, robot.position_targets.size());
+    in.get(robot.contacts);
+    if (in.get<bool>() != robot.drive.has_value()) in.fail("a mobile base where the scene has none, or none where it has one");
+    if (robot.drive) {
+      auto& drive = *robot.drive;
+      const auto values = in.get<std::array<double, 8>>();
+      drive.odometry_x = values[0], drive.odometry_y = values[1], drive.odometry_heading = values[2];
+      drive.last_left = values[3], drive.last_right = values[4];
+      drive.requested_speed = values[5], drive.requested_turn = values[6], drive.distance = values[7];
+      in.get(drive.tracking);
+    }
+    for (const auto& controller : robot.controllers) controller->load(in);
+  }
+  if (in.get<std::uint64_t>() != impl_->tools.size()) in.fail("another number of tools than the scene makes");
+  for (auto& tool : impl_->tools) {
+    get_vector(in, tool.solution, -1);  // empty until the IK first solves
+    in.get(tool.tracking);
+  }
+  impl_->world->setTime(time);
+}
 
 Pose World::pose(BodyIndex body) const {
   return pose_of(impl_->bodies.at(body)->getRootBodyNode()->getWorldTransform());

@@ -15,6 +15,11 @@
 #include "m3dp/core/types.hpp"
 #include "m3dp/world/statistics.hpp"
 
+namespace m3dp {
+class StateWriter;
+class StateReader;
+}  // namespace m3dp
+
 namespace m3dp::world {
 
 struct WorldSettings {
@@ -177,6 +182,11 @@ class World {
   void step_to(double time);
 
   [[nodiscard]] double time() const;
+  /// A checkpoint of what moves and what the controllers carry (joints, bodies, targets, odometry,
+  /// contacts and tracking so far), and back into a world the same scene made. Printed meshes are
+  /// the caller's (set_static_mesh).
+  void save_state(StateWriter& out) const;
+  void load_state(StateReader& in);
   [[nodiscard]] Pose pose(BodyIndex body) const;
   [[nodiscard]] Vec3 linear_velocity(BodyIndex body) const;  // m/s of the body's origin, world frame
   /// Sets a free body's velocity (m/s of its origin, world frame), e.g. a thrown body's initial state.

@@ -49,6 +49,50 @@ class CameraFiles final : public RunObserver {
   [[nodiscard]] double period() const override { return 0; }
 
   void start(const Simulation& simulation) override {
+    describe(simulation);
+    observe_cameras(simulation);
+  }
+
+  void observe(const Simulation& simulation, const StepReport& /*report*/) override { observe_cameras(simulation); }
+
+  // A checkpoint: every queued image on disk first; a resumed run lists the frames up to it again.
+  void save(StateWriter& out) override {
+    writer_.finish();
+    for (const CameraOutput& output : cameras_) {
+      out.put(output.next_time);
+      out.put(static_cast<std::uint64_t>(output.frames));
+      out.put(output.frames_csv);
+    }
+  }
+  void resume(const Simulation& simulation, StateReader& in) override {
+    describe(simulation);
+    for (CameraOutput& output : cameras_) {
+      in.get(output.next_time);
+      output.frames = in.get<std::uint64_t>();
+      in.get(output.frames_csv);
+      io::write_text_atomically(output.folder / "frames.csv", output.frames_csv);
+    }
+  }
+
+  void finish(const Simulation& simulation, RunSummary& summary) override {
+    writer_.finish();  // every image on disk (or its error thrown) before the summary says so
+    CameraRig& rig = simulation.cameras();
+    for (std::size_t c = 0; c < cameras_.size(); ++c) {
+      const CameraRig::Totals& totals = rig.totals(c);
+      summary.cameras.push_back({rig.settings(c).name, cameras_[c].frames, totals.frames, totals.render_seconds, totals.rays});
+    }
+  }
+
+ private:
+  struct CameraOutput {
+    std::filesystem::path folder;
+    double next_time = 0;
+    std::size_t frames = 0;
+    std::string frames_csv;
+  };
+
+  /// Each camera's folder with its camera.json and legend.json.
+  void describe(const Simulation& simulation) {
     CameraRig& rig = simulation.cameras();
     nlohmann::json legend = nlohmann::json::array();
     for (const Segment& segment : rig.legend()) {
@@ -93,27 +137,7 @@ class CameraFiles final : public RunObserver {
       io::write_text_atomically(folder / "legend.json", legend.dump(2) + "\n");
       cameras_.push_back({folder, simulation.time(), 0, "frame,time_s,x_m,y_m,z_m,qw,qx,qy,qz\n"});
     }
-    observe_cameras(simulation);
   }
-
-  void observe(const Simulation& simulation, const StepReport& /*report*/) override { observe_cameras(simulation); }
-
-  void finish(const Simulation& simulation, RunSummary& summary) override {
-    writer_.finish();  // every image on disk (or its error thrown) before the summary says so
-    CameraRig& rig = simulation.cameras();
-    for (std::size_t c = 0; c < cameras_.size(); ++c) {
-      const CameraRig::Totals& totals = rig.totals(c);
-      summary.cameras.push_back({rig.settings(c).name, cameras_[c].frames, totals.frames, totals.render_seconds, totals.rays});
-    }
-  }
-
- private:
-  struct CameraOutput {
-    std::filesystem::path folder;
-    double next_time = 0;
-    std::size_t frames = 0;
-    std::string frames_csv;
-  };
 
   void observe_cameras(const Simulation& simulation) {
     CameraRig& rig = simulation.cameras();

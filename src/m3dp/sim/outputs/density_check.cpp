@@ -20,6 +20,8 @@ class DensityCheck final : public RunObserver {
     check(simulation);  // the end state: the run's last frame, or its last step
     summary.density = report_;
   }
+  void save(StateWriter& out) override { out.put(report_); }
+  void resume(const Simulation& /*simulation*/, StateReader& in) override { in.get(report_); }
 
  private:
   void check(const Simulation& simulation) {

@@ -20,6 +20,9 @@ class ParticleFrames final : public RunObserver {
   void start(const Simulation& simulation) override { write(simulation); }
   void observe(const Simulation& simulation, const StepReport& /*report*/) override { write(simulation); }
   void finish(const Simulation& /*simulation*/, RunSummary& summary) override { summary.frames_written = collection_.size(); }
+  // The frames after the checkpoint are written again under the same numbers.
+  void save(StateWriter& out) override { collection_.save(out); }
+  void resume(const Simulation& /*simulation*/, StateReader& in) override { collection_.load(in); }
 
  private:
   void write(const Simulation& simulation) {

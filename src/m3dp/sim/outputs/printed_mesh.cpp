@@ -2,6 +2,9 @@
 // solver steps on (MeshingWorker), and the final state's at the end. The newest mesh goes back into
 // the world as the printed material's collision body: the one way an output feeds the run, through
 // the Simulation the factory was given (the observer itself only reads).
+#include <array>
+
+#include "m3dp/core/error.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/simulation.hpp"
 
@@ -39,6 +42,52 @@ class PrintedMesh final : public RunObserver {
       inserted_ = std::move(newest);
       ++inserted_count_;
     }
+  }
+
+  // A checkpoint: the mesh in progress joins the world first, and the kept field is dropped, so that
+  // the run goes on as a resumed one will (its first mesh made whole).
+  void save(StateWriter& out) override {
+    worker_.wait_idle();
+    auto newest = worker_.latest_mesh();
+    if (newest && newest != inserted_) {
+      simulation_.set_printed_mesh(newest);
+      inserted_ = std::move(newest);
+      ++inserted_count_;
+    }
+    worker_.forget_kept_field();
+    if (!worker_.error().empty()) throw Error(worker_.error());
+    out.put(next_time_);
+    out.put(last_meshed_time_);
+    out.put(static_cast<std::uint64_t>(inserted_count_));
+    out.put(static_cast<std::uint64_t>(worker_.skipped()));
+    const auto meshes = worker_.meshes();
+    out.put(static_cast<std::uint64_t>(meshes.size()));
+    for (const auto& mesh : meshes) {
+      out.put(mesh.file.string());
+      out.put(std::array<double, 3>{mesh.time, mesh.volume, mesh.seconds});
+      out.put(std::array<std::uint64_t, 5>{mesh.particles, mesh.triangles, mesh.reused_particles, mesh.tiles, mesh.remeshed_tiles});
+    }
+  }
+  void resume(const Simulation& simulation, StateReader& in) override {
+    in.get(next_time_);
+    in.get(last_meshed_time_);
+    inserted_count_ = in.get<std::uint64_t>();
+    const auto skipped = in.get<std::uint64_t>();
+    const auto count = in.get<std::uint64_t>();
+    if (count > in.remaining()) in.fail("more meshes than the file holds");
+    std::vector<MeshingWorker::Mesh> meshes(count);
+    for (auto& mesh : meshes) {
+      std::string file;
+      in.get(file);
+      mesh.file = file;
+      const auto times = in.get<std::array<double, 3>>();
+      mesh.time = times[0], mesh.volume = times[1], mesh.seconds = times[2];
+      const auto counts = in.get<std::array<std::uint64_t, 5>>();
+      mesh.particles = counts[0], mesh.triangles = counts[1], mesh.reused_particles = counts[2];
+      mesh.tiles = counts[3], mesh.remeshed_tiles = counts[4];
+    }
+    inserted_ = simulation.printed_mesh();
+    worker_.resume(std::move(meshes), skipped, inserted_);
   }
 
   void finish(const Simulation& simulation, RunSummary& summary) override {

@@ -2,6 +2,7 @@
 // error estimate) and, when the run ends, the state's totals, the volume balance, the nozzles' and the
 // robots' reports. After the printed mesh's observer, whose meshes it reads.
 #include <algorithm>
+#include <array>
 #include <chrono>
 
 #include "m3dp/sim/outputs/outputs.hpp"
@@ -15,6 +16,18 @@ class RunFigures final : public RunObserver {
  public:
   [[nodiscard]] bool is_output() const override { return false; }
   void start(const Simulation& /*simulation*/) override { wall_start_ = std::chrono::steady_clock::now(); }
+  // The sums go on across a resume; the wall time counts the run's segments, not the time it stood.
+  void save(StateWriter& out) override {
+    out.put(std::array<double, 7>{wall_seconds(), steps_, particle_steps_, density_iterations_, divergence_iterations_,
+                                  viscosity_iterations_, max_density_error_});
+  }
+  void resume(const Simulation& /*simulation*/, StateReader& in) override {
+    const auto values = in.get<std::array<double, 7>>();
+    wall_start_ = std::chrono::steady_clock::now() -
+                  std::chrono::duration_cast<std::chrono::steady_clock::duration>(std::chrono::duration<double>(values[0]));
+    steps_ = values[1], particle_steps_ = values[2], density_iterations_ = values[3];
+    divergence_iterations_ = values[4], viscosity_iterations_ = values[5], max_density_error_ = values[6];
+  }
 
   void observe(const Simulation& simulation, const StepReport& report) override {
     const sph::StepStats& stats = report.stats;
@@ -29,7 +42,7 @@ class RunFigures final : public RunObserver {
   void finish(const Simulation& simulation, RunSummary& summary) override {
     const auto& solver = simulation.solver();
     const auto& state = solver.state();
-    summary.wall_time = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count();
+    summary.wall_time = wall_seconds();
     summary.simulated_time = solver.time();
     summary.steps = state.step;
     summary.real_time_factor = summary.wall_time > 0 ? summary.simulated_time / summary.wall_time : 0;
@@ -85,7 +98,7 @@ class RunFigures final : public RunObserver {
     }
     summary.granular = solver.granular();
     if (steps_ > 0) {
-      // Over the steps of this run (one that continues another starts its sums anew).
+      // Over the steps of this run (a resumed one's included).
       summary.mean_density_iterations = density_iterations_ / steps_;
       summary.mean_divergence_iterations = divergence_iterations_ / steps_;
       summary.mean_viscosity_iterations = viscosity_iterations_ / steps_;
@@ -93,6 +106,8 @@ class RunFigures final : public RunObserver {
   }
 
  private:
+  [[nodiscard]] double wall_seconds() const { return std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count(); }
+
   std::chrono::steady_clock::time_point wall_start_;
   double steps_ = 0, particle_steps_ = 0, density_iterations_ = 0, divergence_iterations_ = 0, viscosity_iterations_ = 0;
   double max_density_error_ = 0;

@@ -71,6 +71,11 @@ std::vector<record::PointField> camera_point_fields() {
           {"green", 13, Type::uint8},  {"blue", 14, Type::uint8},    {"alpha", 15, Type::uint8},    {"segment", 16, Type::uint16}};
 }
 
+/// Where a message goes: the recording, the live stream.
+struct Sinks {
+  bool file = false, live = false;
+};
+
 class RunMessages final : public RunObserver {
  public:
   RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate,
@@ -92,17 +97,7 @@ class RunMessages final : public RunObserver {
       ids.calibration = add("calibration", "foxglove.CameraCalibration");
       camera_topics_.push_back(ids);
     }
-    if (!mcap_file.empty()) {
-      mcap_file_ = mcap_file;
-      mcap_.emplace(mcap_file);
-      std::map<std::string, std::uint16_t> schema_ids;
-      for (const TopicInfo& topic : topics_) {
-        auto found = schema_ids.find(topic.schema);
-        if (found == schema_ids.end())
-          found = schema_ids.emplace(topic.schema, mcap_->add_schema(topic.schema, "protobuf", record::schema_descriptor_set(topic.schema))).first;
-        mcap_channels_.push_back(mcap_->add_channel(topic.topic, "protobuf", found->second));
-      }
-    }
+    mcap_file_ = mcap_file;
     if (serve_port) {
       std::vector<record::ServerChannel> channels;
       for (const TopicInfo& topic : topics_)
@@ -121,12 +116,68 @@ class RunMessages final : public RunObserver {
 
   void start(const Simulation& simulation) override {
     const auto began = Clock::now();
-    wall_start_ = began;
+    if (!mcap_file_.empty()) {
+      mcap_.emplace(mcap_file_);
+      std::map<std::string, std::uint16_t> schema_ids;
+      for (const TopicInfo& topic : topics_) {
+        auto found = schema_ids.find(topic.schema);
+        if (found == schema_ids.end())
+          found = schema_ids.emplace(topic.schema, mcap_->add_schema(topic.schema, "protobuf", record::schema_descriptor_set(topic.schema))).first;
+        mcap_channels_.push_back(mcap_->add_channel(topic.topic, "protobuf", found->second));
+      }
+    }
+    prepare(simulation);
+    const Sinks sinks{mcap_.has_value(), live_ != nullptr};
+    send_scene(simulation, sinks);
+    next_frame_time_ = next_multiple(simulation.time(), period_);
+    write_frame(simulation, nullptr, sinks);
+    for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
+      next_camera_time_.push_back(next_multiple(simulation.time(), 1 / simulation.cameras().settings(c).update_rate));
+      write_camera(simulation, c, sinks);
+    }
+    encode_seconds_ += seconds_since(began);
+  }
+
+  // A checkpoint: the recording flushed and its bookkeeping; a resumed run cuts run.mcap back to it.
+  void save(StateWriter& out) override {
+    out.put(mcap_.has_value());
+    if (mcap_) mcap_->save(out);
+    out.put(mcap_channels_);
+    out.put(next_frame_time_);
+    out.put(next_camera_time_);
+    out.put(nozzle_extruding_);
+    out.put(static_cast<std::uint64_t>(mesh_version_));
+    out.put(last_time_);
+    out.put(encode_seconds_);
+  }
+  void resume(const Simulation& simulation, StateReader& in) override {
+    if (in.get<bool>() != !mcap_file_.empty()) in.fail("a recording where the run had none, or none where it had one");
+    if (!mcap_file_.empty()) mcap_.emplace(mcap_file_, in);
+    in.get(mcap_channels_);
+    prepare(simulation);
+    in.get(next_frame_time_);
+    in.get(next_camera_time_);
+    in.get(nozzle_extruding_);
+    if (next_camera_time_.size() != camera_topics_.size() || nozzle_extruding_.size() != layout_.nozzles.size())
+      in.fail("another set of cameras or nozzles than the scene has");
+    mesh_version_ = in.get<std::uint64_t>();
+    in.get(last_time_);
+    in.get(encode_seconds_);
+    if (live_) send_scene(simulation, Sinks{false, true});  // the recording has it; the live stream keeps it for its clients
+  }
+
+ private:
+  /// What the messages are made from: the scene's layout, and the clocks of the real-time factor.
+  void prepare(const Simulation& simulation) {
+    wall_start_ = Clock::now();
     time_start_ = simulation.time();
     layout_ = world_layout(simulation);
     nozzle_extruding_.assign(layout_.nozzles.size(), -1);
+    last_camera_live_.assign(camera_topics_.size(), Clock::time_point{});
+  }
 
-    // The scene: bodies in their frames (frame-locked, so /tf moves them), nozzles, whole paths.
+  /// The scene: bodies in their frames (frame-locked, so /tf moves them), nozzles, whole paths.
+  void send_scene(const Simulation& simulation, const Sinks& sinks) {
     std::vector<record::SceneEntity> entities;
     for (const auto& body : layout_.bodies) {
       record::SceneEntity entity{body.name, body.own_frame() ? body.name : "world", kind_color(body.kind), &body.triangles, {}, 0, {}};
@@ -141,18 +192,10 @@ class RunMessages final : public RunObserver {
       entity.line_strips.push_back(std::move(strip));
       entities.push_back(std::move(entity));
     }
-    const Sinks sinks{mcap_.has_value(), live_ != nullptr};
     send(sinks, Topic::scene, nanoseconds(simulation.time()), record::encode_scene_update(simulation.time(), entities), "scene");
-    next_frame_time_ = next_multiple(simulation.time(), period_);
-    write_frame(simulation, nullptr, sinks);
-    last_camera_live_.assign(camera_topics_.size(), Clock::time_point{});
-    for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
-      next_camera_time_.push_back(next_multiple(simulation.time(), 1 / simulation.cameras().settings(c).update_rate));
-      write_camera(simulation, c, sinks);
-    }
-    encode_seconds_ += seconds_since(began);
   }
 
+ public:
   void observe(const Simulation& simulation, const StepReport& report) override {
     const auto began = Clock::now();
     const double time = simulation.time();
@@ -188,9 +231,6 @@ class RunMessages final : public RunObserver {
   }
 
  private:
-  struct Sinks {
-    bool file = false, live = false;
-  };
 
   static double seconds_since(Clock::time_point began) { return std::chrono::duration<double>(Clock::now() - began).count(); }
   /// The first multiple of `period` after `time`.

@@ -13,6 +13,7 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/outputs/partial_text_file.hpp"
 #include "m3dp/sim/simulation.hpp"
 
 namespace m3dp::sim::outputs {
@@ -58,17 +59,11 @@ class StateHasher {
 
 class StateHash final : public RunObserver {
  public:
-  explicit StateHash(const std::filesystem::path& output_directory)
-      : partial_(output_directory / "hashes.csv.partial"), final_(output_directory / "hashes.csv") {
-    file_ = std::fopen(partial_.c_str(), "w");
-    if (!file_) throw Error("cannot write " + partial_.string());
-    std::fputs("step,time_s,fluid,bodies,robots,state\n", file_);
-  }
-  ~StateHash() override {
-    if (file_) std::fclose(file_);
-  }
-  StateHash(const StateHash&) = delete;
-  StateHash& operator=(const StateHash&) = delete;
+  explicit StateHash(const std::filesystem::path& output_directory) : file_(output_directory / "hashes.csv") {}
+
+  void start(const Simulation& /*simulation*/) override { file_.create("step,time_s,fluid,bodies,robots,state\n"); }
+  void save(StateWriter& out) override { file_.save(out); }
+  void resume(const Simulation& /*simulation*/, StateReader& in) override { file_.resume(in); }
 
   void observe(const Simulation& simulation, const StepReport& /*report*/) override {
     const auto& fluid = simulation.solver().fluid();
@@ -94,21 +89,18 @@ class StateHash final : public RunObserver {
     const std::array<std::uint64_t, 3> parts{fluid_hash.value(), bodies_hash.value(), robots_hash.value()};
     state_hash.add(std::span<const std::uint64_t>(parts));
     const std::int64_t step = simulation.solver().state().step;
-    fmt::print(file_, "{},{:.9g},{:016x},{:016x},{:016x},{:016x}\n", step, simulation.time(), parts[0], parts[1], parts[2],
+    fmt::print(file_.get(), "{},{:.9g},{:016x},{:016x},{:016x},{:016x}\n", step, simulation.time(), parts[0], parts[1], parts[2],
                state_hash.value());
     fmt::print("hash {} {:.9g} {:016x}\n", step, simulation.time(), state_hash.value());
   }
 
   void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) override {
-    std::fclose(file_);
-    file_ = nullptr;
+    file_.finish();
     std::fflush(stdout);
-    std::filesystem::rename(partial_, final_);
   }
 
  private:
-  std::filesystem::path partial_, final_;
-  std::FILE* file_ = nullptr;
+  PartialTextFile file_;
 };
 
 }  // namespace

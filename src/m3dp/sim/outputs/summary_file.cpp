@@ -146,7 +146,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
 
 class SummaryFile final : public RunObserver {
  public:
-  explicit SummaryFile(std::filesystem::path output_directory) : output_directory_(std::move(output_directory)) {}
+  SummaryFile(const Simulation& simulation, std::filesystem::path output_directory)
+      : simulation_(&simulation), output_directory_(std::move(output_directory)) {}
   [[nodiscard]] double period() const override { return 0; }
   [[nodiscard]] bool is_output() const override { return false; }
   void start(const Simulation& simulation) override {
@@ -154,21 +155,35 @@ class SummaryFile final : public RunObserver {
     if (std::filesystem::exists(simulation.scene().file))
       std::filesystem::copy_file(simulation.scene().file, output_directory_ / "scene.sdf",
                                  std::filesystem::copy_options::overwrite_existing, ignored);
+    write_running(simulation);
   }
+  // While it runs, summary.json says so (never an earlier run's summary in the same folder), and how
+  // far the last checkpoint got.
+  void save(StateWriter& /*out*/) override { write_running(*simulation_); }
+  void resume(const Simulation& simulation, StateReader& /*in*/) override { write_running(simulation); }
   void observe(const Simulation& /*simulation*/, const StepReport& /*report*/) override {}
   void finish(const Simulation& simulation, RunSummary& summary) override {
     io::write_text_atomically(output_directory_ / "summary.json", summary_json(summary, simulation).dump(2) + "\n");
   }
 
  private:
+  void write_running(const Simulation& simulation) const {
+    const nlohmann::json running = {{"status", "running"},
+                                    {"scene", simulation.scene().file.string()},
+                                    {"simulated_time_s", simulation.time()},
+                                    {"steps", simulation.solver().state().step}};
+    io::write_text_atomically(output_directory_ / "summary.json", running.dump(2) + "\n");
+  }
+
+  const Simulation* simulation_;
   std::filesystem::path output_directory_;
 };
 
 }  // namespace
 
-std::unique_ptr<RunObserver> make_summary_file(Simulation& /*simulation*/, const RunOptions& options) {
+std::unique_ptr<RunObserver> make_summary_file(Simulation& simulation, const RunOptions& options) {
   if (options.output_directory.empty()) return nullptr;
-  return std::make_unique<SummaryFile>(options.output_directory);
+  return std::make_unique<SummaryFile>(simulation, options.output_directory);
 }
 
 }  // namespace m3dp::sim::outputs

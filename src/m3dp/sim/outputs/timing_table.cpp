@@ -1,6 +1,6 @@
 // timing.csv: a row per step with its time step, iterations, density error and the milliseconds of
 // every stage (the solver's table sph::kStageNames, then the coupling, the world and the outputs).
-// Written as timing.csv.partial during the run and renamed when the run ends.
+// Written as timing.csv.partial during the run and renamed when the run ends (partial_text_file.hpp).
 #include <fmt/format.h>
 #include <fmt/os.h>
 
@@ -9,6 +9,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
+#include "m3dp/sim/outputs/partial_text_file.hpp"
 #include "m3dp/sim/simulation.hpp"
 
 namespace m3dp::sim::outputs {
@@ -17,43 +18,35 @@ namespace {
 
 class TimingTable final : public RunObserver {
  public:
-  explicit TimingTable(const std::filesystem::path& output_directory)
-      : partial_(output_directory / "timing.csv.partial"), final_(output_directory / "timing.csv") {
-    file_ = std::fopen(partial_.c_str(), "w");
-    if (!file_) throw Error("cannot write " + partial_.string());
+  explicit TimingTable(const std::filesystem::path& output_directory) : file_(output_directory / "timing.csv") {}
+
+  void start(const Simulation& /*simulation*/) override {
     std::string header = "step,time_s,dt_s,particles,density_iterations,divergence_iterations,viscosity_iterations,density_error";
     for (const auto name : sph::kStageNames) header += fmt::format(",ms_{}", name);
     // ms_cameras: the cameras' rendering, a part of ms_output (the outputs that asked for images).
     header += ",ms_coupling,ms_world,ms_output,ms_cameras,ms_total\n";
-    std::fputs(header.c_str(), file_);
+    file_.create(header);
   }
-  ~TimingTable() override {
-    if (file_) std::fclose(file_);
-  }
-  TimingTable(const TimingTable&) = delete;
-  TimingTable& operator=(const TimingTable&) = delete;
+  void save(StateWriter& out) override { file_.save(out); }
+  void resume(const Simulation& /*simulation*/, StateReader& in) override { file_.resume(in); }
 
   void observe(const Simulation& simulation, const StepReport& report) override {
+    std::FILE* file = file_.get();
     const sph::StepStats& stats = report.stats;
     const auto& solver = simulation.solver();
-    fmt::print(file_, "{},{:.8g},{:.6g},{},{},{},{},{:.4g}", solver.state().step, solver.time(), stats.time_step,
+    fmt::print(file, "{},{:.8g},{:.6g},{},{},{},{},{:.4g}", solver.state().step, solver.time(), stats.time_step,
                solver.fluid().size(), stats.density_iterations, stats.divergence_iterations, stats.viscosity_iterations,
                stats.density_error);
-    for (const double ms : stats.stage_ms.ms) fmt::print(file_, ",{:.4f}", ms);
+    for (const double ms : stats.stage_ms.ms) fmt::print(file, ",{:.4f}", ms);
     const double camera_ms = simulation.scene().cameras.empty() ? 0.0 : simulation.cameras().take_render_ms();
-    fmt::print(file_, ",{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n", simulation.last_coupling_ms(), simulation.last_world_ms(), report.output_ms,
+    fmt::print(file, ",{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n", simulation.last_coupling_ms(), simulation.last_world_ms(), report.output_ms,
                camera_ms, stats.stage_ms.total() + simulation.last_coupling_ms() + simulation.last_world_ms() + report.output_ms);
   }
 
-  void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) override {
-    std::fclose(file_);
-    file_ = nullptr;
-    std::filesystem::rename(partial_, final_);
-  }
+  void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) override { file_.finish(); }
 
  private:
-  std::filesystem::path partial_, final_;
-  std::FILE* file_ = nullptr;
+  PartialTextFile file_;
 };
 
 }  // namespace

@@ -33,6 +33,20 @@ class WorldFrames final : public RunObserver {
   [[nodiscard]] double period() const override { return period_; }
 
   void start(const Simulation& simulation) override {
+    write_static(simulation);
+    write(simulation);
+  }
+  void observe(const Simulation& simulation, const StepReport& /*report*/) override { write(simulation); }
+  void finish(const Simulation& /*simulation*/, RunSummary& summary) override { summary.world_frames_written = collection_.size(); }
+  void save(StateWriter& out) override { collection_.save(out); }
+  void resume(const Simulation& simulation, StateReader& in) override {
+    write_static(simulation);
+    collection_.load(in);
+  }
+
+ private:
+  /// The layout, and the files of what does not move (static bodies, the paths).
+  void write_static(const Simulation& simulation) {
     layout_ = world_layout(simulation);
     std::filesystem::create_directories(folder_ / "static");
     for (const auto& body : layout_.bodies) {
@@ -47,12 +61,8 @@ class WorldFrames final : public RunObserver {
       write_path(file, path);
       static_blocks_.push_back({name, file});
     }
-    write(simulation);
   }
-  void observe(const Simulation& simulation, const StepReport& /*report*/) override { write(simulation); }
-  void finish(const Simulation& /*simulation*/, RunSummary& summary) override { summary.world_frames_written = collection_.size(); }
 
- private:
   void write(const Simulation& simulation) {
     const WorldPoses poses = world_poses(simulation, layout_);
     const auto frame_folder = folder_ / fmt::format("{:06}", collection_.size());

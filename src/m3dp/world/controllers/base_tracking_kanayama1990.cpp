@@ -38,3 +38,17 @@ void BaseTrackingKanayama1990::after_step(RobotIo& robot) {
 }
 
 }  // namespace m3dp::world
+
+namespace m3dp::world {
+
+void BaseTrackingKanayama1990::save(StateWriter& out) const {
+  out.put(reference_heading_);
+  out.put(last_target_);
+}
+
+void BaseTrackingKanayama1990::load(StateReader& in) {
+  in.get(reference_heading_);
+  in.get(last_target_);
+}
+
+}  // namespace m3dp::world

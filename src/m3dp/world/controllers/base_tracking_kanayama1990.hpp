@@ -16,6 +16,8 @@ class BaseTrackingKanayama1990 final : public Controller {
   void command(RobotIo& robot, double step, double next_time, double chunk_fraction) override;
   /// The true base's distance from the path's point of this step.
   void after_step(RobotIo& robot) override;
+  void save(StateWriter& out) const override;
+  void load(StateReader& in) override;
 
  private:
   BaseTrajectory path_;

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <utility>
 
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/world/statistics.hpp"
 
 namespace m3dp::world {
@@ -59,6 +60,9 @@ class Controller {
   virtual void after_step(RobotIo& /*robot*/) {}
   /// At a chunk's end.
   virtual void end_chunk(RobotIo& /*robot*/) {}
+  /// A checkpoint: what it carries from one world step to the next (between chunks), and back.
+  virtual void save(StateWriter& /*out*/) const {}
+  virtual void load(StateReader& /*in*/) {}
 };
 
 }  // namespace m3dp::world

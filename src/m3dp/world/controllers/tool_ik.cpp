@@ -40,3 +40,29 @@ void ToolIk::end_chunk(RobotIo& robot) {
 }
 
 }  // namespace m3dp::world
+
+namespace m3dp::world {
+
+void ToolIk::save(StateWriter& out) const {
+  out.put(static_cast<std::uint64_t>(tools_.size()));
+  for (const FollowedTool& tool : tools_) out.put(tool.target);
+  auto put_vector = [&](const Eigen::VectorXd& vector) {
+    out.put(std::vector<double>(vector.data(), vector.data() + vector.size()));
+  };
+  put_vector(chunk_start_);
+  put_vector(chunk_end_);
+}
+
+void ToolIk::load(StateReader& in) {
+  if (in.get<std::uint64_t>() != tools_.size()) in.fail("a robot with a different number of tools");
+  for (FollowedTool& tool : tools_) in.get(tool.target);
+  auto get_vector = [&](Eigen::VectorXd& vector) {
+    std::vector<double> values;
+    in.get(values);
+    vector = Eigen::Map<const Eigen::VectorXd>(values.data(), static_cast<Eigen::Index>(values.size()));
+  };
+  get_vector(chunk_start_);
+  get_vector(chunk_end_);
+}
+
+}  // namespace m3dp::world

@@ -18,6 +18,8 @@ class ToolIk final : public Controller {
   void command(RobotIo& robot, double step, double next_time, double chunk_fraction) override;
   /// The distance of each tool from its target, where the IK aimed it (the chunk's end).
   void end_chunk(RobotIo& robot) override;
+  void save(StateWriter& out) const override;
+  void load(StateReader& in) override;
 
  private:
   struct FollowedTool {
