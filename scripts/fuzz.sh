@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
-# Builds the readers with AddressSanitizer and UndefinedBehaviorSanitizer (clang, build-fuzz/), runs
-# the G-code reader's unit tests under them, then fuzzes each reader for SECONDS (default 30) from
-# seeds the project wrote (its G-code, waypoint CSV, meshes and particle frames) and the corpus of
+# Builds the modules that read users' files (core, material, sph, toolpath, io, scene, world) with
+# AddressSanitizer and UndefinedBehaviorSanitizer (clang, build-fuzz/), runs their unit tests under
+# them, then fuzzes each reader for SECONDS (default 30) from seeds the project wrote (its scenes,
+# URDF robots, G-code, waypoint CSV, and what its mesh and frame writers write) and the corpus of
 # earlier runs. Exits non-zero on any finding: libFuzzer leaves the input as build-fuzz/crash-*.
 # Usage: scripts/fuzz.sh [SECONDS] [TARGET...]   (make test runs it for 60 s a target)
 set -euo pipefail
@@ -9,7 +10,7 @@ cd "$(dirname "$0")/.."
 seconds=${1:-30}
 shift || true
 targets=("$@")
-[ ${#targets[@]} -gt 0 ] || targets=(fuzz_gcode fuzz_waypoints fuzz_mesh fuzz_particles)
+[ ${#targets[@]} -gt 0 ] || targets=(fuzz_gcode fuzz_waypoints fuzz_mesh fuzz_particles fuzz_scene fuzz_urdf)
 build=build-fuzz
 if [ ! -f $build/build.ninja ]; then
   CXX=clang++ cmake -S . -B $build -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DM3DP_FUZZ=ON > /dev/null
@@ -17,13 +18,19 @@ fi
 cmake --build $build -j "$(nproc)" > $build/build.log 2>&1 || { tail -n 30 $build/build.log; exit 1; }
 
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1 UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
-# The reader's unit tests under the sanitizers (the sliced-profile test is in the main build's suite).
-$build/test_gcode --gtest_filter=-*RealPrinterProfiles* --gtest_brief=1
+# The modules' unit tests under the sanitizers (the sliced-profile test is in the main build's suite).
+for test in test_gcode test_toolpath test_mesh_io test_kernels test_neighbor_search test_boundary_sampling test_rheology test_scene; do
+  $build/$test --gtest_filter=-*RealPrinterProfiles* --gtest_brief=1 > $build/$test.log 2>&1 \
+    || { tail -n 40 $build/$test.log; echo "fuzz.sh: $test failed under the sanitizers"; exit 1; }
+  echo "sanitizers: $test: $(grep -E '^\[  PASSED  \]' $build/$test.log)"
+done
 
 # Seeds: the project's own files, and what its writers write.
 seeds=$build/seeds
-rm -rf "$seeds" && mkdir -p "$seeds/fuzz_gcode" "$seeds/fuzz_waypoints"
+rm -rf "$seeds" && mkdir -p "$seeds/fuzz_gcode" "$seeds/fuzz_waypoints" "$seeds/fuzz_scene" "$seeds/fuzz_urdf"
 cp scenes/gcode/*.gcode "$seeds/fuzz_gcode/"
+cp scenes/*.sdf tests/data/*.sdf "$seeds/fuzz_scene/"
+find models -name '*.urdf' -exec cp {} "$seeds/fuzz_urdf/" \;
 printf 'x,y,z,speed,extrude\n0,0,0.1,0.05,1\n0.1,0,0.1,0.05,1\n0.1,0.1,0.1,0.05,0\n' > "$seeds/fuzz_waypoints/seed.csv"
 find scenes tests -name '*.csv' -size -64k -exec cp {} "$seeds/fuzz_waypoints/" \;
 $build/fuzz/fuzz_seeds "$seeds/generated"

@@ -164,8 +164,7 @@ struct FieldInputs {
 
 /// A reconstruction method: its field and how its fields behave.
 struct FieldMethod {
-  Method method;
-  std::string_view name;
+  Method method;  // its name is surface.cpp's (method_name)
   // The field is a volume fraction, stored negated (surface at −iso_level; the fields of two particle
   // sets add up); otherwise a level set with its surface at 0 (two sets combine by union, min).
   bool volume_fraction = false;

@@ -499,24 +499,6 @@ const FieldMethod& field_method(Method method) {
   throw Error("surface reconstruction: unknown method");
 }
 
-std::string_view method_name(Method method) {
-  for (const FieldMethod* entry : kFieldMethods)
-    if (entry->method == method) return entry->name;
-  return "unknown";
-}
-
-std::optional<Method> parse_method(std::string_view name) {
-  for (const FieldMethod* entry : kFieldMethods)
-    if (entry->name == name) return entry->method;
-  return std::nullopt;
-}
-
-std::string method_names() {
-  std::string names;
-  for (const FieldMethod* entry : kFieldMethods) names += (names.empty() ? "" : ", ") + std::string(entry->name);
-  return names;
-}
-
 namespace {
 /// Particle list in the form ParticlesToLevelSet reads (the reference the tests compare against).
 struct ParticleList {

@@ -2,12 +2,18 @@
 
 #include <array>
 #include <cmath>
+#include <utility>
 
 #include "m3dp/core/error.hpp"
 
 namespace m3dp::surface {
 
 namespace {
+/// Every method's name (what scenes and `m3dp mesh --method` say), in Method's order.
+constexpr std::array<std::pair<Method, std::string_view>, 4> kMethodNames{{{Method::spherical, "spherical"},
+                                                                           {Method::sph_blobby, "sph_blobby"},
+                                                                           {Method::zhu_bridson, "zhu_bridson"},
+                                                                           {Method::anisotropic, "anisotropic"}}};
 /// r̄ that puts the Zhu–Bridson surface of a flat cubic-lattice block (spacing 2r) one radius beyond
 /// its last layer of centres, i.e. on the block's geometric face. Averaged over points above a
 /// lattice site, an edge midpoint and a cell centre.
@@ -53,6 +59,24 @@ SurfaceSettings SurfaceSettings::resolved() const {
   if (out.anisotropy_neighborhood == 0) out.anisotropy_neighborhood = Real(1.5) * out.kernel_radius;
   if (out.zhu_bridson_radius == 0) out.zhu_bridson_radius = calibrated_zhu_bridson_radius(r, out.kernel_radius);
   return out;
+}
+
+std::string_view method_name(Method method) {
+  for (const auto& [entry, name] : kMethodNames)
+    if (entry == method) return name;
+  return "unknown";
+}
+
+std::optional<Method> parse_method(std::string_view name) {
+  for (const auto& [method, entry] : kMethodNames)
+    if (entry == name) return method;
+  return std::nullopt;
+}
+
+std::string method_names() {
+  std::string names;
+  for (const auto& [method, name] : kMethodNames) names += (names.empty() ? "" : ", ") + std::string(name);
+  return names;
 }
 
 }  // namespace m3dp::surface

@@ -173,6 +173,6 @@ openvdb::FloatGrid::Ptr anisotropic_field(std::span<const Vec3> positions, const
 
 }  // namespace
 
-extern const FieldMethod kAnisotropicMethod{Method::anisotropic, "anisotropic", true, true, true, false, anisotropic_field};
+extern const FieldMethod kAnisotropicMethod{Method::anisotropic, true, true, true, false, anisotropic_field};
 
 }  // namespace m3dp::surface

@@ -31,6 +31,6 @@ openvdb::FloatGrid::Ptr blobby_field(std::span<const Vec3> positions, const Surf
 
 }  // namespace
 
-extern const FieldMethod kSphBlobbyMethod{Method::sph_blobby, "sph_blobby", true, true, false, false, blobby_field};
+extern const FieldMethod kSphBlobbyMethod{Method::sph_blobby, true, true, false, false, blobby_field};
 
 }  // namespace m3dp::surface

@@ -173,6 +173,6 @@ openvdb::FloatGrid::Ptr spherical_field(std::span<const Vec3> positions, const S
 
 }  // namespace
 
-extern const FieldMethod kSphericalMethod{Method::spherical, "spherical", false, true, false, true, spherical_field};
+extern const FieldMethod kSphericalMethod{Method::spherical, false, true, false, true, spherical_field};
 
 }  // namespace m3dp::surface

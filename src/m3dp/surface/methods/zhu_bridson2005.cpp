@@ -72,6 +72,6 @@ openvdb::FloatGrid::Ptr zhu_bridson_field(std::span<const Vec3> positions, const
 
 }  // namespace
 
-extern const FieldMethod kZhuBridsonMethod{Method::zhu_bridson, "zhu_bridson", false, false, false, false, zhu_bridson_field};
+extern const FieldMethod kZhuBridsonMethod{Method::zhu_bridson, false, false, false, false, zhu_bridson_field};
 
 }  // namespace m3dp::surface
