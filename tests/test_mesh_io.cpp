@@ -12,6 +12,7 @@
 #include <string>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/io/atomic_file.hpp"
 #include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/particle_reader.hpp"
 #include "m3dp/io/vtk_binary.hpp"
@@ -470,3 +471,19 @@ TEST(Base64, MatchesRfc4648Vectors) {
 }
 
 }  // namespace
+
+TEST_F(MeshIo, WhatAKilledWriterLeftIsRemovedAndNothingElse) {
+  // write_file_atomically's temporary names (NAME.tmpPID), as a SIGKILL leaves them; a resumed run clears them.
+  fs::create_directories(folder_ / "particles");
+  write("particles/particles_000003.vtu.tmp4242", "half a frame");
+  write("run.mcap.tmp17", "");
+  write("particles/particles_000002.vtu", "a frame");
+  write("notes.tmp", "the user's");
+  write("data.tmp12x", "the user's");
+  EXPECT_EQ(m3dp::io::remove_leftover_temporaries(folder_), 2u);
+  EXPECT_FALSE(fs::exists(folder_ / "particles/particles_000003.vtu.tmp4242"));
+  EXPECT_FALSE(fs::exists(folder_ / "run.mcap.tmp17"));
+  EXPECT_TRUE(fs::exists(folder_ / "particles/particles_000002.vtu"));
+  EXPECT_TRUE(fs::exists(folder_ / "notes.tmp"));
+  EXPECT_TRUE(fs::exists(folder_ / "data.tmp12x"));
+}

@@ -4,7 +4,8 @@
 # with `m3dp run --resume`. The resumed run must end bit for bit as the one never stopped: the same
 # state hash at every step, the same particle, world, mesh and camera files byte for byte, the same
 # messages in run.mcap (read by @mcap/core, its indexes whole), the same summary and timing rows
-# apart from wall-clock figures. After every kill, the files in the folder are valid as they are.
+# apart from wall-clock figures. After every kill, the files in the folder are valid as they are,
+# and what a writer killed mid-file left is cleared by the resume.
 # Also: a folder without a checkpoint, and a scene changed since, are refused with the reason.
 set -euo pipefail
 m3dp=$1 scene=$2 urdf=$3 out=$4
@@ -50,6 +51,8 @@ assert not os.path.exists(f"{folder}/timing.csv"), "a killed run has timing.csv 
 print(f"killed after step {steps}: summary says running at {summary['simulated_time_s']:.3f} s; every frame listed is whole")
 PY
 done
+# What a writer killed mid-file leaves (its temporary name): the resumed run clears it.
+echo "half a frame" > "$killed/particles/particles_000045.vtu.tmp99999"
 "$m3dp" run --resume "$killed" --quiet > "$out/resumed.log"
 grep -q "Run completed" "$out/resumed.log" || { cat "$out/resumed.log"; echo "FAIL: the resumed run did not complete"; exit 1; }
 

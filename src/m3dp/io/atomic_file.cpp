@@ -32,6 +32,22 @@ void write_file_atomically(const std::filesystem::path& target, const std::funct
   }
 }
 
+std::size_t remove_leftover_temporaries(const std::filesystem::path& folder) {
+  std::size_t removed = 0;
+  std::error_code error;
+  for (auto it = std::filesystem::recursive_directory_iterator(folder, error); !error && it != std::filesystem::recursive_directory_iterator();
+       it.increment(error)) {
+    if (!it->is_regular_file(error)) continue;
+    const std::string extension = it->path().extension().string();  // ".tmp12345"
+    if (extension.size() > 4 && extension.starts_with(".tmp") &&
+        extension.find_first_not_of("0123456789", 4) == std::string::npos) {
+      std::filesystem::remove(it->path(), error);
+      ++removed;
+    }
+  }
+  return removed;
+}
+
 void write_text_atomically(const std::filesystem::path& target, const std::string& text) {
   write_file_atomically(target, [&](std::ostream& stream) { stream << text; });
 }

@@ -12,6 +12,10 @@ namespace m3dp::io {
 void write_file_atomically(const std::filesystem::path& target, const std::function<void(std::ostream&)>& write,
                            bool binary = false);
 
+/// Removes what writers killed mid-write left under `folder` (their temporary names), e.g. before a
+/// run resumes there. Returns how many.
+std::size_t remove_leftover_temporaries(const std::filesystem::path& folder);
+
 /// Same for a whole string.
 void write_text_atomically(const std::filesystem::path& target, const std::string& text);
 

@@ -77,7 +77,9 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
   if (checkpoint.checkpoint_period > 0 && options.output_directory.empty())
     throw Error("checkpoints need an output folder: the run writes checkpoint.bin there");
   if (options.resume) {
-    // The caller made the simulation from the checkpoint's scene, with its options.
+    // The caller made the simulation from the checkpoint's scene, with its options. Files a killed
+    // writer left half-written under temporary names go first.
+    io::remove_leftover_temporaries(options.output_directory);
     const std::string bytes = read_checkpoint_bytes(options.output_directory);
     StateReader in(bytes, (options.output_directory / kCheckpointFile).string());
     CheckpointRun saved;
