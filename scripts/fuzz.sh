@@ -36,23 +36,36 @@ find scenes tests -name '*.csv' -size -64k -exec cp {} "$seeds/fuzz_waypoints/" 
 $build/fuzz/fuzz_seeds "$seeds/generated"
 mv "$seeds/generated/mesh" "$seeds/fuzz_mesh" && mv "$seeds/generated/particles" "$seeds/fuzz_particles"
 
-status=0
-for target in "${targets[@]}"; do
-  corpus=$build/corpus/$target
-  mkdir -p "$corpus"
-  log=$build/$target.log
+# One target: its line of result in $build/$target.result, non-zero on a finding.
+fuzz_target() {
+  local target=$1 log=$build/$1.log max_len=16384
+  mkdir -p "$build/corpus/$target"
   # Bytes: enough for every format's structure; G-code's meaning is line by line, and its seed's
   # 7,000 lines would slow each run tenfold.
-  max_len=16384
   [ "$target" = fuzz_gcode ] && max_len=2048
   if (cd $build && ./fuzz/$target -max_total_time="$seconds" -rss_limit_mb=2048 -timeout=10 -max_len=$max_len \
         -print_final_stats=1 "corpus/$target" "seeds/$target") > "$log" 2>&1; then
     runs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log")
-    echo "fuzz: $target: $runs inputs in ${seconds} s, no finding"
+    echo "fuzz: $target: $runs inputs in ${seconds} s, no finding" > "$build/$target.result"
   else
-    echo "fuzz: $target: FINDING (input saved as build-fuzz/crash-* or leak-*/oom-*/timeout-*):"
-    grep -E "ERROR|runtime error|==ABORTING|SUMMARY|uncaught|terminate" "$log" | head -n 20
-    status=1
+    { echo "fuzz: $target: FINDING (input saved as build-fuzz/crash-* or leak-*/oom-*/timeout-*):"
+      # The report and its stack, so that a CI log alone says where it failed.
+      sed -n '/ERROR\|runtime error\|terminate called\|uncaught/,/SUMMARY/p' "$log" | head -n 60
+    } > "$build/$target.result"
+    return 1
   fi
+}
+
+# As many targets at once as there are cores: each still has its SECONDS of a core.
+for target in "${targets[@]}"; do
+  rm -f "$build/$target.result"
+  while [ "$(jobs -rp | wc -l)" -ge "$(nproc)" ]; do wait -n || true; done
+  fuzz_target "$target" &
+done
+wait || true
+status=0
+for target in "${targets[@]}"; do
+  if [ -f "$build/$target.result" ]; then cat "$build/$target.result"; else echo "fuzz: $target: no result"; status=1; fi
+  grep -q FINDING "$build/$target.result" 2>/dev/null && status=1
 done
 exit $status

@@ -452,6 +452,34 @@ TEST_F(MeshIo, APointCountTheArraysCannotHoldIsAnError) {
   }
 }
 
+TEST_F(MeshIo, APlyVertexCountTheDataCannotHoldIsAnError) {
+  // Found by fuzz_particles in CI: a PLY header's vertex count too large for size_t (read as its
+  // maximum) was allocated before the data was looked at, and threw std::length_error.
+  const std::string binary =
+      "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999999999999999\n"
+      "property float x\nproperty float y\nproperty float z\nend_header\n" + std::string(24, '\0');
+  const std::string ascii =
+      "ply\nformat ascii 1.0\nelement vertex 4000000000\nproperty float x\nproperty float y\n"
+      "property float z\nend_header\n0 0 0\n1 1 1\n";
+  for (const auto& [name, text, expected] :
+       {std::tuple{"huge.ply", binary, "vertices declared, but the 24 bytes after the header hold at most 2"},
+        std::tuple{"huge_ascii.ply", ascii, "4000000000 vertices declared, but the 12 bytes after the header hold at most 2"}}) {
+    try {
+      (void)m3dp::io::read_particle_frame(write(name, text));
+      ADD_FAILURE() << name << " was read";
+    } catch (const InputError& error) {
+      EXPECT_NE(std::string(error.what()).find(expected), std::string::npos) << error.what();
+      EXPECT_NE(std::string(error.what()).find(name), std::string::npos) << error.what();
+    }
+  }
+  // The counts that fit are still read.
+  const std::string fitting = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                              "property float z\nend_header\n0 0 0\n1 2 3\n";
+  const auto frame = m3dp::io::read_particle_frame(write("two.ply", fitting));
+  ASSERT_EQ(frame.positions.size(), 2u);
+  EXPECT_NEAR(frame.positions[1].z(), 3.0, 1e-6);
+}
+
 TEST(Base64, MatchesRfc4648Vectors) {
   // RFC 4648 section 10.
   const std::pair<const char*, const char*> vectors[] = {{"", ""},         {"f", "Zg=="},         {"fo", "Zm8="},

@@ -233,6 +233,7 @@ ParticleFrame read_ply_points(const fs::path& file) {
       properties.push_back(property);
     }
   }
+  if (format.empty()) fail(file, 0, "a PLY header without its 'format' line; expected ascii or binary_little_endian");
   int axis_property[3] = {-1, -1, -1};
   for (std::size_t p = 0; p < properties.size(); ++p)
     for (int k = 0; k < 3; ++k)
@@ -240,9 +241,24 @@ ParticleFrame read_ply_points(const fs::path& file) {
   if (!vertex_seen || axis_property[0] < 0 || axis_property[1] < 0 || axis_property[2] < 0)
     fail(file, 0, "expected a vertex element with x, y and z properties");
 
+  // Nothing is allocated for a count the data cannot hold: ascii takes at least two characters a
+  // value, binary a record of its properties' bytes a vertex.
+  const std::size_t data_start = bytes.find('\n', header_end);
+  const std::size_t data = data_start == std::string::npos ? bytes.size() : data_start + 1;
+  const std::size_t data_bytes = bytes.size() - data;
+  std::size_t stride = 0;
+  std::vector<std::size_t> offset(properties.size());
+  for (std::size_t p = 0; p < properties.size(); ++p) {
+    offset[p] = stride;
+    stride += ply_type_bytes(properties[p].type);
+  }
+  const std::size_t capacity = format == "ascii" ? (data_bytes / 2 + 1) / properties.size() : data_bytes / stride;
+  if (vertex_count > capacity)
+    fail(file, 0, fmt::format("{} vertices declared, but the {} bytes after the header hold at most {} (truncated?)",
+                              vertex_count, data_bytes, capacity));
+
   ParticleFrame frame;
   frame.positions.resize(vertex_count);
-  const std::size_t data = bytes.find('\n', header_end) + 1;
   if (format == "ascii") {
     std::istringstream values(bytes.substr(data));
     for (std::size_t i = 0; i < vertex_count; ++i)
@@ -254,13 +270,6 @@ ParticleFrame read_ply_points(const fs::path& file) {
       }
     return frame;
   }
-  std::size_t stride = 0;
-  std::vector<std::size_t> offset(properties.size());
-  for (std::size_t p = 0; p < properties.size(); ++p) {
-    offset[p] = stride;
-    stride += ply_type_bytes(properties[p].type);
-  }
-  if (data + vertex_count * stride > bytes.size()) fail(file, 0, "the file ends inside the vertex data (truncated?)");
   for (int k = 0; k < 3; ++k) {
     const Property& property = properties[axis_property[k]];
     if (property.type != "float" && property.type != "float32" && property.type != "double" && property.type != "float64")
