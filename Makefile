@@ -6,7 +6,7 @@ BUILD_TYPE ?= Release
 JOBS ?= $(shell nproc)
 M3DP = $(BUILD_DIR)/apps/m3dp/m3dp
 
-.PHONY: all setup configure build test demo bench fuzz clean
+.PHONY: all setup configure build install test demo bench fuzz clean
 
 all: build
 
@@ -20,6 +20,12 @@ configure: setup $(BUILD_DIR)/build.ninja
 
 build: configure
 	cmake --build $(BUILD_DIR) -j $(JOBS)
+
+# The m3dp program and the Python module into /usr/local (PREFIX=... for another place). Both
+# read the material presets and robot models from this checkout.
+PREFIX ?= /usr/local
+install: build
+	cmake --install $(BUILD_DIR) --prefix $(PREFIX)
 
 test: build
 	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS) --timeout 900

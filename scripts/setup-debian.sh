@@ -23,6 +23,8 @@ packages=(
   # Cameras: Embree ray casting; images as PNG (libpng), read back in the tests by PIL, numpy and
   # ImageMagick's identify.
   libembree-dev libpng-dev python3-pil python3-numpy imagemagick
+  # The Python API (import m3dp): pybind11 and numpy; its tests run with pytest.
+  pybind11-dev python3-dev python3-pytest
   # The browser viewer's tests: Debian's Chromium, headless (puppeteer-core drives it; npm ci below).
   chromium
   # Real slicers with their printer profiles: the G-code reader's test slices with both.

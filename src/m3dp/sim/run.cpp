@@ -54,18 +54,28 @@ void write_checkpoint(Simulation& simulation, ObserverSchedule& schedule, Checkp
 }
 }  // namespace
 
-RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
+struct Run::Impl {
+  Simulation& simulation;
+  RunOptions options;
   RunSummary summary;
+  ObserverSchedule schedule;
+  CheckpointRun checkpoint;
+  double next_checkpoint = 0;  // s
+  bool finished = false;
+};
+
+Run::Run(Simulation& simulation, const RunOptions& options) : impl_(std::make_unique<Impl>(Impl{simulation, options, {}, {}, {}})) {
+  RunSummary& summary = impl_->summary;
+  ObserverSchedule& schedule = impl_->schedule;
+  CheckpointRun& checkpoint = impl_->checkpoint;
   const double end_time = options.until.value_or(simulation.scene().end_time);
   summary.end_time = end_time;
   summary.output_directory = options.output_directory.string();
   summary.mass_initial = simulation.initial_fluid_mass();
   if (!options.output_directory.empty()) std::filesystem::create_directories(options.output_directory);
 
-  ObserverSchedule schedule;
   for (const outputs::MakeOutput make : kOutputs)
     if (auto observer = make(simulation, options)) schedule.add(std::move(observer));
-  CheckpointRun checkpoint;
   checkpoint.scene_file = std::filesystem::absolute(simulation.scene().file);
   checkpoint.threads = options.threads;
   checkpoint.until = end_time;
@@ -98,33 +108,65 @@ RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
     if (checkpoint.checkpoint_period > 0 && !simulation.scene().file.empty()) checkpoint.scene_hash = file_hash(simulation.scene().file);
     schedule.start(simulation);
   }
-  double next_checkpoint =
+  impl_->next_checkpoint =
       checkpoint.checkpoint_period > 0 ? checkpoint.checkpoint_period * (std::floor(simulation.time() / checkpoint.checkpoint_period + 1e-9) + 1) : 0;
+}
+
+Run::~Run() {
+  if (!impl_->finished) (void)finish(RunStatus::interrupted);
+}
+
+double Run::end_time() const { return impl_->summary.end_time; }
+bool Run::finished() const { return impl_->finished; }
+
+void Run::step() {
+  Impl& run = *impl_;
+  if (run.finished) throw Error("the run has finished: it cannot step");
+  Simulation& simulation = run.simulation;
   try {
-    while (simulation.time() < end_time - 1e-12) {
-      if (options.stop_requested && options.stop_requested->load()) {
-        summary.status = RunStatus::interrupted;
-        break;
-      }
-      schedule.after_step(simulation, simulation.step());
-      if (checkpoint.checkpoint_period > 0 && simulation.time() + 1e-12 >= next_checkpoint && simulation.time() < end_time - 1e-12) {
-        write_checkpoint(simulation, schedule, checkpoint, options);
-        while (next_checkpoint <= simulation.time() + 1e-12) next_checkpoint += checkpoint.checkpoint_period;
-      }
+    run.schedule.after_step(simulation, simulation.step());
+    const double period = run.checkpoint.checkpoint_period;
+    if (period > 0 && simulation.time() + 1e-12 >= run.next_checkpoint && simulation.time() < run.summary.end_time - 1e-12) {
+      write_checkpoint(simulation, run.schedule, run.checkpoint, run.options);
+      while (run.next_checkpoint <= simulation.time() + 1e-12) run.next_checkpoint += period;
     }
   } catch (const std::exception& error) {
     // The state blew up (SimulationError), or an output could not be written (a full disk, a file in
-    // the way): the run stops as failed, and every output still finishes what it has.
-    summary.status = RunStatus::failed;
-    summary.error = error.what();
+    // the way): the run is failed, and finish() still completes what every output has.
+    run.summary.fail(error.what());
+    throw;
   }
-  schedule.finish(simulation, summary);
+}
+
+RunSummary Run::finish(RunStatus status) {
+  Impl& run = *impl_;
+  if (run.finished) return run.summary;
+  run.finished = true;
+  if (run.summary.status != RunStatus::failed) run.summary.status = status;
+  run.schedule.finish(run.simulation, run.summary);
   // A run that ended has nothing to resume; an interrupted or failed one keeps its last checkpoint.
-  if (summary.status == RunStatus::completed && checkpoint.checkpoint_period > 0) {
+  if (run.summary.status == RunStatus::completed && run.checkpoint.checkpoint_period > 0) {
     std::error_code ignored;
-    std::filesystem::remove(options.output_directory / kCheckpointFile, ignored);
+    std::filesystem::remove(run.options.output_directory / kCheckpointFile, ignored);
   }
-  return summary;
+  return run.summary;
+}
+
+RunSummary run_simulation(Simulation& simulation, const RunOptions& options) {
+  Run run(simulation, options);
+  RunStatus status = RunStatus::completed;
+  try {
+    while (simulation.time() < run.end_time() - 1e-12) {
+      if (options.stop_requested && options.stop_requested->load()) {
+        status = RunStatus::interrupted;
+        break;
+      }
+      run.step();
+    }
+  } catch (const std::exception&) {
+    // Run::step marked the run failed with what happened; finish completes every output's files.
+  }
+  return run.finish(status);
 }
 
 std::string format_summary(const RunSummary& summary, const std::filesystem::path& output_directory) {

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -148,6 +149,31 @@ struct RunSummary {
   std::vector<Robot> robots;
   double particle_steps_per_second = 0;
   std::string output_directory;
+};
+
+/// A run stepped by its caller: its observers start (or resume from the checkpoint) when it is
+/// made, watch each step, and complete their files in finish(). run_simulation steps it to the end;
+/// the Python API steps it as the user's code asks.
+class Run {
+ public:
+  Run(Simulation& simulation, const RunOptions& options);
+  /// An unfinished run finishes as interrupted.
+  ~Run();
+  Run(const Run&) = delete;
+  Run& operator=(const Run&) = delete;
+
+  /// One simulation step, the observers due after it, and a checkpoint if one is due. What throws
+  /// (the state blew up, an output could not be written) marks the run failed and is rethrown.
+  void step();
+  /// The observers complete their files and the summary (once; later calls return it again).
+  /// `status` is the run's unless a step failed.
+  RunSummary finish(RunStatus status);
+  [[nodiscard]] double end_time() const;  // s: RunOptions::until or the scene's
+  [[nodiscard]] bool finished() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
 };
 
 /// Runs `simulation` to the end time (or until a stop request / failure), writing the run folder.

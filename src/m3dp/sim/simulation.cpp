@@ -60,6 +60,7 @@ Simulation::Simulation(const scene::Scene& scene)
 }
 
 void Simulation::add_robots() {
+  head_commands_.resize(scene_.print_heads.size());
   robots_ = add_scene_robots(scene_, world_);
   head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter());
 }
@@ -81,8 +82,18 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   const Real nominal_flow = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed;
   state.flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
   state.extruding = sample.extruding;
+  const HeadCommand& command = head_commands_[head_index];
+  if (command.flow_scale) state.flow_scale = *command.flow_scale;
+  if (command.extruding) state.extruding = *command.extruding;
   state.volume_rate = sample.extruding ? nominal_flow * state.flow_scale : Real(0);
   return state;
+}
+
+void Simulation::command_head(std::size_t head, const HeadCommand& command) {
+  if (command.flow_scale && !(*command.flow_scale >= 0 && *command.flow_scale <= 100))
+    throw Error(fmt::format("print head '{}': a flow scale of {} (expected 0 to 100 times the nominal flow)",
+                            scene_.print_heads.at(head).name, *command.flow_scale));
+  head_commands_.at(head) = command;
 }
 
 void Simulation::update_print_heads() {

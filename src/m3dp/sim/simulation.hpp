@@ -40,6 +40,16 @@ class Simulation {
   };
   [[nodiscard]] NozzleState nozzle_state(std::size_t head) const;
 
+  /// A print head commanded from outside (the Python API): whether it extrudes and its flow as a
+  /// fraction of its nominal π D²/4 · U; none: as its path says. Held until the next command. Where
+  /// the head goes is its robot's (World::command_tool_target). Not kept in checkpoints.
+  struct HeadCommand {
+    std::optional<bool> extruding;
+    std::optional<Real> flow_scale;
+  };
+  void command_head(std::size_t head, const HeadCommand& command);
+  [[nodiscard]] const HeadCommand& head_command(std::size_t head) const { return head_commands_.at(head); }
+
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
   /// collision body "printed_material", replacing the previous one.
   void set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh);
@@ -102,6 +112,7 @@ class Simulation {
   std::vector<world::RobotIndex> robots_;
   std::vector<world::BodyIndex> dynamic_bodies_;
   std::vector<std::optional<world::ToolIndex>> head_tools_;
+  std::vector<HeadCommand> head_commands_;  // per print head
   std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;
   std::shared_ptr<const TriangleMesh> printed_mesh_;

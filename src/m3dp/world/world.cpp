@@ -21,6 +21,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/state_io.hpp"
 #include "m3dp/world/controllers/base_tracking_kanayama1990.hpp"
+#include "m3dp/world/controllers/external_command.hpp"
 #include "m3dp/world/controllers/joint_servo.hpp"
 #include "m3dp/world/controllers/tool_ik.hpp"
 
@@ -218,6 +219,19 @@ struct World::Impl {
     // Run in order each world step; the joint servo is always last.
     std::vector<std::unique_ptr<Controller>> controllers;
     ToolIk* tool_ik = nullptr;  // among the controllers, once a tool follows a trajectory
+    /// Commands from outside; while `external`, it runs instead of the controllers but the servo.
+    std::unique_ptr<ExternalCommand> external_command;
+    bool external = false;
+    /// Calls `call` with each controller that runs this step, in order.
+    template <class Call>
+    void each_controller(Call&& call) {
+      if (!external) {
+        for (const auto& controller : controllers) call(*controller);
+        return;
+      }
+      call(*external_command);
+      call(*controllers.back());  // the joint servo
+    }
     struct DiffDrive {
       DiffDriveDescription description;
       dart::dynamics::DegreeOfFreedom* left = nullptr;
@@ -649,6 +663,41 @@ void World::set_tool_trajectory(ToolIndex tool, ToolTrajectory trajectory) {
   robot.tool_ik->follow(tool, std::move(trajectory));
 }
 
+void World::set_external_control(RobotIndex robot_index, bool external) {
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  if (!robot.external_command) robot.external_command = std::make_unique<ExternalCommand>();
+  if (external && !robot.external) robot.external_command->clear();  // hold where it is
+  robot.external = external;
+}
+
+bool World::external_control(RobotIndex robot) const { return impl_->robots.at(robot).external; }
+
+void World::command_joint_targets(RobotIndex robot_index, const std::vector<double>& positions) {
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  if (positions.size() != static_cast<std::size_t>(robot.position_targets.size()))
+    throw Error(fmt::format("robot '{}': {} joint targets for {} joints", robot.name, positions.size(), robot.position_targets.size()));
+  for (const double position : positions)
+    if (!std::isfinite(position)) throw Error(fmt::format("robot '{}': a joint target that is not a number", robot.name));
+  set_external_control(robot_index, true);
+  robot.external_command->set_joint_targets(Eigen::Map<const Eigen::VectorXd>(positions.data(), static_cast<Eigen::Index>(positions.size())));
+}
+
+void World::command_tool_target(ToolIndex tool, const ToolTarget& target) {
+  const RobotIndex robot_index = impl_->tools.at(tool).robot;
+  if (!target.position.allFinite() || !target.axis.allFinite() || target.axis.norm() < Real(1e-6))
+    throw Error(fmt::format("robot '{}': a tool target needs a finite position and a non-zero axis", impl_->robots.at(robot_index).name));
+  set_external_control(robot_index, true);
+  impl_->robots.at(robot_index).external_command->set_tool_target(tool, target);
+}
+
+void World::command_base_velocity(RobotIndex robot_index, double speed, double turn_rate) {
+  Impl::Robot& robot = impl_->robots.at(robot_index);
+  if (!robot.drive) throw Error(fmt::format("robot '{}' has no mobile base", robot.name));
+  if (!std::isfinite(speed) || !std::isfinite(turn_rate)) throw Error(fmt::format("robot '{}': a base velocity that is not a number", robot.name));
+  set_external_control(robot_index, true);
+  robot.external_command->set_base_velocity(speed, turn_rate);
+}
+
 void World::set_joint_targets(RobotIndex robot_index, const std::vector<double>& positions) {
   Impl::Robot& robot = impl_->robots.at(robot_index);
   if (positions.size() != static_cast<std::size_t>(robot.position_targets.size()))
@@ -779,7 +828,7 @@ LinkIndex World::link_of_body(BodyIndex body) const {
 void World::Impl::plan_chunk(double end_time) {
   for (Robot& robot : robots) {
     DartRobotIo io(*this, robot);
-    for (const auto& controller : robot.controllers) controller->plan(io, end_time);
+    robot.each_controller([&](Controller& controller) { controller.plan(io, end_time); });
   }
 }
 
@@ -788,7 +837,7 @@ void World::Impl::control(double step, double chunk_fraction) {
   for (Robot& robot : robots) {
     if (robot.drive) robot.drive->requested_speed = robot.drive->requested_turn = 0;  // stands, unless asked
     DartRobotIo io(*this, robot);
-    for (const auto& controller : robot.controllers) controller->command(io, step, next_time, chunk_fraction);
+    robot.each_controller([&](Controller& controller) { controller.command(io, step, next_time, chunk_fraction); });
     if (robot.drive) drive_base(robot, step);
   }
   for (const Link& link : links) {
@@ -803,14 +852,14 @@ void World::Impl::after_step() {
   for (Robot& robot : robots) {
     if (robot.drive) update_odometry(robot);
     DartRobotIo io(*this, robot);
-    for (const auto& controller : robot.controllers) controller->after_step(io);
+    robot.each_controller([&](Controller& controller) { controller.after_step(io); });
   }
 }
 
 void World::Impl::end_chunk() {
   for (Robot& robot : robots) {
     DartRobotIo io(*this, robot);
-    for (const auto& controller : robot.controllers) controller->end_chunk(io);
+    robot.each_controller([&](Controller& controller) { controller.end_chunk(io); });
   }
 }
 

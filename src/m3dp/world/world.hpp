@@ -140,6 +140,19 @@ class World {
   void set_joint_targets(RobotIndex robot, const std::vector<double>& positions);
   /// Puts the joints at these positions (rad or m, joint_names() order) at rest, and makes them the targets.
   void set_joint_positions(RobotIndex robot, const std::vector<double>& positions);
+  // ---- commands from outside the process (controllers/external_command.hpp) ----
+  /// Switches the robot between its scene controllers (false: its tool and base paths) and commands
+  /// from outside (true: the joints hold their targets and the base stands until commanded). The
+  /// commands below switch it to external control themselves.
+  void set_external_control(RobotIndex robot, bool external);
+  [[nodiscard]] bool external_control(RobotIndex robot) const;
+  /// Joint position targets (rad or m, joint_names() order), held until the next command.
+  void command_joint_targets(RobotIndex robot, const std::vector<double>& positions);
+  /// Where a tool should be, reached by the same IK as a tool path; held until the next command.
+  void command_tool_target(ToolIndex tool, const ToolTarget& target);
+  /// A mobile base's forward speed (m/s) and turn rate (rad/s), held until the next command. Throws
+  /// Error if the robot has no mobile base.
+  void command_base_velocity(RobotIndex robot, double speed, double turn_rate);
   [[nodiscard]] std::size_t robot_count() const;
   [[nodiscard]] const std::string& robot_name(RobotIndex robot) const;
   [[nodiscard]] std::vector<std::string> joint_names(RobotIndex robot) const;

@@ -1,0 +1,435 @@
+// The Python API (import m3dp): a simulation stepped from the user's code, its state as numpy
+// arrays, robots and print heads commanded between steps, and the run folder's outputs on request.
+// Arrays that look into the simulation (particles, camera images) are read-only views valid until
+// the next step; small ones (joints, poses) are copies.
+#include <pybind11/numpy.h>
+#include <pybind11/pybind11.h>
+#include <pybind11/stl.h>
+#include <pybind11/stl/filesystem.h>
+#include <tbb/task_arena.h>
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/camera_rig.hpp"
+#include "m3dp/sim/run.hpp"
+#include "m3dp/sim/simulation.hpp"
+
+namespace py = pybind11;
+namespace fs = std::filesystem;
+
+namespace m3dp::python {
+
+namespace {
+
+/// A pose as numpy's [x, y, z, qx, qy, qz, qw] (m; a unit quaternion, ROS order).
+py::array_t<double> pose_array(const Pose& pose) {
+  py::array_t<double> out(7);
+  auto values = out.mutable_unchecked<1>();
+  for (int k = 0; k < 3; ++k) values(k) = pose.position[k];
+  values(3) = pose.orientation.x();
+  values(4) = pose.orientation.y();
+  values(5) = pose.orientation.z();
+  values(6) = pose.orientation.w();
+  return out;
+}
+
+py::array_t<double> vector_array(const std::vector<double>& values) { return py::array_t<double>(values.size(), values.data()); }
+
+Vec3 vec3_from(const std::vector<double>& values, const char* what) {
+  if (values.size() != 3) throw Error(fmt::format("{}: expected 3 numbers, got {}", what, values.size()));
+  return Vec3(Real(values[0]), Real(values[1]), Real(values[2]));
+}
+
+/// A read-only numpy view of `count` rows of `columns` values of T at `data`, kept alive by `owner`.
+template <class T>
+py::array view(const T* data, std::size_t count, std::size_t columns, py::handle owner) {
+  std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(count)}, strides{static_cast<py::ssize_t>(columns * sizeof(T))};
+  if (columns > 1) {
+    shape.push_back(static_cast<py::ssize_t>(columns));
+    strides.push_back(sizeof(T));
+  }
+  py::array array(py::dtype::of<T>(), shape, strides, data, owner);
+  py::detail::array_proxy(array.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+  return array;
+}
+
+}  // namespace
+
+/// One simulation and its run: m3dp.Simulation.
+class PySimulation {
+ public:
+  PySimulation(const scene::Scene& scene, int threads)
+      : arena_(threads > 0 ? threads : tbb::task_arena::automatic), threads_(threads) {
+    arena_.execute([&] {
+      simulation_ = std::make_unique<sim::Simulation>(scene);
+      start_run({});
+    });
+    for (std::size_t robot = 0; robot < scene.robots.size(); ++robot) robot_names_.push_back(scene.robots[robot].name);
+  }
+  ~PySimulation() { close(); }
+
+  sim::Simulation& simulation() { return *simulation_; }
+  const std::vector<std::string>& robot_names() const { return robot_names_; }
+
+  void step() {
+    if (!run_) throw Error("the simulation is closed");
+    arena_.execute([&] { run_->step(); });
+  }
+  void step_to(double time) {
+    if (!std::isfinite(time)) throw Error("step_to: the time must be a number (s)");
+    while (simulation_->time() < time - 1e-12) {
+      {
+        py::gil_scoped_release released;
+        step();
+      }
+      if (PyErr_CheckSignals() != 0) throw py::error_already_set();
+    }
+  }
+
+  /// From now on the run folder's outputs (frames, meshes, cameras, run.mcap if `mcap`, summary)
+  /// go to `directory`, starting at the present; the outputs started before finish first.
+  void record(const fs::path& directory, bool mcap) {
+    if (directory.empty()) throw Error("record: an output folder is needed");
+    sim::RunOptions options;
+    options.output_directory = directory;
+    options.record = mcap;
+    finish_run();
+    arena_.execute([&] { start_run(options); });
+  }
+
+  /// Ends the run: its outputs complete their files; the summary's figures as a dict.
+  py::dict close() {
+    py::dict summary;
+    if (!run_) return summary;
+    const sim::RunSummary result = finish_run();
+    summary["status"] = std::string(sim::to_string(result.status));
+    summary["error"] = result.error;
+    summary["simulated_time"] = result.simulated_time;
+    summary["steps"] = result.steps;
+    summary["particles"] = result.particles;
+    summary["output_directory"] = result.output_directory;
+    summary["volume_emitted"] = result.volume.emitted;
+    summary["volume_commanded"] = result.volume.commanded;
+    run_.reset();
+    return summary;
+  }
+
+  py::dict camera_images(const std::string& name, py::handle owner) {
+    auto& rig = simulation_->cameras();
+    for (std::size_t camera = 0; camera < rig.size(); ++camera) {
+      if (rig.settings(camera).name != name) continue;
+      py::dict result;
+      arena_.execute([&] { (void)rig.image(*simulation_, camera); (void)rig.points(*simulation_, camera); });
+      const sensors::CameraImage& image = rig.image(*simulation_, camera);
+      const auto rows = static_cast<py::ssize_t>(image.height), columns = static_cast<py::ssize_t>(image.width);
+      auto image_view = [&](const auto* data, py::ssize_t channels) {
+        using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
+        std::vector<py::ssize_t> shape{rows, columns}, strides{columns * channels * py::ssize_t(sizeof(T)), channels * py::ssize_t(sizeof(T))};
+        if (channels > 1) {
+          shape.push_back(channels);
+          strides.push_back(sizeof(T));
+        }
+        py::array array(py::dtype::of<T>(), shape, strides, data, owner);
+        py::detail::array_proxy(array.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+        return array;
+      };
+      if (!image.rgb.empty()) result["rgb"] = image_view(image.rgb.data(), 3);
+      if (!image.depth.empty()) result["depth"] = image_view(image.depth.data(), 1);
+      if (!image.segment.empty()) result["segmentation"] = image_view(image.segment.data(), 1);
+      const auto& points = rig.points(*simulation_, camera);
+      py::array_t<float> xyz({static_cast<py::ssize_t>(points.size()), py::ssize_t(3)});
+      py::array_t<std::uint16_t> segments(static_cast<py::ssize_t>(points.size()));
+      auto xyz_values = xyz.mutable_unchecked<2>();
+      auto segment_values = segments.mutable_unchecked<1>();
+      for (std::size_t i = 0; i < points.size(); ++i) {
+        xyz_values(i, 0) = points[i].x;
+        xyz_values(i, 1) = points[i].y;
+        xyz_values(i, 2) = points[i].z;
+        segment_values(i) = points[i].segment;
+      }
+      result["points"] = xyz;
+      result["point_segments"] = segments;
+      result["pose"] = pose_array(rig.pose(*simulation_, camera));
+      return result;
+    }
+    throw Error(fmt::format("no camera '{}' in the scene", name));
+  }
+
+  py::dict camera_legend() {
+    py::dict legend;
+    for (const sim::Segment& segment : simulation_->cameras().legend()) {
+      py::dict entry;
+      entry["kind"] = segment.kind;
+      entry["name"] = segment.name;
+      if (!segment.robot.empty()) entry["robot"] = segment.robot;
+      if (segment.layer >= 0) entry["layer"] = segment.layer;
+      legend[py::int_(segment.id)] = entry;
+    }
+    return legend;
+  }
+
+  template <class Call>
+  auto in_arena(Call&& call) {
+    return arena_.execute(std::forward<Call>(call));
+  }
+
+ private:
+  void start_run(sim::RunOptions options) {
+    options.show_progress = false;
+    options.until = std::numeric_limits<double>::infinity();  // the caller decides when to stop
+    options.threads = threads_;
+    run_ = std::make_unique<sim::Run>(*simulation_, options);
+  }
+  sim::RunSummary finish_run() {
+    sim::RunSummary summary;
+    arena_.execute([&] { summary = run_->finish(sim::RunStatus::completed); });
+    return summary;
+  }
+
+  tbb::task_arena arena_;
+  int threads_ = 0;
+  std::unique_ptr<sim::Simulation> simulation_;
+  std::unique_ptr<sim::Run> run_;
+  std::vector<std::string> robot_names_;
+};
+
+namespace {
+
+std::size_t robot_index(PySimulation& self, const std::string& name) {
+  const auto& names = self.robot_names();
+  for (std::size_t i = 0; i < names.size(); ++i)
+    if (names[i] == name) return i;
+  throw Error(fmt::format("no robot '{}' in the scene (robots: {})", name, fmt::join(names, ", ")));
+}
+
+std::size_t head_index(PySimulation& self, const std::string& name) {
+  const auto& heads = self.simulation().scene().print_heads;
+  for (std::size_t i = 0; i < heads.size(); ++i)
+    if (heads[i].name == name) return i;
+  std::vector<std::string> names;
+  for (const auto& head : heads) names.push_back(head.name);
+  throw Error(fmt::format("no print head '{}' in the scene (print heads: {})", name, fmt::join(names, ", ")));
+}
+
+/// The tool of the print head the robot carries (the one named, or its only one).
+world::ToolIndex robot_tool(PySimulation& self, std::size_t robot, const std::optional<std::string>& head_name) {
+  sim::Simulation& simulation = self.simulation();
+  const std::string& robot_name = self.robot_names()[robot];
+  for (std::size_t head = 0; head < simulation.scene().print_heads.size(); ++head) {
+    const auto& description = simulation.scene().print_heads[head];
+    if (!description.mount || description.mount->robot != robot_name) continue;
+    if (head_name && description.name != *head_name) continue;
+    if (const auto tool = simulation.print_head_tool(head)) return *tool;
+  }
+  throw Error(fmt::format("robot '{}' carries no print head{}", robot_name, head_name ? fmt::format(" '{}'", *head_name) : ""));
+}
+
+void translate_errors(py::module_& module) {
+  static py::exception<Error> error(module, "Error", PyExc_RuntimeError);
+  static py::exception<SimulationError> simulation_error(module, "SimulationError", error.ptr());
+  static py::exception<InputError> input_error(module, "InputError", error.ptr());
+  py::register_exception_translator([](std::exception_ptr thrown) {
+    try {
+      if (thrown) std::rethrow_exception(thrown);
+    } catch (const InputError& problem) {
+      // file and line of the first problem, for code that wants them; the message has them all.
+      py::object instance = py::reinterpret_borrow<py::object>(input_error.ptr())(problem.what());
+      if (!problem.diagnostics().empty()) {
+        instance.attr("file") = problem.diagnostics().front().location.file;
+        instance.attr("line") = problem.diagnostics().front().location.line;
+      }
+      PyErr_SetObject(input_error.ptr(), instance.ptr());
+    } catch (const SimulationError& problem) {
+      simulation_error(problem.what());
+    } catch (const Error& problem) {
+      error(problem.what());
+    }
+  });
+}
+
+}  // namespace
+
+}  // namespace m3dp::python
+
+PYBIND11_MODULE(m3dp, module) {
+  using namespace m3dp;
+  using m3dp::python::PySimulation;
+  module.doc() = "M3DP: a simulator for robotic and mobile 3D printing (SPH material, DART robots, cameras).";
+  python::translate_errors(module);
+
+  py::class_<PySimulation>(module, "Simulation", R"(A scene's simulation, stepped by the caller.
+
+Simulation(scene, threads=0): scene is an SDF world file (str or path); threads 0 uses every core.
+Simulation.from_string(text, name="scene.sdf") reads the scene from a string (paths in it are
+relative to the current folder). Errors in the scene raise m3dp.InputError with .file and .line.
+
+Arrays that look into the simulation (particles, camera images) are read-only views, valid until
+the next step; copy them (numpy.array(x)) to keep them. Joints and poses are copies.)")
+      .def(py::init([](const fs::path& file, int threads) { return std::make_unique<PySimulation>(scene::load_scene(file), threads); }),
+           py::arg("scene"), py::arg("threads") = 0)
+      .def_static("from_string",
+                  [](const std::string& text, const std::string& name, int threads) {
+                    return std::make_unique<PySimulation>(scene::load_scene_from_string(text, name), threads);
+                  },
+                  py::arg("text"), py::arg("name") = "scene.sdf", py::arg("threads") = 0)
+      .def("step", &PySimulation::step, py::call_guard<py::gil_scoped_release>(),
+           "One step (adaptive time step): heads and robots move, the material flows, the world follows.")
+      .def("step_to", &PySimulation::step_to, py::arg("time"),
+           "Steps until the simulated time reaches `time` (s). Ctrl-C stops it between steps.")
+      .def_property_readonly("time", [](PySimulation& self) { return self.simulation().time(); }, "Simulated time (s).")
+      .def_property_readonly("steps", [](PySimulation& self) { return self.simulation().solver().state().step; })
+      .def_property_readonly("end_time", [](PySimulation& self) { return self.simulation().scene().end_time; },
+                             "The scene's end time (s); stepping past it is allowed.")
+      .def_property_readonly("time_step", [](PySimulation& self) { return double(self.simulation().solver().state().time_step); },
+                             "The last step's length (s).")
+      .def("record", &PySimulation::record, py::arg("directory"), py::arg("mcap") = false,
+           "Writes the run folder's outputs (frames, meshes, cameras, summary; run.mcap if mcap) from now on.")
+      .def("close", &PySimulation::close, "Ends the run: outputs complete their files. Returns the summary as a dict.")
+      .def("__enter__", [](py::object self) { return self; })
+      .def("__exit__", [](PySimulation& self, py::args) { self.close(); })
+      // ---- particles ----
+      .def_property_readonly("particle_count", [](PySimulation& self) { return self.simulation().solver().state().fluid.position.size(); })
+      .def_property_readonly("positions", [](py::object owner) {
+        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
+        return python::view(fluid.position.empty() ? nullptr : fluid.position.front().data(), fluid.position.size(), 3, owner);
+      }, "Particle positions (n, 3), m: a read-only view, valid until the next step.")
+      .def_property_readonly("velocities", [](py::object owner) {
+        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
+        return python::view(fluid.velocity.empty() ? nullptr : fluid.velocity.front().data(), fluid.velocity.size(), 3, owner);
+      }, "Particle velocities (n, 3), m/s: a read-only view, valid until the next step.")
+      .def_property_readonly("density", [](py::object owner) {
+        PySimulation& self = owner.cast<PySimulation&>();
+        const auto* measured = self.in_arena([&] { return &self.simulation().measured_density(); });
+        return python::view(measured->density.data(), measured->density.size(), 1, owner);
+      }, "Each particle's density (n), kg/m³, measured where the particles are now (as the frames write it).")
+      .def_property_readonly("material", [](py::object owner) {
+        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
+        return python::view(fluid.phase.data(), fluid.phase.size(), 1, owner);
+      }, "Each particle's material (n): an index into material_names.")
+      .def_property_readonly("ids", [](py::object owner) {
+        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
+        return python::view(fluid.id.data(), fluid.id.size(), 1, owner);
+      }, "Each particle's stable id (n): particles are reordered between steps; ids follow them.")
+      .def_property_readonly("birth_time", [](py::object owner) {
+        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
+        return python::view(fluid.birth_time.data(), fluid.birth_time.size(), 1, owner);
+      }, "When each particle was emitted (n), s of simulated time.")
+      .def_property_readonly("age", [](PySimulation& self) {
+        const auto& state = self.simulation().solver().state();
+        py::array_t<double> age(static_cast<py::ssize_t>(state.fluid.birth_time.size()));
+        auto values = age.mutable_unchecked<1>();
+        for (std::size_t i = 0; i < state.fluid.birth_time.size(); ++i) values(i) = state.time - double(state.fluid.birth_time[i]);
+        return age;
+      }, "Each particle's age (n), s: a copy.")
+      .def_property_readonly("material_names", [](PySimulation& self) {
+        std::vector<std::string> names;
+        for (const auto& entry : self.simulation().scene().materials) names.push_back(entry.material.name);
+        return names;
+      })
+      // ---- moving bodies as the material sees them ----
+      .def_property_readonly("bodies", [](PySimulation& self) {
+        py::dict bodies;
+        for (const auto& body : self.simulation().solver().state().bodies) {
+          if (body.is_static) continue;
+          py::dict entry;
+          entry["pose"] = python::pose_array(body.pose);
+          entry["force"] = python::vector_array({body.fluid_force.x(), body.fluid_force.y(), body.fluid_force.z()});
+          entry["torque"] = python::vector_array({body.fluid_torque.x(), body.fluid_torque.y(), body.fluid_torque.z()});
+          bodies[py::str(body.name)] = entry;
+        }
+        return bodies;
+      }, "Every moving body (free bodies, robot links, nozzle barrels) by name: pose [x y z qx qy qz qw], "
+         "and the material's force (N) and torque (N·m, about its origin) on it over the last step.")
+      // ---- robots ----
+      .def_property_readonly("robots", &PySimulation::robot_names)
+      .def("joint_names", [](PySimulation& self, const std::string& robot) {
+        return self.simulation().world().joint_names(self.simulation().robots()[python::robot_index(self, robot)]);
+      }, py::arg("robot"))
+      .def("joint_positions", [](PySimulation& self, const std::string& robot) {
+        return python::vector_array(self.simulation().world().joint_positions(self.simulation().robots()[python::robot_index(self, robot)]));
+      }, py::arg("robot"), "rad (or m), in joint_names order.")
+      .def("joint_velocities", [](PySimulation& self, const std::string& robot) {
+        return python::vector_array(self.simulation().world().joint_velocities(self.simulation().robots()[python::robot_index(self, robot)]));
+      }, py::arg("robot"), "rad/s (or m/s).")
+      .def("joint_efforts", [](PySimulation& self, const std::string& robot) {
+        return python::vector_array(self.simulation().world().joint_efforts(self.simulation().robots()[python::robot_index(self, robot)]));
+      }, py::arg("robot"), "N·m (or N) the joints' motors exerted over the last world step.")
+      .def("link_poses", [](PySimulation& self, const std::string& robot) {
+        const world::World& world = self.simulation().world();
+        const auto index = self.simulation().robots()[python::robot_index(self, robot)];
+        py::dict poses;
+        for (const auto& link : world.link_names(index))
+          if (const auto pose = world.robot_link_pose(index, link)) poses[py::str(link)] = python::pose_array(*pose);
+        return poses;
+      }, py::arg("robot"), "Each link's pose in the world, [x y z qx qy qz qw].")
+      .def("base_pose", [](PySimulation& self, const std::string& robot) {
+        return python::pose_array(self.simulation().world().base_pose(self.simulation().robots()[python::robot_index(self, robot)]));
+      }, py::arg("robot"))
+      .def("set_external_control", [](PySimulation& self, const std::string& robot, bool external) {
+        self.simulation().world().set_external_control(self.simulation().robots()[python::robot_index(self, robot)], external);
+      }, py::arg("robot"), py::arg("external") = true,
+         "True: the robot leaves its scene paths and holds still until commanded; False: back to its scene paths "
+         "(where they are at the present time). The commands below switch it to external control themselves.")
+      .def("external_control", [](PySimulation& self, const std::string& robot) {
+        return self.simulation().world().external_control(self.simulation().robots()[python::robot_index(self, robot)]);
+      }, py::arg("robot"))
+      .def("set_joint_targets", [](PySimulation& self, const std::string& robot, const std::vector<double>& targets) {
+        self.simulation().world().command_joint_targets(self.simulation().robots()[python::robot_index(self, robot)], targets);
+      }, py::arg("robot"), py::arg("targets"), "Joint position targets (rad or m, joint_names order), held until the next command.")
+      .def("set_nozzle_target", [](PySimulation& self, const std::string& robot, const std::vector<double>& position,
+                                   const std::vector<double>& axis, std::optional<std::string> head) {
+        world::ToolTarget target;
+        target.position = python::vec3_from(position, "set_nozzle_target position");
+        target.axis = python::vec3_from(axis, "set_nozzle_target axis");
+        self.simulation().world().command_tool_target(python::robot_tool(self, python::robot_index(self, robot), head), target);
+      }, py::arg("robot"), py::arg("position"), py::arg("axis") = std::vector<double>{0, 0, -1}, py::arg("head") = py::none(),
+         "Where the robot's nozzle exit should be (m, world) and where it should point (the material leaves along it), "
+         "reached through the robot's inverse kinematics; held until the next command.")
+      .def("set_base_velocity", [](PySimulation& self, const std::string& robot, double speed, double turn_rate) {
+        self.simulation().world().command_base_velocity(self.simulation().robots()[python::robot_index(self, robot)], speed, turn_rate);
+      }, py::arg("robot"), py::arg("speed"), py::arg("turn_rate"), "A mobile base's forward speed (m/s) and turn rate (rad/s).")
+      // ---- print heads ----
+      .def_property_readonly("print_heads", [](PySimulation& self) {
+        std::vector<std::string> names;
+        for (const auto& head : self.simulation().scene().print_heads) names.push_back(head.name);
+        return names;
+      })
+      .def("nozzle", [](PySimulation& self, const std::string& head) {
+        const auto state = self.simulation().nozzle_state(python::head_index(self, head));
+        py::dict result;
+        result["pose"] = python::pose_array(state.pose);
+        result["velocity"] = python::vector_array({state.velocity.x(), state.velocity.y(), state.velocity.z()});
+        result["extruding"] = state.extruding;
+        result["volume_rate"] = double(state.volume_rate);
+        result["flow_scale"] = double(state.flow_scale);
+        return result;
+      }, py::arg("head"), "The nozzle exit's pose (material leaves along its −z), velocity (m/s), whether it extrudes, "
+                          "its flow (m³/s) and that flow over the nominal.")
+      .def("set_extrusion", [](PySimulation& self, const std::string& head, std::optional<bool> extruding, std::optional<double> flow_scale) {
+        sim::Simulation::HeadCommand command;
+        command.extruding = extruding;
+        if (flow_scale) command.flow_scale = Real(*flow_scale);
+        self.simulation().command_head(python::head_index(self, head), command);
+      }, py::arg("head"), py::arg("extruding") = py::none(), py::arg("flow_scale") = py::none(),
+         "Extrusion on or off and the flow as a fraction of the nominal; None: as the head's path says.")
+      // ---- cameras ----
+      .def_property_readonly("cameras", [](PySimulation& self) {
+        std::vector<std::string> names;
+        for (const auto& camera : self.simulation().scene().cameras) names.push_back(camera.settings.name);
+        return names;
+      })
+      .def("camera", [](py::object owner, const std::string& name) { return owner.cast<PySimulation&>().camera_images(name, owner); },
+           py::arg("name"), "The camera's image now (rendered once a step): rgb (h, w, 3) uint8, depth (h, w) float32 m "
+                            "(inf: nothing), segmentation (h, w) uint16 (see camera_legend), points (m, 3) in the camera's "
+                            "point-cloud frame, and the camera's pose. Images are views valid until the next step.")
+      .def("camera_legend", &PySimulation::camera_legend, "What each segmentation id is: kind, name, robot, layer.");
+}

@@ -1,0 +1,212 @@
+"""The Python API (import m3dp) on the demo scene: stepping, state as numpy views, commands to the
+robot and the print head, cameras, outputs, errors, two simulations in one process, the GIL."""
+import json
+import os
+import pathlib
+import threading
+
+import numpy as np
+import pytest
+
+import m3dp
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+DEMO = ROOT / "scenes" / "ur10_wall.sdf"
+
+
+def demo_text(**replacements):
+    text = DEMO.read_text()
+    for old, new in replacements.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    return text
+
+
+@pytest.fixture(scope="module")
+def printed():
+    """The demo stepped to 3.2 s (the nozzle reaches the first corner at about 1.7 s, then prints)."""
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(3.2)
+    return sim
+
+
+def test_steps_and_time():
+    sim = m3dp.Simulation(DEMO, threads=1)
+    assert sim.time == 0 and sim.steps == 0
+    sim.step()
+    assert sim.steps == 1
+    assert 0 < sim.time <= 0.004 + 1e-9  # the scene's max_time_step
+    sim.step_to(0.05)
+    assert sim.time >= 0.05 - 1e-9
+    assert sim.end_time == pytest.approx(31)
+    assert sim.robots == ["ur10"]
+    assert sim.print_heads == ["nozzle"]
+    assert sorted(sim.cameras) == ["overview", "wrist"]
+    assert sim.material_names == ["mortar"]
+
+
+def test_particles_are_views_without_copies(printed):
+    sim = printed
+    n = sim.particle_count
+    assert n > 400, "the nozzle has printed for 1.4 s (13 cm³, 27 mm³ a particle)"
+    positions = sim.positions
+    assert positions.shape == (n, 3) and positions.dtype == np.float32
+    assert not positions.flags.writeable and not positions.flags.owndata
+    with pytest.raises(ValueError):
+        positions[0, 0] = 1.0
+    # Two reads look at the same memory: no copy is made.
+    again = sim.positions
+    assert positions.__array_interface__["data"][0] == again.__array_interface__["data"][0]
+    assert sim.velocities.shape == (n, 3)
+    assert sim.material.shape == (n,) and sim.material.dtype == np.uint16 and (sim.material == 0).all()
+    assert len(np.unique(sim.ids)) == n
+    # The printed bead lies on the floor, inside the wall's square (0.58..0.82 m, -0.12..0.12 m).
+    assert positions[:, 2].min() > -0.002 and np.median(positions[:, 2]) < 0.02
+    assert 0.55 < np.median(positions[:, 0]) < 0.85
+    # Density measured where the particles are: near the mortar's rest density inside the bead.
+    density = sim.density
+    assert density.shape == (n,)
+    assert 0.97 * 2100 < np.percentile(density, 90) < 1.05 * 2100  # printable_mortar: 2100 kg/m³ at rest
+    age = sim.age
+    assert (age >= 0).all() and age.max() <= sim.time
+    np.testing.assert_allclose(age, sim.time - sim.birth_time, atol=1e-6)
+
+
+def test_robot_state_and_nozzle(printed):
+    sim = printed
+    names = sim.joint_names("ur10")
+    assert names[0] == "shoulder_pan_joint" and len(names) == 6
+    assert sim.joint_positions("ur10").shape == (6,)
+    assert sim.joint_velocities("ur10").shape == (6,)
+    assert np.isfinite(sim.joint_efforts("ur10")).all()
+    links = sim.link_poses("ur10")
+    assert "tool0" in links and links["tool0"].shape == (7,)
+    nozzle = sim.nozzle("nozzle")
+    assert nozzle["extruding"]
+    # The exit is 0.15 m out along the flange's z axis, and printing on the first layer (8 mm).
+    tool0 = links["tool0"]
+    assert np.linalg.norm(nozzle["pose"][:3] - tool0[:3]) == pytest.approx(0.15, abs=1e-3)
+    assert nozzle["pose"][2] == pytest.approx(0.008, abs=0.004)
+    assert nozzle["volume_rate"] == pytest.approx(np.pi / 4 * 0.012**2 * 0.085, rel=1e-3)
+    bodies = sim.bodies
+    assert "ur10/forearm_link" in bodies or any(name.startswith("ur10/") for name in bodies)
+
+
+def test_cameras(printed):
+    wrist = printed.camera("wrist")
+    assert wrist["rgb"].shape == (240, 320, 3) and wrist["rgb"].dtype == np.uint8
+    assert wrist["depth"].shape == (240, 320) and wrist["depth"].dtype == np.float32
+    assert wrist["segmentation"].shape == (240, 320)
+    legend = printed.camera_legend()
+    seen = {legend[int(i)]["kind"] for i in np.unique(wrist["segmentation"])}
+    assert "material" in seen, f"the wrist camera sees the fresh bead: {seen}"
+    hit = np.isfinite(wrist["depth"])
+    assert 0.02 < wrist["depth"][hit].min() < 0.3
+    assert not wrist["rgb"].flags.writeable
+
+
+def test_nozzle_target_moves_the_arm():
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(0.1)
+    target = [0.72, 0.1, 0.12]
+    sim.set_nozzle_target("ur10", target)
+    assert sim.external_control("ur10")
+    sim.step_to(1.3)
+    pose = sim.nozzle("nozzle")["pose"]
+    assert np.linalg.norm(pose[:3] - target) < 0.001, pose
+    # Pointing down: the exit frame's −z is the material's direction.
+    x, y, z, w = pose[3:]
+    down = np.array([-(2 * (x * z + w * y)), -(2 * (y * z - w * x)), -(1 - 2 * (x * x + y * y))])
+    assert down @ [0, 0, -1] > 0.999
+    # Back to the scene's path: the nozzle heads for where the path is now (on its way to the first
+    # corner, which it reaches at 1.76 s and starts to print).
+    sim.set_external_control("ur10", False)
+    sim.step_to(2.6)
+    assert not sim.external_control("ur10")
+    assert sim.nozzle("nozzle")["pose"][2] < 0.03
+
+
+def test_joint_targets():
+    sim = m3dp.Simulation(DEMO, threads=2)
+    start = sim.joint_positions("ur10")
+    targets = start + [0.3, 0, 0, 0, 0, 0]
+    sim.set_joint_targets("ur10", targets)
+    sim.step_to(1.0)
+    np.testing.assert_allclose(sim.joint_positions("ur10"), targets, atol=2e-3)
+    with pytest.raises(m3dp.Error, match="5 joint targets for 6 joints"):
+        sim.set_joint_targets("ur10", [0, 0, 0, 0, 0])
+    with pytest.raises(m3dp.Error, match="no robot 'ur5'"):
+        sim.joint_positions("ur5")
+
+
+def test_extrusion_commands():
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(2.0)
+    before = sim.particle_count
+    sim.set_extrusion("nozzle", extruding=False)
+    sim.step_to(2.4)
+    assert sim.particle_count == before, "no material while extrusion is off"
+    sim.set_extrusion("nozzle", extruding=True, flow_scale=1.0)
+    sim.step_to(2.8)
+    nominal = sim.particle_count - before
+    sim.set_extrusion("nozzle", flow_scale=2.0)
+    assert sim.nozzle("nozzle")["flow_scale"] == pytest.approx(2.0)
+    start = sim.particle_count
+    sim.step_to(3.2)
+    doubled = sim.particle_count - start
+    assert doubled == pytest.approx(2 * nominal, rel=0.15), (nominal, doubled)
+    with pytest.raises(m3dp.Error, match="flow scale"):
+        sim.set_extrusion("nozzle", flow_scale=float("nan"))
+
+
+def test_record_writes_a_run_folder(tmp_path):
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(0.2)
+    sim.record(tmp_path / "run", mcap=True)
+    sim.step_to(0.5)
+    summary = sim.close()
+    assert summary["status"] == "completed"
+    files = {path.name for path in (tmp_path / "run").iterdir()}
+    assert {"particles.pvd", "world.pvd", "run.mcap", "summary.json", "timing.csv"} <= files, files
+    on_disk = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert on_disk["status"] == "completed"
+    with pytest.raises(m3dp.Error, match="closed"):
+        sim.step()
+
+
+def test_two_simulations_are_independent():
+    alone = m3dp.Simulation(DEMO, threads=1)
+    alone.step_to(2.2)
+    first, second = m3dp.Simulation(DEMO, threads=1), m3dp.Simulation(DEMO, threads=1)
+    second.set_extrusion("nozzle", extruding=False)
+    while first.time < 2.2 - 1e-12:
+        first.step()
+        second.step()
+    assert first.steps == alone.steps
+    np.testing.assert_array_equal(first.positions, alone.positions)
+    assert second.particle_count == 0 and first.particle_count > 0
+
+
+def test_stepping_releases_the_gil():
+    sim = m3dp.Simulation(DEMO, threads=1)
+    counted = 0
+    worker = threading.Thread(target=sim.step_to, args=(1.0,))
+    worker.start()
+    while worker.is_alive():
+        counted += 1
+    worker.join()
+    assert sim.time >= 1.0 - 1e-9
+    assert counted > 10000, "the main thread ran while the simulation stepped"
+
+
+def test_scene_errors_name_the_file_and_line(tmp_path):
+    with pytest.raises(m3dp.InputError) as missing:
+        m3dp.Simulation(tmp_path / "nowhere.sdf")
+    assert "nowhere.sdf" in str(missing.value)
+    text = demo_text(**{"<max_time_step>0.004</max_time_step>": "<max_time_step>fast</max_time_step>"})
+    line = next(number for number, row in enumerate(text.splitlines(), 1) if "fast" in row)
+    with pytest.raises(m3dp.InputError) as bad:
+        m3dp.Simulation.from_string(text, name=str(DEMO))
+    assert bad.value.line == line and bad.value.file == str(DEMO)
+    assert f"{DEMO}:{line}" in str(bad.value)
+    assert isinstance(bad.value, m3dp.Error) and isinstance(bad.value, RuntimeError)
