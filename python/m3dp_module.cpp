@@ -119,6 +119,9 @@ class PySimulation {
     summary["output_directory"] = result.output_directory;
     summary["volume_emitted"] = result.volume.emitted;
     summary["volume_commanded"] = result.volume.commanded;
+    summary["volume_lost_at_nozzles"] = result.volume.lost_at_nozzles;
+    summary["volume_removed"] = result.volume.removed;
+    summary["mass_emitted"] = result.mass_emitted;
     run_.reset();
     return summary;
   }
