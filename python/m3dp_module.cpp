@@ -424,6 +424,17 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         self.simulation().command_head(python::head_index(self, head), command);
       }, py::arg("head"), py::arg("extruding") = py::none(), py::arg("flow_scale") = py::none(),
          "Extrusion on or off and the flow as a fraction of the nominal; None: as the head's path says.")
+      .def("set_path", [](PySimulation& self, const std::string& head, const std::string& path, bool append,
+                          std::optional<fs::path> name) {
+        const fs::path file = name ? *name : self.simulation().scene().file.parent_path() / "path.xml";
+        scene::PathSegments read = scene::load_path_from_string(path, file);
+        self.simulation().set_head_path(python::head_index(self, head), std::move(read.segments), read.start_time, append);
+      }, py::arg("head"), py::arg("path"), py::arg("append") = false, py::arg("name") = py::none(),
+         "A new path for the print head, as the scene's <path> element (lines, polylines, circles, helices, walls, "
+         "<gcode file=…>, <waypoints file=…>): it replaces the path from now on (the head travels from where it is "
+         "to its first point), or with append=True follows the path's end. Its start_time attribute is a delay from "
+         "now. Files are relative to `name` (default: beside the scene file), which errors also name. The robot "
+         "carrying the head goes back to following its path. world.pvd and run.mcap keep drawing the first path.")
       // ---- cameras ----
       .def_property_readonly("cameras", [](PySimulation& self) {
         std::vector<std::string> names;

@@ -96,3 +96,25 @@ TEST(Toolpath, WaypointFileBecomesStraightMoves) {
     EXPECT_NE(message.find("odd.csv:7: error: the speed must be > 0 m/s and at most 100 m/s, got 1e300"), std::string::npos) << message;
   }
 }
+
+TEST(Toolpath, AppendedSegmentsFollowAfterAPauseAndATravel) {
+  // A path extended while it is followed (the Python API's append): 1 s along x, then at 1.5 s (a
+  // 0.5 s pause at the end) a travel of 0.1 m up to the new segment at its 0.1 m/s, then it.
+  Trajectory path({PathSegment{LineCurve{Vec3(0, 0, 0), Vec3(0.1, 0, 0)}, 0.1f, true}}, 0);
+  path.append({PathSegment{LineCurve{Vec3(0.1, 0, 0.1), Vec3(0.1, 0.1, 0.1)}, 0.1f, true}}, 1.5);
+  EXPECT_NEAR(path.end_time(), 3.5, 1e-6);
+  const auto paused = path.sample(1.25);
+  EXPECT_NEAR(paused.position.x(), 0.1, 1e-6);
+  EXPECT_FALSE(paused.extruding);
+  const auto travelling = path.sample(2.0);
+  EXPECT_NEAR(travelling.position.z(), 0.05, 1e-6);
+  EXPECT_FALSE(travelling.extruding);
+  const auto printing = path.sample(3.0);
+  EXPECT_NEAR(printing.position.y(), 0.05, 1e-6);
+  EXPECT_TRUE(printing.extruding);
+  // Appended before the end: straight after it, no pause.
+  Trajectory busy({PathSegment{LineCurve{Vec3(0, 0, 0), Vec3(0.1, 0, 0)}, 0.1f, true}}, 0);
+  busy.append({PathSegment{LineCurve{Vec3(0.1, 0, 0), Vec3(0.2, 0, 0)}, 0.1f, true}}, 0.5);
+  EXPECT_NEAR(busy.end_time(), 2.0, 1e-6);
+  EXPECT_TRUE(busy.sample(1.5).extruding);
+}

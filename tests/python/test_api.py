@@ -210,3 +210,33 @@ def test_scene_errors_name_the_file_and_line(tmp_path):
     assert bad.value.line == line and bad.value.file == str(DEMO)
     assert f"{DEMO}:{line}" in str(bad.value)
     assert isinstance(bad.value, m3dp.Error) and isinstance(bad.value, RuntimeError)
+
+
+def test_paths_given_while_printing(tmp_path):
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(2.0)  # printing the first side of the square since 1.76 s
+    # Replace the square by a short line elsewhere: the head travels there (0.26 m at the line's
+    # 0.1 m/s: until 4.6 s), then prints it (until 5.6 s).
+    sim.set_path("nozzle", """<path speed="0.1">
+      <line><start>0.75 0.1 0.008</start><end>0.65 0.1 0.008</end></line>
+    </path>""")
+    sim.step_to(4.0)
+    assert not sim.nozzle("nozzle")["extruding"], "travelling"
+    sim.step_to(6.0)
+    pose = sim.nozzle("nozzle")["pose"]
+    np.testing.assert_allclose(pose[:3], [0.65, 0.1, 0.008], atol=2e-3)
+    assert not sim.nozzle("nozzle")["extruding"], "the line is done"
+    on_line = (np.abs(sim.positions[:, 1] - 0.1) < 0.01) & (sim.positions[:, 0] > 0.64) & (sim.positions[:, 0] < 0.76)
+    assert on_line.sum() > 100, "the new line was printed"
+    count = sim.particle_count
+    # Append waypoints from a file, after a 0.5 s pause.
+    (tmp_path / "more.csv").write_text("x,y,z,speed,extrude\n0.65,0.05,0.008,0.1,1\n0.75,0.05,0.008,0.1,1\n")
+    sim.set_path("nozzle", '<path start_time="0.5"><waypoints file="more.csv"/></path>', append=True,
+                 name=tmp_path / "appended.xml")
+    sim.step_to(6.45)
+    assert sim.particle_count == count, "paused"
+    sim.step_to(8.5)
+    assert sim.particle_count > count + 100
+    with pytest.raises(m3dp.InputError) as bad:
+        sim.set_path("nozzle", "<path>\n<line><start>0 0</start></line></path>", name=tmp_path / "bad.xml")
+    assert bad.value.file == str(tmp_path / "bad.xml") and bad.value.line == 2

@@ -289,6 +289,8 @@ class SceneReader {
   SceneReader(const std::string& text, fs::path file) : text_(text), file_(std::move(file)), lines_(text) {}
 
   Scene read();
+  /// The text is a <path> element on its own.
+  PathSegments read_path_text();
   /// Parses the text into `document` and returns its root element, which must be <expected_root>
   /// (InputError at the file's line otherwise).
   pugi::xml_node parse_root(pugi::xml_document& document, std::string_view expected_root);
@@ -410,6 +412,7 @@ class SceneReader {
   void read_fluid_block(const pugi::xml_node& block);
   void read_print_head(const pugi::xml_node& head);
   std::optional<toolpath::Trajectory> read_path(const pugi::xml_node& path);
+  std::optional<PathSegments> read_path_segments(const pugi::xml_node& path);
   std::optional<toolpath::PathSegment> read_path_segment(const pugi::xml_node& element, Real path_speed);
   std::optional<std::vector<toolpath::PathSegment>> read_gcode_segments(const pugi::xml_node& element);
   std::optional<std::vector<toolpath::PathSegment>> read_waypoint_segments(const pugi::xml_node& element);
@@ -1969,6 +1972,20 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
 }
 
 std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node& path) {
+  auto read = read_path_segments(path);
+  if (!read) return std::nullopt;
+  return toolpath::Trajectory(std::move(read->segments), read->start_time);
+}
+
+PathSegments SceneReader::read_path_text() {
+  pugi::xml_document document;
+  const pugi::xml_node path = parse_root(document, "path");
+  auto read = read_path_segments(path);
+  if (!diagnostics_.empty()) throw InputError(std::move(diagnostics_));
+  return std::move(*read);
+}
+
+std::optional<PathSegments> SceneReader::read_path_segments(const pugi::xml_node& path) {
   check_attributes(path, {"start_time", "speed"});
   check_children(path, {"line", "polyline", "circle", "helix", "wall", "gcode", "waypoints"},
                  {"line", "polyline", "circle", "helix", "wall", "gcode", "waypoints"});
@@ -2002,7 +2019,7 @@ std::optional<toolpath::Trajectory> SceneReader::read_path(const pugi::xml_node&
     return std::nullopt;
   }
   if (!segments_valid || !attributes_valid) return std::nullopt;
-  return toolpath::Trajectory(std::move(segments), start_time.value_or(0));
+  return PathSegments{std::move(segments), start_time.value_or(0)};
 }
 
 std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segments(const pugi::xml_node& element) {
@@ -2363,6 +2380,10 @@ Scene load_scene(const std::filesystem::path& file) {
 
 Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name) {
   return SceneReader(text, file_name).read();
+}
+
+PathSegments load_path_from_string(const std::string& text, const std::filesystem::path& file_name) {
+  return SceneReader(text, file_name).read_path_text();
 }
 
 }  // namespace m3dp::scene

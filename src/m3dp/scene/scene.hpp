@@ -178,4 +178,13 @@ std::vector<MaterialEntry> load_material_presets();
 /// Same, from text in memory; `file_name` is used in messages and to resolve relative mesh paths.
 Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name);
 
+/// A print head's <path> element on its own (paths given at run time, the Python API): its segments
+/// and its start_time attribute (s; 0 if absent). `file_name` names it in errors (file:line) and
+/// is what the <gcode> and <waypoints> files it refers to are relative to.
+struct PathSegments {
+  std::vector<toolpath::PathSegment> segments;
+  double start_time = 0;
+};
+PathSegments load_path_from_string(const std::string& text, const std::filesystem::path& file_name);
+
 }  // namespace m3dp::scene

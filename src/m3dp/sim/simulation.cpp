@@ -96,6 +96,31 @@ void Simulation::command_head(std::size_t head, const HeadCommand& command) {
   head_commands_.at(head) = command;
 }
 
+void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
+  auto& head = scene_.print_heads.at(head_index);
+  if (segments.empty()) throw Error(fmt::format("print head '{}': a new path without segments", head.name));
+  if (!(delay >= 0) || !std::isfinite(delay)) throw Error(fmt::format("print head '{}': a path's delay must be ≥ 0 s", head.name));
+  const double now = solver_.time();
+  if (append) {
+    head.trajectory.append(std::move(segments), now + delay);
+  } else {
+    // From where the path has the head now: a pause there (the delay), then the travel to the new path.
+    toolpath::PathSegment here;
+    const Vec3 position = head.trajectory.sample(now).position;
+    here.curve = toolpath::LineCurve{position, position};
+    here.speed = segments.front().speed;
+    here.extrude = false;
+    toolpath::Trajectory path({here}, now);
+    path.append(std::move(segments), now + delay);
+    head.trajectory = std::move(path);  // the robot's tool target reads it where it is
+  }
+  if (const auto tool = head_tools_[head_index]) {
+    for (const auto& description : scene_.robots)
+      if (head.mount && description.name == head.mount->robot)
+        world_.set_external_control(robots_[static_cast<std::size_t>(&description - scene_.robots.data())], false);
+  }
+}
+
 void Simulation::update_print_heads() {
   for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
     const NozzleState state = nozzle_state(i);

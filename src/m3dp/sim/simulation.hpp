@@ -48,6 +48,12 @@ class Simulation {
     std::optional<Real> flow_scale;
   };
   void command_head(std::size_t head, const HeadCommand& command);
+  /// A new path for a print head, given while it runs: it replaces the head's path from now on (the
+  /// head first travels from where its path has it now to the new path's first point), or with
+  /// `append` follows the path's end. `delay` (s) waits that long first. The robot that carries
+  /// the head goes back to following its path. Outputs that draw paths keep drawing the path the
+  /// run started with.
+  void set_head_path(std::size_t head, std::vector<toolpath::PathSegment> segments, double delay, bool append);
   [[nodiscard]] const HeadCommand& head_command(std::size_t head) const { return head_commands_.at(head); }
 
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static

@@ -60,10 +60,17 @@ Vec3 curve_point(const Curve& curve, Real arc_length) {
 }
 
 Trajectory::Trajectory(std::vector<PathSegment> segments, double start_time) : start_time_(start_time) {
-  double time = start_time;
-  bool have_previous = false;
-  Vec3 previous_end = Vec3::Zero();
-  Real previous_speed = 0;
+  append(std::move(segments), start_time);
+}
+
+void Trajectory::append(std::vector<PathSegment> segments, double not_before) {
+  const double end = end_time();
+  double time = std::max(end, not_before);
+  bool have_previous = !pieces_.empty();
+  Vec3 previous_end = have_previous ? last_point(pieces_.back().curve) : Vec3::Zero();
+  Real previous_speed = have_previous ? pieces_.back().speed : Real(0);
+  // A path added later than this one ends: the head waits where it stopped.
+  if (have_previous && time > end) pieces_.push_back(Piece{LineCurve{previous_end, previous_end}, 0, 0, false, end, time - end});
   for (auto& segment : segments) {
     const Vec3 start = first_point(segment.curve);
     if (segment.dwell > 0) {

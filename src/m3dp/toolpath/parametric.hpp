@@ -66,6 +66,10 @@ class Trajectory {
   /// `start_time` (s): the head waits at the first point until then.
   Trajectory(std::vector<PathSegment> segments, double start_time);
 
+  /// More segments after the last ones (with a travel to their first point where needed), from
+  /// `not_before` (s) if that is later than the path's end: a path extended while it is followed.
+  void append(std::vector<PathSegment> segments, double not_before);
+
   [[nodiscard]] TrajectorySample sample(double time) const;
   [[nodiscard]] double start_time() const { return start_time_; }
   [[nodiscard]] double end_time() const;
