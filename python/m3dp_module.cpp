@@ -236,6 +236,12 @@ world::ToolIndex robot_tool(PySimulation& self, std::size_t robot, const std::op
   throw Error(fmt::format("robot '{}' carries no print head{}", robot_name, head_name ? fmt::format(" '{}'", *head_name) : ""));
 }
 
+/// A <path> element given at run time; `name` (default: path.xml beside the scene) names it in
+/// errors, and its files are relative to it.
+scene::PathSegments read_path(PySimulation& self, const std::string& path, const std::optional<fs::path>& name) {
+  return scene::load_path_from_string(path, name ? *name : self.simulation().scene().file.parent_path() / "path.xml");
+}
+
 void translate_errors(py::module_& module) {
   static py::exception<Error> error(module, "Error", PyExc_RuntimeError);
   static py::exception<SimulationError> simulation_error(module, "SimulationError", error.ptr());
@@ -426,8 +432,7 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
          "Extrusion on or off and the flow as a fraction of the nominal; None: as the head's path says.")
       .def("set_path", [](PySimulation& self, const std::string& head, const std::string& path, bool append,
                           std::optional<fs::path> name) {
-        const fs::path file = name ? *name : self.simulation().scene().file.parent_path() / "path.xml";
-        scene::PathSegments read = scene::load_path_from_string(path, file);
+        scene::PathSegments read = python::read_path(self, path, name);
         self.simulation().set_head_path(python::head_index(self, head), std::move(read.segments), read.start_time, append);
       }, py::arg("head"), py::arg("path"), py::arg("append") = false, py::arg("name") = py::none(),
          "A new path for the print head, as the scene's <path> element (lines, polylines, circles, helices, walls, "
@@ -435,6 +440,13 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
          "to its first point), or with append=True follows the path's end. Its start_time attribute is a delay from "
          "now. Files are relative to `name` (default: beside the scene file), which errors also name. The robot "
          "carrying the head goes back to following its path. world.pvd and run.mcap keep drawing the first path.")
+      .def("set_base_path", [](PySimulation& self, const std::string& robot, const std::string& path, bool append,
+                               std::optional<fs::path> name) {
+        scene::PathSegments read = python::read_path(self, path, name);
+        self.simulation().set_base_path(python::robot_index(self, robot), std::move(read.segments), read.start_time, append);
+      }, py::arg("robot"), py::arg("path"), py::arg("append") = false, py::arg("name") = py::none(),
+         "A new path for a mobile base (a <path> element, z ignored), as set_path does for a print head; the base "
+         "follows it with its tracking controller on odometry.")
       // ---- cameras ----
       .def_property_readonly("cameras", [](PySimulation& self) {
         std::vector<std::string> names;

@@ -240,3 +240,16 @@ def test_paths_given_while_printing(tmp_path):
     with pytest.raises(m3dp.InputError) as bad:
         sim.set_path("nozzle", "<path>\n<line><start>0 0</start></line></path>", name=tmp_path / "bad.xml")
     assert bad.value.file == str(tmp_path / "bad.xml") and bad.value.line == 2
+
+
+def test_base_paths_given_while_driving():
+    sim = m3dp.Simulation(ROOT / "scenes" / "turtlebot_print.sdf", threads=2)
+    sim.step_to(0.5)  # its scene path starts at 1 s: it stands at (0, 0) facing +x
+    start = sim.base_pose("turtlebot")
+    np.testing.assert_allclose(start[:2], [0, 0], atol=1e-3)
+    # Instead of the scene's quarter circle: 0.1 m straight ahead at 0.05 m/s, from now on.
+    sim.set_base_path("turtlebot", '<path speed="0.05"><line extrude="false"><start>0 0 0</start><end>0.1 0 0</end></line></path>')
+    sim.step_to(3.5)
+    np.testing.assert_allclose(sim.base_pose("turtlebot")[:2], [0.1, 0.0], atol=0.01)
+    with pytest.raises(m3dp.Error, match="no mobile base"):
+        m3dp.Simulation(DEMO).set_base_path("ur10", '<path><line><start>0 0 0</start><end>1 0 0</end></line></path>')

@@ -96,29 +96,53 @@ void Simulation::command_head(std::size_t head, const HeadCommand& command) {
   head_commands_.at(head) = command;
 }
 
+namespace {
+/// `path` given a new part at `now` (s): appended after its end, or replacing it from `here` (where
+/// it has its follower now: a pause of `delay` there, then the travel to the new first point).
+void change_path(toolpath::Trajectory& path, const Vec3& here, std::vector<toolpath::PathSegment> segments, double now,
+                 double delay, bool append, const std::string& whose) {
+  if (segments.empty()) throw Error(fmt::format("{}: a new path without segments", whose));
+  if (!(delay >= 0) || !std::isfinite(delay)) throw Error(fmt::format("{}: a path's delay must be ≥ 0 s", whose));
+  if (append) {
+    path.append(std::move(segments), now + delay);
+    return;
+  }
+  toolpath::PathSegment pause;
+  pause.curve = toolpath::LineCurve{here, here};
+  pause.speed = segments.front().speed;
+  pause.extrude = false;
+  toolpath::Trajectory changed({pause}, now);
+  changed.append(std::move(segments), now + delay);
+  path = std::move(changed);  // in place: the controllers read it where it is
+}
+}  // namespace
+
 void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
   auto& head = scene_.print_heads.at(head_index);
-  if (segments.empty()) throw Error(fmt::format("print head '{}': a new path without segments", head.name));
-  if (!(delay >= 0) || !std::isfinite(delay)) throw Error(fmt::format("print head '{}': a path's delay must be ≥ 0 s", head.name));
   const double now = solver_.time();
-  if (append) {
-    head.trajectory.append(std::move(segments), now + delay);
-  } else {
-    // From where the path has the head now: a pause there (the delay), then the travel to the new path.
-    toolpath::PathSegment here;
-    const Vec3 position = head.trajectory.sample(now).position;
-    here.curve = toolpath::LineCurve{position, position};
-    here.speed = segments.front().speed;
-    here.extrude = false;
-    toolpath::Trajectory path({here}, now);
-    path.append(std::move(segments), now + delay);
-    head.trajectory = std::move(path);  // the robot's tool target reads it where it is
+  change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
+              fmt::format("print head '{}'", head.name));
+  if (!head_tools_[head_index] || !head.mount) return;
+  for (std::size_t robot = 0; robot < scene_.robots.size(); ++robot)
+    if (scene_.robots[robot].name == head.mount->robot) world_.set_external_control(robots_[robot], false);
+}
+
+void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
+  auto& description = scene_.robots.at(robot);
+  if (!description.mobile_base) throw Error(fmt::format("robot '{}' has no mobile base", description.name));
+  auto& base = *description.mobile_base;
+  const double now = solver_.time();
+  const bool had_path = base.path.has_value();
+  // A base without a path starts its new one where it stands.
+  Vec3 here = world_.base_pose(robots_[robot]).position;
+  if (!had_path) base.path = toolpath::Trajectory({}, now);
+  else here = base.path->sample(now).position;
+  change_path(*base.path, here, std::move(segments), now, delay, append && had_path, fmt::format("robot '{}'", description.name));
+  if (!had_path) {
+    const toolpath::Trajectory* path = &*base.path;
+    world_.set_base_trajectory(robots_[robot], [path](double time) { return path->sample(time).position; });
   }
-  if (const auto tool = head_tools_[head_index]) {
-    for (const auto& description : scene_.robots)
-      if (head.mount && description.name == head.mount->robot)
-        world_.set_external_control(robots_[static_cast<std::size_t>(&description - scene_.robots.data())], false);
-  }
+  world_.set_external_control(robots_[robot], false);
 }
 
 void Simulation::update_print_heads() {

@@ -54,6 +54,8 @@ class Simulation {
   /// the head goes back to following its path. Outputs that draw paths keep drawing the path the
   /// run started with.
   void set_head_path(std::size_t head, std::vector<toolpath::PathSegment> segments, double delay, bool append);
+  /// The same for a mobile base's path (z ignored): the scene's robot `robot` (scene order) follows it.
+  void set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append);
   [[nodiscard]] const HeadCommand& head_command(std::size_t head) const { return head_commands_.at(head); }
 
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
