@@ -10,6 +10,7 @@
 
 #include <fmt/format.h>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <memory>
@@ -86,10 +87,14 @@ class PySimulation {
   }
   void step_to(double time) {
     if (!std::isfinite(time)) throw Error("step_to: the time must be a number (s)");
+    // Without the GIL for a tenth of a second of steps at a time: taking it back every step would
+    // wait out Python's switch interval (5 ms) whenever another thread runs Python.
     while (simulation_->time() < time - 1e-12) {
       {
         py::gil_scoped_release released;
-        step();
+        const auto batch_end = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
+        do step();
+        while (simulation_->time() < time - 1e-12 && std::chrono::steady_clock::now() < batch_end);
       }
       if (PyErr_CheckSignals() != 0) throw py::error_already_set();
     }

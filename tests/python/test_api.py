@@ -4,6 +4,7 @@ import json
 import os
 import pathlib
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -188,15 +189,21 @@ def test_two_simulations_are_independent():
 
 
 def test_stepping_releases_the_gil():
+    # The main thread keeps running while another steps: no gap in its loop as long as a step, let
+    # alone the whole step_to (which a held GIL would make it).
     sim = m3dp.Simulation(DEMO, threads=1)
-    counted = 0
-    worker = threading.Thread(target=sim.step_to, args=(1.0,))
+    worker = threading.Thread(target=sim.step_to, args=(3.0,))
+    start = last = time.perf_counter()
+    longest_gap = 0.0
     worker.start()
     while worker.is_alive():
-        counted += 1
+        now = time.perf_counter()
+        longest_gap, last = max(longest_gap, now - last), now
     worker.join()
-    assert sim.time >= 1.0 - 1e-9
-    assert counted > 10000, "the main thread ran while the simulation stepped"
+    elapsed = last - start
+    assert sim.time >= 3.0 - 1e-9
+    assert elapsed > 0.2
+    assert longest_gap < elapsed / 4, (longest_gap, elapsed)
 
 
 def test_scene_errors_name_the_file_and_line(tmp_path):
