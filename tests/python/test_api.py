@@ -260,3 +260,17 @@ def test_base_paths_given_while_driving():
     np.testing.assert_allclose(sim.base_pose("turtlebot")[:2], [0.1, 0.0], atol=0.01)
     with pytest.raises(m3dp.Error, match="no mobile base"):
         m3dp.Simulation(DEMO).set_base_path("ur10", '<path><line><start>0 0 0</start><end>1 0 0</end></line></path>')
+
+
+def test_layers_of_the_wall():
+    # The demo's square is 0.96 m a layer at 0.1 m/s: its second layer starts at about 11.4 s.
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(12.5)
+    layer = sim.layer
+    assert layer.shape == (sim.particle_count,) and layer.dtype == np.int32
+    assert set(np.unique(layer)) == {0, 1}
+    z = sim.positions[:, 2]
+    # The second layer lies on the first: its particles are higher on average by about a layer (8 mm).
+    assert 0.004 < z[layer == 1].mean() - z[layer == 0].mean() < 0.012
+    # And it was born after every particle of the first.
+    assert sim.birth_time[layer == 1].min() > sim.birth_time[layer == 0].max()

@@ -147,6 +147,12 @@ void CameraRig::update(const Simulation& simulation) {
         settled.begin, settled.end, settled.build});
 }
 
+int CameraRig::particle_layer(std::uint16_t phase, Real birth_time) const {
+  if (phase >= layer_starts_.size()) return -1;
+  const auto& starts = layer_starts_[phase];
+  return static_cast<int>(std::upper_bound(starts.begin(), starts.end(), double(birth_time)) - starts.begin()) - 1;
+}
+
 void CameraRig::show(const State& state) {
   for (std::size_t b = 0; b < layout_.bodies.size() && b < state.bodies.size(); ++b)
     if (layout_.bodies[b].link) renderer_.set_body_pose(body_handles_[b], state.bodies[b]);

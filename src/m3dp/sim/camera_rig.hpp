@@ -45,6 +45,9 @@ class CameraRig {
   /// What each segment id is (index: id): fixed when the rig is made, layers from the paths.
   [[nodiscard]] const std::vector<Segment>& legend() const { return legend_; }
   [[nodiscard]] const WorldLayout& layout() const { return layout_; }
+  /// A particle's print layer (0 first) by its material (phase) and birth time (s), as the
+  /// segmentation names it; -1: not printed by a path (a fluid block, or before the first layer).
+  [[nodiscard]] int particle_layer(std::uint16_t phase, Real birth_time) const;
 
   /// What the cameras see when it does not come from the simulation (a saved run: m3dp render):
   /// each layout body's and nozzle's pose (static ones ignored), the particles with their
