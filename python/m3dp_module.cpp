@@ -76,7 +76,13 @@ class PySimulation {
     });
     for (std::size_t robot = 0; robot < scene.robots.size(); ++robot) robot_names_.push_back(scene.robots[robot].name);
   }
-  ~PySimulation() { close(); }
+  ~PySimulation() {
+    try {
+      close();
+    } catch (...) {
+      // A destructor must not throw; close() was the place to hear of it.
+    }
+  }
 
   sim::Simulation& simulation() { return *simulation_; }
   const std::vector<std::string>& robot_names() const { return robot_names_; }
@@ -193,8 +199,9 @@ class PySimulation {
  private:
   void start_run(sim::RunOptions options) {
     options.show_progress = false;
-    options.until = std::numeric_limits<double>::infinity();  // the caller decides when to stop
     options.threads = threads_;
+    // Commands from Python are not in checkpoints, so a run stepped from Python writes none.
+    options.checkpoint_period = 0;
     run_ = std::make_unique<sim::Run>(*simulation_, options);
   }
   sim::RunSummary finish_run() {
