@@ -147,6 +147,7 @@ def test_extrusion_commands():
     sim.set_extrusion("nozzle", extruding=False)
     sim.step_to(2.4)
     assert sim.particle_count == before, "no material while extrusion is off"
+    assert not sim.nozzle("nozzle")["extruding"] and sim.nozzle("nozzle")["volume_rate"] == 0
     sim.set_extrusion("nozzle", extruding=True, flow_scale=1.0)
     sim.step_to(2.8)
     nominal = sim.particle_count - before

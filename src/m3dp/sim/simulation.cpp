@@ -85,7 +85,7 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   const HeadCommand& command = head_commands_[head_index];
   if (command.flow_scale) state.flow_scale = *command.flow_scale;
   if (command.extruding) state.extruding = *command.extruding;
-  state.volume_rate = sample.extruding ? nominal_flow * state.flow_scale : Real(0);
+  state.volume_rate = state.extruding ? nominal_flow * state.flow_scale : Real(0);
   return state;
 }
 

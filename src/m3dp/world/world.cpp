@@ -672,10 +672,17 @@ void World::set_external_control(RobotIndex robot_index, bool external) {
 
 bool World::external_control(RobotIndex robot) const { return impl_->robots.at(robot).external; }
 
+namespace {
+/// Throws Error unless `positions` has a value for each of the robot's joints.
+void check_joint_count(const std::string& robot, const Eigen::VectorXd& targets, const std::vector<double>& positions) {
+  if (positions.size() != static_cast<std::size_t>(targets.size()))
+    throw Error(fmt::format("robot '{}': {} joint targets for {} joints", robot, positions.size(), targets.size()));
+}
+}  // namespace
+
 void World::command_joint_targets(RobotIndex robot_index, const std::vector<double>& positions) {
   Impl::Robot& robot = impl_->robots.at(robot_index);
-  if (positions.size() != static_cast<std::size_t>(robot.position_targets.size()))
-    throw Error(fmt::format("robot '{}': {} joint targets for {} joints", robot.name, positions.size(), robot.position_targets.size()));
+  check_joint_count(robot.name, robot.position_targets, positions);
   for (const double position : positions)
     if (!std::isfinite(position)) throw Error(fmt::format("robot '{}': a joint target that is not a number", robot.name));
   set_external_control(robot_index, true);
@@ -700,8 +707,7 @@ void World::command_base_velocity(RobotIndex robot_index, double speed, double t
 
 void World::set_joint_targets(RobotIndex robot_index, const std::vector<double>& positions) {
   Impl::Robot& robot = impl_->robots.at(robot_index);
-  if (positions.size() != static_cast<std::size_t>(robot.position_targets.size()))
-    throw Error(fmt::format("robot '{}': {} joint targets for {} joints", robot.name, positions.size(), robot.position_targets.size()));
+  check_joint_count(robot.name, robot.position_targets, positions);
   for (std::size_t k = 0; k < positions.size(); ++k) robot.position_targets[static_cast<Eigen::Index>(k)] = positions[k];
 }
 
