@@ -133,6 +133,19 @@ class PySimulation {
     summary["volume_lost_at_nozzles"] = result.volume.lost_at_nozzles;
     summary["volume_removed"] = result.volume.removed;
     summary["mass_emitted"] = result.mass_emitted;
+    py::dict robots;
+    for (const auto& robot : result.robots) {
+      py::dict entry;
+      entry["contacts_with_robots"] = robot.contacts.with_robots;
+      entry["contacts_with_printed_material"] = robot.contacts.with_printed_material;
+      entry["contacts_with_other"] = robot.contacts.with_other;
+      if (robot.coordination) {
+        entry["waiting_time"] = robot.coordination->waiting_time;
+        entry["slowed_time"] = robot.coordination->slowed_time;
+      }
+      robots[py::str(robot.name)] = entry;
+    }
+    summary["robots"] = robots;
     run_.reset();
     return summary;
   }
@@ -409,6 +422,39 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
       }, py::arg("robot"), py::arg("external") = true,
          "True: the robot leaves its scene paths and holds still until commanded; False: back to its scene paths "
          "(where they are at the present time). The commands below switch it to external control themselves.")
+      .def("set_coordination", [](PySimulation& self, bool on) { self.simulation().set_coordination(on); }, py::arg("on") = true,
+         "Switches the multi-robot coordinator on (with the scene's <coordinator> settings, or the defaults) or off "
+         "(every robot follows its paths at full speed from where they are).")
+      .def_property_readonly("coordination", [](PySimulation& self) -> py::object {
+        const auto* coordination = self.simulation().coordination();
+        if (!coordination) return py::none();
+        py::dict robots;
+        for (std::size_t r = 0; r < self.robot_names().size(); ++r) {
+          const auto& report = coordination->reports()[r];
+          py::dict entry;
+          entry["rate"] = report.rate;
+          entry["waiting_time"] = report.waiting_time;
+          entry["slowed_time"] = report.slowed_time;
+          entry["decisions"] = report.decisions;
+          entry["conflicts"] = report.conflicts;
+          entry["blocked"] = report.blocked;
+          entry["least_robot_distance"] = report.least_robot_distance;
+          entry["least_print_distance"] = report.least_print_distance;
+          robots[py::str(self.robot_names()[r])] = entry;
+        }
+        return robots;
+      }, "Per robot, what the coordinator did so far: its path clock's rate now (1 full speed, 0 waiting), "
+         "waiting_time and slowed_time (s), decisions, conflicts (decisions it yielded at), blocked, and the least "
+         "distances (m) to another robot and to the print at its decisions. None when the coordinator is off.")
+      .def("contacts", [](PySimulation& self, const std::string& robot) {
+        const auto& contacts = self.simulation().world().robot_contacts(self.simulation().robots()[python::robot_index(self, robot)]);
+        py::dict result;
+        result["with_robots"] = contacts.with_robots;
+        result["with_printed_material"] = contacts.with_printed_material;
+        result["with_other"] = contacts.with_other;
+        result["world_steps_in_contact"] = contacts.steps_in_contact;
+        return result;
+      }, py::arg("robot"), "Contact points the robot's links have had so far (summed over world steps), by what they touched.")
       .def("external_control", [](PySimulation& self, const std::string& robot) {
         return self.simulation().world().external_control(self.simulation().robots()[python::robot_index(self, robot)]);
       }, py::arg("robot"))

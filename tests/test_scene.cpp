@@ -1095,3 +1095,40 @@ TEST(SceneMaterials, TheEngineChecksAreReportedAtTheirLines) {
   const InputError error = load_error(mixed);
   EXPECT_EQ(error.diagnostics().size(), 1u) << error.what();  // said once, not also by the scene reader
 }
+
+namespace {
+std::string shared_print_scene() {
+  std::ifstream file(fs::path(M3DP_SCENES) / "multi_robot_shared.sdf");
+  return std::string(std::istreambuf_iterator<char>(file), {});
+}
+}  // namespace
+
+TEST(Scene, ACoordinatorTakesItsSettingsAndPriorities) {
+  const std::string text = shared_print_scene();
+  const auto scene = load_scene_from_string(text, "scenes/multi_robot_shared.sdf");
+  const auto& coordinator = scene.coordinator;
+  EXPECT_TRUE(coordinator.enabled);
+  EXPECT_DOUBLE_EQ(coordinator.period, 0.1);
+  EXPECT_DOUBLE_EQ(coordinator.horizon, 1.5);
+  EXPECT_EQ(coordinator.samples, 6);
+  EXPECT_FLOAT_EQ(coordinator.robot_clearance, 0.03F);
+  EXPECT_FLOAT_EQ(coordinator.print_clearance, 0.01F);
+  EXPECT_EQ(coordinator.priority, (std::vector<std::string>{"turtlebot_1", "turtlebot_2", "turtlebot_3"}));
+  EXPECT_FALSE(load_scene_from_string(replaced(text, "      <coordinator>", "      <coordinator enabled=\"false\">"), "x.sdf").coordinator.enabled);
+  EXPECT_FALSE(load_scene_from_string(valid_scene(), "scenes/valid.sdf").coordinator.enabled);
+}
+
+TEST(Scene, ACoordinatorsMistakesAreErrorsAtTheirLine) {
+  const std::string text = shared_print_scene();
+  const std::string unknown = replaced(text, "<priority>turtlebot_1 turtlebot_2", "<priority>turtlebot_1 turtlebot_9");
+  expect_error_at(unknown, "<priority>", "<priority>: no robot 'turtlebot_9' is included in the world; its robots: turtlebot_1, turtlebot_2, turtlebot_3");
+  const std::string twice = replaced(text, "<priority>turtlebot_1 turtlebot_2", "<priority>turtlebot_1 turtlebot_1");
+  expect_error_at(twice, "<priority>", "<priority>: robot 'turtlebot_1' is named twice");
+  const std::string horizon = replaced(text, "<horizon>1.5</horizon>", "<horizon>-1</horizon>");
+  EXPECT_CONTAINS(load_error(horizon).what(), location_of(horizon, "<horizon>") + " error: <horizon>");
+  const std::string typo = replaced(text, "<horizon>", "<horizn>");
+  EXPECT_CONTAINS(load_error(typo).what(), location_of(typo, "<horizn>"));
+  // One robot has no one to make way for.
+  const std::string alone = replaced(valid_scene(), "<output>", "<coordinator/><output>");
+  expect_error_at(alone, "<coordinator/>", "<coordinator> coordinates robots: the world needs at least two");
+}

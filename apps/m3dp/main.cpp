@@ -1,5 +1,5 @@
 // m3dp — command-line front end.
-//   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N] [--record] [--serve [PORT]] [--pace F] [--checkpoint-period S]
+//   m3dp run SCENE [-o DIR] [--until SECONDS] [--threads N] [--record] [--no-coordinator] [--serve [PORT]] [--pace F] [--checkpoint-period S]
 //   m3dp run --resume RUN_DIR
 //   m3dp validate SCENE
 //   m3dp bench [--particles N] [--steps S] ...
@@ -36,10 +36,13 @@ std::atomic<bool> g_stop_requested{false};
 extern "C" void request_stop(int) { g_stop_requested.store(true); }
 
 /// `m3dp run`: `options` holds what the command line set (until, progress, record, live stream, pace).
-int run_command(const std::filesystem::path& scene_file, std::filesystem::path output, int threads, m3dp::sim::RunOptions options) {
+/// `coordinate`: none as the scene says; false switches its <coordinator> off (`--no-coordinator`).
+int run_command(const std::filesystem::path& scene_file, std::filesystem::path output, int threads, m3dp::sim::RunOptions options,
+                bool coordinate) {
   using namespace m3dp;
   ThreadLimit thread_limit(threads);
-  const scene::Scene scene = scene::load_scene(scene_file);
+  scene::Scene scene = scene::load_scene(scene_file);
+  if (!coordinate) scene.coordinator.enabled = false;
   for (const auto& warning : scene.warnings) fmt::print(stderr, "{}: warning: {}\n", warning.location.str(), warning.message);
   if (output.empty()) output = std::filesystem::path("out") / scene_file.stem();
   fmt::print(stderr, "m3dp: {} → {} ({} threads){}\n", scene_file.string(), output.string(), ThreadLimit::active_threads(),
@@ -68,8 +71,9 @@ int validate_command(const std::filesystem::path& scene_file) {
   // Robots as a run loads them: DART's URDF loader may reject what the XML check let through, and a
   // mobile base or a mount may name what the robot does not have.
   m3dp::world::World world;
-  const auto robots = m3dp::sim::add_scene_robots(scene, world);
-  m3dp::sim::add_print_head_tools(scene, world, robots, 2 * scene.solver.particle_radius);
+  const std::vector<m3dp::sim::PlanClock> clocks(scene.robots.size());
+  const auto robots = m3dp::sim::add_scene_robots(scene, world, clocks);
+  m3dp::sim::add_print_head_tools(scene, world, robots, 2 * scene.solver.particle_radius, clocks);
   std::size_t collisions = 0;
   for (const auto& body : scene.bodies) collisions += body.collisions.size();
   fmt::print("{}: OK — world '{}', {} static bodies ({} collision shapes), {} dynamic bodies, {} robots, {} materials, {} fluid "
@@ -116,6 +120,9 @@ int main(int argc, char** argv) {
   run->add_flag("--hash", run_options.hash,
                 "Print a hash of the state after every step (also hashes.csv): the same scene gives the same hashes at a "
                 "fixed thread count; meshes then join the world at the step they were asked for");
+  bool no_coordinator = false;
+  run->add_flag("--no-coordinator", no_coordinator,
+                "Switch the scene's <coordinator> off: every robot follows its paths at full speed, whatever it meets");
   run->add_option("--pace", run_options.pace, "Run at most this many times real time (1: real time, to watch it live)")
       ->check(CLI::PositiveNumber);
 
@@ -171,7 +178,7 @@ int main(int argc, char** argv) {
         throw m3dp::Error("run: give a scene file (or --resume RUN_DIR)");
       }
       run_options.threads = threads;
-      return run_command(scene_file, output, threads, run_options);
+      return run_command(scene_file, output, threads, run_options, !no_coordinator);
     }
     if (validate->parsed()) return validate_command(validate_file);
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);

@@ -422,6 +422,7 @@ class SceneReader {
   pugi::xml_node find_centre(const pugi::xml_node& curve);
   void read_output(const pugi::xml_node& output);
   void read_meshing(const pugi::xml_node& meshing);
+  void read_coordinator(const pugi::xml_node& coordinator);
   void check_materials();
   /// The engine's own check of what was read (sph::check_parameters), each problem at its field's line.
   void check_engine_parameters();
@@ -1421,7 +1422,8 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
 // ---- the m3dp plugin ----
 
 void SceneReader::read_plugin(const pugi::xml_node& plugin) {
-  check_children(plugin, {"solver", "air", "material", "fluid_block", "print_head", "robot", "output", "meshing", "camera"},
+  check_children(plugin, {"solver", "air", "material", "fluid_block", "print_head", "robot", "output", "meshing", "camera",
+                          "coordinator"},
                  {"material", "fluid_block", "print_head", "robot", "camera"});
   // The solver comes first: other checks need the particle radius and the bounds.
   if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
@@ -1433,6 +1435,7 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
   if (const pugi::xml_node output = plugin.child("output")) read_output(output);
   if (const pugi::xml_node meshing = plugin.child("meshing")) read_meshing(meshing);
   for (const auto& camera : child_elements(plugin, "camera")) read_plugin_camera(camera);
+  if (const pugi::xml_node coordinator = plugin.child("coordinator")) read_coordinator(coordinator);
 
   if (!plugin.child("fluid_block") && !plugin.child("print_head")) {
     report(plugin, "the scene has no fluid: add a <fluid_block> or a <print_head>");
@@ -2252,6 +2255,39 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
     }
   }
   if (const auto iterations = read_int(meshing, "smoothing_iterations", 0)) settings.surface.smoothing_iterations = *iterations;
+}
+
+void SceneReader::read_coordinator(const pugi::xml_node& coordinator) {
+  check_attributes(coordinator, {"enabled"});
+  check_children(coordinator, {"period", "horizon", "samples", "robot_clearance", "print_clearance", "priority"});
+  CoordinatorSettings& settings = scene_.coordinator;
+  settings.enabled = read_bool_attribute(coordinator, "enabled").value_or(true);
+  settings.where = where(coordinator);
+  if (const auto period = read_scalar(coordinator, "period", Quantity::time, Limits::positive(), Presence::optional))
+    settings.period = *period;
+  if (const auto horizon = read_scalar(coordinator, "horizon", Quantity::time, Limits::positive(), Presence::optional))
+    settings.horizon = *horizon;
+  if (const auto samples = read_int(coordinator, "samples", 1)) settings.samples = *samples;
+  if (const auto clearance = read_scalar(coordinator, "robot_clearance", Quantity::length, Limits::non_negative(), Presence::optional))
+    settings.robot_clearance = Real(*clearance);
+  if (const auto clearance = read_scalar(coordinator, "print_clearance", Quantity::length, Limits::non_negative(), Presence::optional))
+    settings.print_clearance = Real(*clearance);
+  if (const pugi::xml_node priority = coordinator.child("priority")) {
+    for (const auto& name : split_words(leaf_text(priority, {}))) {
+      const std::string robot(name);
+      if (!scene_.find_robot(robot)) {
+        std::vector<std::string> names;
+        for (const auto& included : scene_.robots) names.push_back(included.name);
+        report(priority, fmt::format("<priority>: no robot '{}' is included in the world; its robots: {}", robot,
+                                     names.empty() ? "none" : fmt::format("{}", fmt::join(names, ", "))));
+      } else if (std::find(settings.priority.begin(), settings.priority.end(), robot) != settings.priority.end()) {
+        report(priority, fmt::format("<priority>: robot '{}' is named twice", robot));
+      } else {
+        settings.priority.push_back(robot);
+      }
+    }
+  }
+  if (scene_.robots.size() < 2) report(coordinator, "<coordinator> coordinates robots: the world needs at least two");
 }
 
 void SceneReader::check_materials() {

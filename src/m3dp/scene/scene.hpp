@@ -137,6 +137,21 @@ struct MeshingSettings {
   SourceLocation where;
 };
 
+/// The multi-robot coordinator (the plugin's <coordinator>; sim/coordination_erdmann1987.hpp): every
+/// `period` it looks `horizon` ahead along each robot's paths and slows or stops, in priority order,
+/// a robot whose predicted shapes would come within `robot_clearance` of another robot's or within
+/// `print_clearance` of the printed material.
+struct CoordinatorSettings {
+  bool enabled = false;
+  double period = 0.1;                // s of simulated time between decisions
+  double horizon = 1.5;               // s looked ahead
+  int samples = 6;                    // predicted configurations over the horizon
+  Real robot_clearance = Real(0.03);  // m
+  Real print_clearance = Real(0.01);  // m
+  std::vector<std::string> priority;  // robot names, highest first; those not named follow in scene order
+  SourceLocation where;
+};
+
 struct Scene {
   std::filesystem::path file;   // the scene file as given
   std::string world_name;
@@ -151,6 +166,7 @@ struct Scene {
   std::vector<PrintHead> print_heads;
   OutputSettings output;
   MeshingSettings meshing;
+  CoordinatorSettings coordinator;
   std::vector<CameraEntry> cameras;
   std::vector<Diagnostic> warnings;  // not errors: e.g. G-code commands that were skipped (file:line)
 

@@ -6,9 +6,11 @@
 
 namespace m3dp::sim {
 
-std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world) {
+std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world,
+                                                const std::vector<PlanClock>& clocks) {
   std::vector<world::RobotIndex> robots;
-  for (const auto& robot : scene.robots) {
+  for (std::size_t r = 0; r < scene.robots.size(); ++r) {
+    const auto& robot = scene.robots[r];
     world::RobotDescription description;
     description.name = robot.name;
     description.urdf_file = robot.urdf_file;
@@ -28,7 +30,8 @@ std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world
                                                                 base.wheel_radius, base.wheel_separation, 0});
       if (base.path) {
         const toolpath::Trajectory* path = &*base.path;
-        world.set_base_trajectory(index, [path](double time) { return path->sample(time).position; });
+        const PlanClock* clock = &clocks.at(r);
+        world.set_base_trajectory(index, [path, clock](double time) { return path->sample(clock->at(time)).position; });
       }
     }
     if (!robot.initial_joint_positions.empty()) {
@@ -46,7 +49,7 @@ std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world
 
 std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::Scene& scene, world::World& world,
                                                                   const std::vector<world::RobotIndex>& robots,
-                                                                  Real particle_diameter) {
+                                                                  Real particle_diameter, const std::vector<PlanClock>& clocks) {
   std::vector<std::optional<world::ToolIndex>> head_tools;
   for (std::size_t h = 0; h < scene.print_heads.size(); ++h) {
     const auto& head = scene.print_heads[h];
@@ -54,8 +57,7 @@ std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::S
       head_tools.emplace_back();
       continue;
     }
-    std::size_t robot = 0;
-    while (scene.robots[robot].name != head.mount->robot) ++robot;  // the scene loader checked that it exists
+    const std::size_t robot = *robot_of_print_head(scene, h);
     world::ToolDescription tool;
     tool.name = head.name;
     tool.link = head.mount->link;
@@ -66,12 +68,21 @@ std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::S
     const world::ToolIndex index = world.add_tool(robots[robot], tool);
     const toolpath::Trajectory* trajectory = &head.trajectory;
     const Vec3 axis = head.direction.normalized();
-    world.set_tool_trajectory(index, [trajectory, axis](double time) {
-      return world::ToolTarget{trajectory->sample(time).position, axis};
+    const PlanClock* clock = &clocks.at(robot);
+    world.set_tool_trajectory(index, [trajectory, axis, clock](double time) {
+      return world::ToolTarget{trajectory->sample(clock->at(time)).position, axis};
     });
     head_tools.emplace_back(index);
   }
   return head_tools;
+}
+
+std::optional<std::size_t> robot_of_print_head(const scene::Scene& scene, std::size_t head) {
+  const auto& mount = scene.print_heads.at(head).mount;
+  if (!mount) return std::nullopt;
+  for (std::size_t robot = 0; robot < scene.robots.size(); ++robot)
+    if (scene.robots[robot].name == mount->robot) return robot;
+  return std::nullopt;  // the scene loader checked that it exists
 }
 
 }  // namespace m3dp::sim

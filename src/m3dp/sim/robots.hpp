@@ -9,16 +9,35 @@
 
 namespace m3dp::sim {
 
+/// A robot's clock for its paths: the time its base and tool paths are sampled at ("plan time"),
+/// which runs at `rate` times the world's clock: 1 unless the coordinator slows (0 < rate < 1) or
+/// stops (0) the robot. Piecewise linear in world time, so the world's sub-steps sample it exactly.
+struct PlanClock {
+  double world_time0 = 0, plan_time0 = 0;  // s: a point of the clock
+  double rate = 1;
+  [[nodiscard]] double at(double world_time) const { return plan_time0 + rate * (world_time - world_time0); }
+  /// From `world_time` on, the clock runs at `new_rate`.
+  void set_rate(double world_time, double new_rate) {
+    plan_time0 = at(world_time);
+    world_time0 = world_time;
+    rate = new_rate;
+  }
+};
+
 /// Loads every robot of the scene: its URDF (an error names the scene line that included it as
 /// well as the URDF's), its mobile base as a differential drive following its base path, its initial
-/// joint positions. Returns the world's robot for each, in scene order.
-std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world);
+/// joint positions. Returns the world's robot for each, in scene order. Paths are sampled at
+/// `clocks[robot]` (one per scene robot; they must outlive the world's use of them).
+std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world,
+                                                const std::vector<PlanClock>& clocks);
 
 /// Every print head a robot carries, as a tool on its link that follows the head's path by IK (with
 /// its barrel `particle_diameter` short of the exit, so the first layer is never blocked by it). One
 /// entry per print head: none for a head on an ideal gantry.
 std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::Scene& scene, world::World& world,
                                                                   const std::vector<world::RobotIndex>& robots,
-                                                                  Real particle_diameter);
+                                                                  Real particle_diameter, const std::vector<PlanClock>& clocks);
+/// The scene robot (scene order) that carries a print head; none for a head on an ideal gantry.
+std::optional<std::size_t> robot_of_print_head(const scene::Scene& scene, std::size_t head);
 
 }  // namespace m3dp::sim

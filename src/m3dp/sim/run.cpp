@@ -239,6 +239,14 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         robot.name, 1e3 * robot.tracking_rms, 1e3 * robot.tracking_max, robot.contacts.with_robots,
                         robot.contacts.with_printed_material, robot.contacts.with_other);
   for (const auto& robot : summary.robots)
+    if (robot.coordination)
+      text += fmt::format("  coordinated {}: waited {:.2f} s, slowed {:.2f} s; {} of {} decisions yielded{}; closest {:.0f} mm to a "
+                          "robot, {:.0f} mm to the print\n",
+                          robot.name, robot.coordination->waiting_time, robot.coordination->slowed_time,
+                          robot.coordination->conflicts, robot.coordination->decisions,
+                          robot.coordination->blocked > 0 ? fmt::format(" ({} blocked)", robot.coordination->blocked) : "",
+                          1e3 * robot.coordination->least_robot_distance, 1e3 * robot.coordination->least_print_distance);
+  for (const auto& robot : summary.robots)
     if (robot.base)
       text += fmt::format("  base        {}: drove {:.3f} m, {:.2f} mm rms from its path (max {:.2f} mm), odometry off by {:.2f} mm\n",
                           robot.name, robot.base->distance, 1e3 * robot.base->tracking_rms, 1e3 * robot.base->tracking_max,

@@ -12,6 +12,7 @@
 #include <vector>
 
 #include "m3dp/record/foxglove_server.hpp"
+#include "m3dp/sim/coordination_erdmann1987.hpp"
 #include "m3dp/sim/meshing_worker.hpp"
 #include "m3dp/sph/measure.hpp"
 #include "m3dp/sph/state.hpp"
@@ -145,6 +146,7 @@ struct RunSummary {
     world::RobotContacts contacts;
     double tracking_rms = 0, tracking_max = 0;  // m, nozzle vs its path target (robots that carry a print head)
     std::optional<world::BaseReport> base;      // mobile bases: path following and odometry
+    std::optional<CoordinationReport> coordination;  // when the coordinator ran
   };
   std::vector<Robot> robots;
   double particle_steps_per_second = 0;

@@ -61,13 +61,30 @@ Simulation::Simulation(const scene::Scene& scene)
 
 void Simulation::add_robots() {
   head_commands_.resize(scene_.print_heads.size());
-  robots_ = add_scene_robots(scene_, world_);
-  head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter());
+  plan_clocks_.resize(scene_.robots.size());
+  robots_ = add_scene_robots(scene_, world_, plan_clocks_);
+  head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter(), plan_clocks_);
+  if (scene_.coordinator.enabled) coordination_ = std::make_unique<PrioritizedCoordination>(scene_.coordinator, scene_);
+}
+
+void Simulation::set_coordination(bool on) {
+  if (on == (coordination_ != nullptr)) return;
+  if (on) {
+    coordination_ = std::make_unique<PrioritizedCoordination>(scene_.coordinator, scene_);
+    return;
+  }
+  coordination_.reset();
+  for (PlanClock& clock : plan_clocks_) clock.set_rate(solver_.time(), 1);
+}
+
+double Simulation::path_time(std::size_t head) const {
+  const auto robot = robot_of_print_head(scene_, head);
+  return robot ? plan_clocks_[*robot].at(solver_.time()) : solver_.time();
 }
 
 Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   const auto& head = scene_.print_heads.at(head_index);
-  const auto sample = head.trajectory.sample(solver_.time());
+  const auto sample = head.trajectory.sample(path_time(head_index));
   NozzleState state;
   state.pose.position = sample.position;
   state.pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
@@ -82,6 +99,12 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   const Real nominal_flow = kPi * head.inner_diameter * head.inner_diameter / 4 * head.exit_speed;
   state.flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
   state.extruding = sample.extruding;
+  // A robot the coordinator slows extrudes in proportion (the bead keeps its section); stopped, none.
+  if (const auto robot = robot_of_print_head(scene_, head_index)) {
+    const double rate = plan_clocks_[*robot].rate;
+    state.flow_scale *= Real(rate);
+    state.extruding = state.extruding && rate > 0;
+  }
   const HeadCommand& command = head_commands_[head_index];
   if (command.flow_scale) state.flow_scale = *command.flow_scale;
   if (command.extruding) state.extruding = *command.extruding;
@@ -119,7 +142,7 @@ void change_path(toolpath::Trajectory& path, const Vec3& here, std::vector<toolp
 
 void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
   auto& head = scene_.print_heads.at(head_index);
-  const double now = solver_.time();
+  const double now = path_time(head_index);
   change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
               fmt::format("print head '{}'", head.name));
   if (!head_tools_[head_index] || !head.mount) return;
@@ -131,7 +154,7 @@ void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegm
   auto& description = scene_.robots.at(robot);
   if (!description.mobile_base) throw Error(fmt::format("robot '{}' has no mobile base", description.name));
   auto& base = *description.mobile_base;
-  const double now = solver_.time();
+  const double now = plan_clocks_[robot].at(solver_.time());
   const bool had_path = base.path.has_value();
   // A base without a path starts its new one where it stands.
   Vec3 here = world_.base_pose(robots_[robot]).position;
@@ -140,7 +163,8 @@ void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegm
   change_path(*base.path, here, std::move(segments), now, delay, append && had_path, fmt::format("robot '{}'", description.name));
   if (!had_path) {
     const toolpath::Trajectory* path = &*base.path;
-    world_.set_base_trajectory(robots_[robot], [path](double time) { return path->sample(time).position; });
+    const PlanClock* clock = &plan_clocks_[robot];
+    world_.set_base_trajectory(robots_[robot], [path, clock](double time) { return path->sample(clock->at(time)).position; });
   }
   world_.set_external_control(robots_[robot], false);
 }
@@ -157,6 +181,7 @@ const sph::StepStats& Simulation::step() {
   auto milliseconds_since = [](Clock::time_point start) {
     return std::chrono::duration<double, std::milli>(Clock::now() - start).count();
   };
+  if (coordination_) coordination_->update(*this, plan_clocks_);
   update_print_heads();
   auto start = Clock::now();
   coupling_->push_link_motion();
@@ -200,6 +225,9 @@ void Simulation::save_state(StateWriter& out) const {
   }
   out.put(cameras_ != nullptr);
   if (cameras_) cameras_->save_totals(out);
+  out.put(plan_clocks_);
+  out.put(coordination_ != nullptr);
+  if (coordination_) coordination_->save(out);
 }
 
 void Simulation::load_state(StateReader& in) {
@@ -220,6 +248,12 @@ void Simulation::load_state(StateReader& in) {
   }
   printed_mesh_version_ = mesh_version;
   if (in.get<bool>()) cameras().load_totals(in);
+  std::vector<PlanClock> clocks;
+  in.get(clocks);
+  if (clocks.size() != plan_clocks_.size()) in.fail("a checkpoint for another number of robots");
+  set_coordination(in.get<bool>());
+  if (coordination_) coordination_->load(in);
+  std::copy(clocks.begin(), clocks.end(), plan_clocks_.begin());  // in place: the world's paths point into it
   density_measurement_.step = -1;
 }
 

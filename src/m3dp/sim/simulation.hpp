@@ -9,6 +9,8 @@
 
 #include "m3dp/coupling/fluid_body_coupling.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/coordination_erdmann1987.hpp"
+#include "m3dp/sim/robots.hpp"
 #include "m3dp/sph/measure.hpp"
 #include "m3dp/sph/solver.hpp"
 #include "m3dp/world/world.hpp"
@@ -24,7 +26,7 @@ class Simulation {
   Simulation(const Simulation&) = delete;
   Simulation& operator=(const Simulation&) = delete;
 
-  /// One step: print heads follow their paths (robots through their controllers), the links' motion
+  /// One step: the coordinator (if on) decides the robots' speeds along their paths, print heads follow their paths (robots through their controllers), the links' motion
   /// goes to the fluid, the fluid advances (adaptive dt), its forces go back to the links, and the
   /// world is stepped to the fluid's clock.
   const sph::StepStats& step();
@@ -57,6 +59,16 @@ class Simulation {
   /// The same for a mobile base's path (z ignored): the scene's robot `robot` (scene order) follows it.
   void set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append);
   [[nodiscard]] const HeadCommand& head_command(std::size_t head) const { return head_commands_.at(head); }
+
+  /// The multi-robot coordinator (coordination_erdmann1987.hpp): on from the scene's <coordinator>,
+  /// switched on (with the scene's settings, or the defaults) or off here. Off, every robot's paths
+  /// run at full speed from where they are. Null when off.
+  void set_coordination(bool on);
+  [[nodiscard]] const PrioritizedCoordination* coordination() const { return coordination_.get(); }
+  /// The clock the scene's robot `robot` (scene order) samples its paths at.
+  [[nodiscard]] const PlanClock& plan_clock(std::size_t robot) const { return plan_clocks_.at(robot); }
+  /// The time a print head's path is sampled at now: its robot's plan clock, or the simulation's.
+  [[nodiscard]] double path_time(std::size_t head) const;
 
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
   /// collision body "printed_material", replacing the previous one.
@@ -121,6 +133,8 @@ class Simulation {
   std::vector<world::BodyIndex> dynamic_bodies_;
   std::vector<std::optional<world::ToolIndex>> head_tools_;
   std::vector<HeadCommand> head_commands_;  // per print head
+  std::vector<PlanClock> plan_clocks_;      // per scene robot; sized once (the world's paths point into it)
+  std::unique_ptr<PrioritizedCoordination> coordination_;
   std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;
   std::shared_ptr<const TriangleMesh> printed_mesh_;

@@ -168,6 +168,25 @@ class World {
   [[nodiscard]] double tool_tracking_rms(ToolIndex tool) const;
   [[nodiscard]] double tool_tracking_max(ToolIndex tool) const;
 
+  // ---- clearance queries (the multi-robot coordinator's: DART's FCL distance) ----
+  /// Puts a robot where it would be for the queries below: its mobile base at (x, y, heading in
+  /// rad) and each listed tool on its target by IK, from the configuration it is in (so a series of
+  /// nearby placements converges as the run's own IK does). restore_robots() puts every robot back
+  /// exactly as it was; the world must not step in between.
+  void place_robot(RobotIndex robot, const std::optional<Vec3>& base_x_y_heading,
+                   const std::vector<std::pair<ToolIndex, ToolTarget>>& tool_targets);
+  void restore_robots();
+  /// The base's (x, y, heading) now (m, m, rad); throws Error without a mobile base.
+  [[nodiscard]] Vec3 base_x_y_heading(RobotIndex robot) const;
+  /// The least distance (m) between two robots' collision shapes as they are placed (0 where they
+  /// overlap). The search stops once it finds one below `enough` (m) and returns `enough` itself.
+  [[nodiscard]] double robot_distance(RobotIndex first, RobotIndex second, double enough) const;
+  /// The same between a robot, its tools' bodies left out (a nozzle sits in the strand it lays), and
+  /// the printed material as set_print_boxes gave it. Infinity when there is none.
+  [[nodiscard]] double print_distance(RobotIndex robot, double enough) const;
+  /// The printed material for print_distance: boxes (m, world) around it, fresh and meshed alike.
+  void set_print_boxes(const std::vector<Aabb>& boxes);
+
   // ---- movable links (what the fluid couples to) ----
   /// Free rigid bodies and robot links that can move and have collision shapes.
   [[nodiscard]] std::size_t link_count() const;

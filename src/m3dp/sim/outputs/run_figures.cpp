@@ -88,6 +88,7 @@ class RunFigures final : public RunObserver {
       robot.name = world.robot_name(index);
       robot.contacts = world.robot_contacts(index);
       if (world.has_diff_drive(index)) robot.base = world.base_report(index);
+      if (const auto* coordination = simulation.coordination()) robot.coordination = coordination->reports()[r];
       for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) {
         const auto& mount = simulation.scene().print_heads[h].mount;
         if (!mount || mount->robot != robot.name) continue;

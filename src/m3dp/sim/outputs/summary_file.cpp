@@ -1,5 +1,6 @@
 // summary.json (what the run did, the bodies' fluid forces, the nozzles', robots' and meshes'
 // reports), written when the run ends however it ends, and scene.sdf, the scene's copy, at the start.
+#include <cmath>
 #include <nlohmann/json.hpp>
 
 #include "m3dp/io/atomic_file.hpp"
@@ -68,6 +69,27 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                            {"tracking_max_m", base->tracking_max},
                            {"odometry_error_m", base->odometry_error},
                            {"distance_m", base->distance}};
+  // Distances never measured (no other robot, no print) are null.
+  auto finite_or_null = [](double value) { return std::isfinite(value) ? nlohmann::json(value) : nlohmann::json(); };
+  for (std::size_t r = 0; r < summary.robots.size(); ++r)
+    if (const auto& coordination = summary.robots[r].coordination)
+      robots[r]["coordination"] = {{"waiting_time_s", coordination->waiting_time},
+                                   {"slowed_time_s", coordination->slowed_time},
+                                   {"decisions", coordination->decisions},
+                                   {"conflicts", coordination->conflicts},
+                                   {"blocked", coordination->blocked},
+                                   {"least_robot_distance_m", finite_or_null(coordination->least_robot_distance)},
+                                   {"least_print_distance_m", finite_or_null(coordination->least_print_distance)}};
+  nlohmann::json coordinator;  // null: robots ran at full speed, uncoordinated
+  if (const auto* coordination = simulation.coordination()) {
+    const auto& settings = coordination->settings();
+    coordinator = {{"period_s", settings.period},
+                   {"horizon_s", settings.horizon},
+                   {"samples", settings.samples},
+                   {"robot_clearance_m", settings.robot_clearance},
+                   {"print_clearance_m", settings.print_clearance},
+                   {"priority", settings.priority}};
+  }
   nlohmann::json recording;  // null: not recorded
   if (!summary.recording.file.empty())
     recording = {{"file", std::filesystem::relative(summary.recording.file, summary.output_directory).generic_string()},
@@ -135,6 +157,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"bodies", bodies},
       {"nozzles", nozzles},
       {"robots", robots},
+      {"coordinator", coordinator},
       {"meshes", meshes},
       {"meshes_skipped", summary.meshes_skipped},
       {"meshes_inserted", summary.meshes_inserted},  // joined the world as the printed body

@@ -2,6 +2,18 @@
 
 namespace m3dp::world {
 
+Eigen::Isometry3d tool_target_transform(const Eigen::Isometry3d& tool_now, const ToolTarget& target) {
+  Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
+  transform.translation() = target.position.cast<double>();
+  // The target's rotation about its axis is free; take the tool's own, turned by the least
+  // rotation that brings its axis onto the target axis. (An arbitrary choice can leave the two
+  // frames near half a turn apart about the axis, where the IK's rotation error is ill-conditioned.)
+  const Eigen::Matrix3d current = tool_now.linear();
+  transform.linear() =
+      Eigen::Quaterniond::FromTwoVectors(current.col(2), target.axis.cast<double>().normalized()).toRotationMatrix() * current;
+  return transform;
+}
+
 void ToolIk::follow(ToolIndex tool, ToolTrajectory trajectory) {
   for (FollowedTool& followed : tools_)
     if (followed.tool == tool) {
@@ -15,15 +27,7 @@ void ToolIk::plan(RobotIo& robot, double end_time) {
   chunk_start_ = robot.joint_targets();
   chunk_end_ = robot.joint_targets();
   for (FollowedTool& followed : tools_) {
-    const ToolTarget target = followed.trajectory(end_time);
-    Eigen::Isometry3d transform = Eigen::Isometry3d::Identity();
-    transform.translation() = target.position.cast<double>();
-    // The target's rotation about its axis is free; take the tool's own, turned by the least
-    // rotation that brings its axis onto the target axis. (An arbitrary choice can leave the two
-    // frames near half a turn apart about the axis, where the IK's rotation error is ill-conditioned.)
-    const Eigen::Matrix3d current = robot.tool_transform(followed.tool).linear();
-    transform.linear() =
-        Eigen::Quaterniond::FromTwoVectors(current.col(2), target.axis.cast<double>().normalized()).toRotationMatrix() * current;
+    const Eigen::Isometry3d transform = tool_target_transform(robot.tool_transform(followed.tool), followed.trajectory(end_time));
     followed.target = transform.translation();
     robot.solve_tool_ik(followed.tool, transform, chunk_end_);
   }

@@ -9,6 +9,10 @@
 
 namespace m3dp::world {
 
+/// The frame a tool should reach for `target`, from where it is now (`tool_now`, world): the
+/// target's position, and the tool's own rotation turned by the least rotation onto the target axis.
+Eigen::Isometry3d tool_target_transform(const Eigen::Isometry3d& tool_now, const ToolTarget& target);
+
 class ToolIk final : public Controller {
  public:
   /// From now on `tool` (one of this robot's) follows `trajectory`.
