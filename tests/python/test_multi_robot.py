@@ -77,3 +77,61 @@ def test_without_the_coordinator_the_arms_collide():
     assert summary["robots"]["turtlebot_1"]["contacts_with_robots"] > 0
     assert summary["robots"]["turtlebot_2"]["contacts_with_robots"] > 0
     assert "waiting_time" not in summary["robots"]["turtlebot_2"]
+
+
+BLOCKED_SCENE = """<?xml version="1.0"?>
+<sdf version="1.9">
+  <world name="blocked">
+    <model name="floor">
+      <static>true</static>
+      <link name="floor">
+        <collision name="floor"><pose>0.3 0 -0.01 0 0 0</pose><geometry><box><size>1.6 1.2 0.02</size></box></geometry></collision>
+      </link>
+    </model>
+    <include><uri>model://turtlebot3_manipulator</uri><name>driver</name><pose>0 0 0 0 0 0</pose></include>
+    <include><uri>model://turtlebot3_manipulator</uri><name>bystander</name><pose>0 0.45 0 0 0 0</pose></include>
+    <plugin name="m3dp" filename="m3dp">
+      <solver>
+        <particle_radius unit="mm">2</particle_radius>
+        <max_time_step>0.004</max_time_step>
+        <end_time>7</end_time>
+        <bounds><min>-0.4 -0.4 -0.05</min><max>1.0 0.8 0.3</max></bounds>
+      </solver>
+      <material name="paste" preset="clay_paste"><rheology><max_viscosity>1e4</max_viscosity></rheology></material>
+      <!-- Printed material on the floor, 3 cm high, across the driver's way. -->
+      <fluid_block name="print" material="paste"><min>0.35 -0.05 0</min><max>0.45 0.05 0.03</max></fluid_block>
+      <robot name="driver">
+        <mobile_base>
+          <left_wheel>wheel_left_joint</left_wheel>
+          <right_wheel>wheel_right_joint</right_wheel>
+          <wheel_radius unit="mm">33</wheel_radius>
+          <wheel_separation unit="mm">287</wheel_separation>
+          <path start_time="0.5" speed="0.1"><line extrude="false"><start>0 0 0</start><end>0.5 0 0</end></line></path>
+        </mobile_base>
+      </robot>
+      <coordinator><priority>driver bystander</priority></coordinator>
+    </plugin>
+  </world>
+</sdf>
+"""
+
+
+@pytest.mark.parametrize("coordinated", [True, False])
+def test_a_robot_stops_short_of_the_print(coordinated):
+    # The driver's base path runs through printed material. Coordinated, it stops short of it (its
+    # body's front is 6.9 cm ahead of its reference point) and waits there: at least the print
+    # clearance (1 cm) short, at most that plus the last rate's look-ahead (¼ of 0.1 m/s over the
+    # 1.5 s horizon) and a cell of the boxes around the print (1 cm); without the coordinator it
+    # drives on to its path's end, through the material.
+    sim = m3dp.Simulation.from_string(BLOCKED_SCENE, str(ROOT / "scenes" / "blocked.sdf"), threads=2)
+    sim.set_coordination(coordinated)
+    sim.step_to(sim.end_time)
+    front = sim.base_pose("driver")[0] + 0.069
+    if coordinated:
+        report = sim.coordination["driver"]
+        assert report["least_print_distance"] > 0.008
+        assert report["waiting_time"] > 1
+        assert 0.35 - 0.01 - 0.0375 - 0.01 < front < 0.35 - 0.008, front
+    else:
+        assert sim.base_pose("driver")[0] > 0.49
+    sim.close()
