@@ -16,6 +16,7 @@
 #include "m3dp/sim/presets.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
+#include "m3dp/sim/world_view.hpp"
 #include "m3dp/surface/mesh_tools.hpp"
 #include "m3dp/surface/surface.hpp"
 
@@ -388,4 +389,26 @@ TEST(Checkpoint, DamagedOrForeignCheckpointsAreErrorsThatNameTheFile) {
   other_scene.save_state(foreign);
   const std::string mismatch = error_loading(foreign.bytes());
   EXPECT_NE(mismatch.find("run/checkpoint.bin: error: damaged checkpoint"), std::string::npos) << mismatch;
+}
+
+TEST(Outputs, APathSlowedByTheCoordinatorIsDrawnPrintedAsFarAsItsNozzleGot) {
+  // multi_robot_shared at 9 s: turtlebot_2 has been slowed and stopped for turtlebot_1's arm since
+  // 6.9 s, so its nozzle is behind where its path would be at 9 s. What world.pvd and run.mcap draw
+  // as printed (and the nozzle's tracking error they report) follow the robot's plan clock, not the
+  // world's: the printed run ends at the nozzle.
+  const auto scene = scene::load_scene(std::filesystem::path(M3DP_SCENES) / "multi_robot_shared.sdf");
+  sim::Simulation simulation(scene);
+  while (simulation.time() < 9) simulation.step();
+  const std::size_t head = 1;  // nozzle_2, on turtlebot_2
+  ASSERT_LT(simulation.plan_clock(1).at(simulation.time()), simulation.time() - 0.5);
+  const sim::WorldLayout layout = sim::world_layout(simulation);
+  const sim::WorldPoses poses = sim::world_poses(simulation, layout);
+  const auto runs = sim::printed_runs(layout.paths[head], poses.path_times[head]);
+  ASSERT_FALSE(runs.empty());
+  const Vec3 printed_end = runs.back().back();
+  const Vec3 nozzle = simulation.nozzle_state(head).pose.position;
+  std::printf("nozzle_2 at x = %.4f m, printed to x = %.4f m (at world time: %.4f m)\n", nozzle.x(), printed_end.x(),
+              sim::printed_runs(layout.paths[head], simulation.time()).back().back().x());
+  EXPECT_NEAR(printed_end.x(), nozzle.x(), 0.002);
+  EXPECT_LT(sim::printed_runs(layout.paths[head], simulation.time()).back().back().x(), nozzle.x() - 0.02);
 }

@@ -61,10 +61,13 @@ WorldLayout world_layout(const Simulation& simulation, Real max_chord) {
     tube.position = Vec3(0, 0, length / 2);
     nozzle.triangles = shapes_triangles({CylinderShape{Real(0.75) * head.inner_diameter, length}}, {tube});
     layout.nozzles.push_back(std::move(nozzle));
-    layout.paths.push_back({head.name, false, head.trajectory.polyline(max_chord)});
+    layout.paths.push_back({head.name, false, head.trajectory.polyline(max_chord), layout.nozzles.size() - 1});
   }
-  for (const auto& robot : scene.robots)
-    if (robot.mobile_base && robot.mobile_base->path) layout.paths.push_back({robot.name, true, robot.mobile_base->path->polyline(max_chord)});
+  for (std::size_t r = 0; r < scene.robots.size(); ++r) {
+    const auto& robot = scene.robots[r];
+    if (robot.mobile_base && robot.mobile_base->path)
+      layout.paths.push_back({robot.name, true, robot.mobile_base->path->polyline(max_chord), r});
+  }
   return layout;
 }
 
@@ -74,6 +77,8 @@ WorldPoses world_poses(const Simulation& simulation, const WorldLayout& layout) 
   poses.bodies.reserve(layout.bodies.size());
   for (const auto& body : layout.bodies) poses.bodies.push_back(body.link ? simulation.world().link_pose(*body.link) : body.fixed_pose);
   for (std::size_t head = 0; head < layout.nozzles.size(); ++head) poses.nozzles.push_back(simulation.nozzle_state(head));
+  for (const auto& path : layout.paths)
+    poses.path_times.push_back(path.base_path ? simulation.plan_clock(path.index).at(poses.time) : simulation.path_time(path.index));
   return poses;
 }
 

@@ -38,6 +38,7 @@ struct PathView {
   std::string name;                       // the print head's, or the mobile robot's
   bool base_path = false;                 // a mobile base's path (else a nozzle's toolpath)
   std::vector<toolpath::PathVertex> vertices;
+  std::size_t index = 0;                  // of the print head, or the robot, in scene order
 };
 
 struct WorldLayout {
@@ -53,10 +54,11 @@ struct WorldPoses {
   double time = 0;                                   // s
   std::vector<Pose> bodies;                          // each layout body's frame in the world
   std::vector<Simulation::NozzleState> nozzles;      // each print head's
+  std::vector<double> path_times;                    // s: where each layout path is sampled now (its robot's plan clock)
 };
 [[nodiscard]] WorldPoses world_poses(const Simulation& simulation, const WorldLayout& layout);
 
-/// The part of a path printed by `time`: each run of extruding moves as a polyline, the last one
+/// The part of a path printed by `time` (the path's own: WorldPoses::path_times): each run of extruding moves as a polyline, the last one
 /// ending where the path is at `time` when it is extruding then.
 [[nodiscard]] std::vector<std::vector<Vec3>> printed_runs(const PathView& path, double time);
 

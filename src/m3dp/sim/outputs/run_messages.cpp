@@ -313,8 +313,10 @@ class RunMessages final : public RunObserver {
 
     if (wanted(sinks, Topic::printed)) {
       std::vector<record::SceneEntity> printed;
-      for (const auto& path : layout_.paths)
-        if (!path.base_path) printed.push_back({"printed/" + path.name, "world", kPrintedColor, nullptr, printed_runs(path, time), 0.004, {}});
+      for (std::size_t p = 0; p < layout_.paths.size(); ++p)
+        if (!layout_.paths[p].base_path)
+          printed.push_back({"printed/" + layout_.paths[p].name, "world", kPrintedColor, nullptr, printed_runs(layout_.paths[p], poses.path_times[p]),
+                             0.004, {}});
       if (!printed.empty()) send(sinks, Topic::printed, stamp, record::encode_scene_update(time, printed));
     }
 
@@ -394,7 +396,7 @@ class RunMessages final : public RunObserver {
       run.world_ms = simulation.last_world_ms();
     }
     for (std::size_t n = 0; n < layout_.nozzles.size(); ++n) {
-      const Vec3 wanted = simulation.scene().print_heads[n].trajectory.sample(simulation.time()).position;
+      const Vec3 wanted = simulation.scene().print_heads[n].trajectory.sample(simulation.path_time(n)).position;
       run.nozzles.push_back({layout_.nozzles[n].name, poses.nozzles[n].extruding, poses.nozzles[n].volume_rate, poses.nozzles[n].pose.position,
                              double((poses.nozzles[n].pose.position - wanted).norm())});
     }

@@ -85,10 +85,11 @@ class WorldFrames final : public RunObserver {
       write_surface(file, nozzle.triangles, state.pose, fields);
       blocks.push_back({"nozzle/" + nozzle.name, file});
     }
-    for (const auto& path : layout_.paths) {
+    for (std::size_t p = 0; p < layout_.paths.size(); ++p) {
+      const auto& path = layout_.paths[p];
       if (path.base_path) continue;
       const auto file = frame_folder / file_name("printed/" + path.name);
-      write_lines(file, printed_runs(path, poses.time));
+      write_lines(file, printed_runs(path, poses.path_times[p]));
       blocks.push_back({"printed/" + path.name, file});
     }
     const auto vtm = folder_ / fmt::format("world_{:06}.vtm", collection_.size());
