@@ -43,18 +43,18 @@ void PrioritizedCoordination::place(Simulation& simulation, std::size_t robot, d
     if (sample.velocity.head<2>().norm() > 1e-9) heading = std::atan2(sample.velocity.y(), sample.velocity.x());
     base = Vec3(sample.position.x(), sample.position.y(), Real(heading));
   }
-  std::vector<std::pair<world::ToolIndex, world::ToolTarget>> tools;
+  tool_targets_.clear();
   for (std::size_t h = 0; h < scene.print_heads.size(); ++h) {
-    if (robot_of_print_head(scene, h) != robot || !simulation.print_head_tool(h)) continue;
+    if (simulation.robot_of_head(h) != robot || !simulation.print_head_tool(h)) continue;
     const auto& head = scene.print_heads[h];
-    tools.emplace_back(*simulation.print_head_tool(h),
-                       world::ToolTarget{head.trajectory.sample(plan_time).position, head.direction.normalized()});
+    tool_targets_.emplace_back(*simulation.print_head_tool(h),
+                               world::ToolTarget{head.trajectory.sample(plan_time).position, head.direction.normalized()});
   }
-  world.place_robot(index, base, tools);
+  world.place_robot(index, base, tool_targets_);
 }
 
 bool PrioritizedCoordination::keeps_clear(Simulation& simulation, const std::vector<PlanClock>& clocks, std::size_t robot,
-                                          double rate, const std::vector<std::size_t>& decided) {
+                                          double rate) {
   world::World& world = simulation.world();
   const auto& robots = simulation.robots();
   const std::size_t count = robots.size();
@@ -62,7 +62,7 @@ bool PrioritizedCoordination::keeps_clear(Simulation& simulation, const std::vec
   bool clear = true;
   for (int k = 1; k <= settings_.samples && clear; ++k) {
     const double ahead = settings_.horizon * k / settings_.samples;  // s of world time
-    for (const std::size_t other : decided) place(simulation, other, clocks[other].at(now) + clocks[other].rate * ahead);
+    for (const std::size_t other : decided_) place(simulation, other, clocks[other].at(now) + clocks[other].rate * ahead);
     place(simulation, robot, clocks[robot].at(now) + rate * ahead);
     for (std::size_t other = 0; other < count && clear; ++other) {
       if (other == robot) continue;
@@ -120,7 +120,7 @@ void PrioritizedCoordination::update(Simulation& simulation, std::vector<PlanClo
       double path_end = -1;
       if (const auto& mobile = scene.robots[r].mobile_base; mobile && mobile->path) path_end = mobile->path->end_time();
       for (std::size_t h = 0; h < scene.print_heads.size(); ++h)
-        if (robot_of_print_head(scene, h) == r) path_end = std::max(path_end, scene.print_heads[h].trajectory.end_time());
+        if (simulation.robot_of_head(h) == r) path_end = std::max(path_end, scene.print_heads[h].trajectory.end_time());
       if (clocks[r].rate <= 0 && clocks[r].at(now) < path_end) reports_[r].waiting_time += elapsed;
       if (clocks[r].rate > 0 && clocks[r].rate < 1) reports_[r].slowed_time += elapsed;
     }
@@ -140,14 +140,14 @@ void PrioritizedCoordination::update(Simulation& simulation, std::vector<PlanClo
     reports_[a].least_print_distance = std::min(reports_[a].least_print_distance, print_distance_now_[a]);
   }
 
-  std::vector<std::size_t> decided;
+  decided_.clear();
   for (const std::size_t robot : order_) {
     if (world.external_control(robots[robot])) continue;  // commanded from outside: an obstacle standing where it is
     CoordinationReport& report = reports_[robot];
     ++report.decisions;
     double chosen = -1;
     for (const double rate : kRates)
-      if (keeps_clear(simulation, clocks, robot, rate, decided)) {
+      if (keeps_clear(simulation, clocks, robot, rate)) {
         chosen = rate;
         break;
       }
@@ -158,7 +158,7 @@ void PrioritizedCoordination::update(Simulation& simulation, std::vector<PlanClo
     if (chosen < 1) ++report.conflicts;
     if (chosen != clocks[robot].rate) clocks[robot].set_rate(now, chosen);
     report.rate = chosen;
-    decided.push_back(robot);
+    decided_.push_back(robot);
   }
 }
 

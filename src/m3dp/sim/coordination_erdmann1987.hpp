@@ -55,10 +55,9 @@ class PrioritizedCoordination {
   void load(StateReader& in);
 
  private:
-  /// Whether robot `robot` at `rate` keeps its clearances over the horizon, the robots in
-  /// `decided` moving at their chosen rates; the least distances it predicts are kept.
-  bool keeps_clear(Simulation& simulation, const std::vector<PlanClock>& clocks, std::size_t robot, double rate,
-                   const std::vector<std::size_t>& decided);
+  /// Whether robot `robot` at `rate` keeps its clearances over the horizon, the robots decided
+  /// before it at this decision moving at their chosen rates.
+  bool keeps_clear(Simulation& simulation, const std::vector<PlanClock>& clocks, std::size_t robot, double rate);
   /// Puts robot `robot` where its paths have it at plan time `plan_time` (s).
   void place(Simulation& simulation, std::size_t robot, double plan_time);
   /// Boxes around every fluid particle, for the world's print_distance.
@@ -70,6 +69,8 @@ class PrioritizedCoordination {
   std::vector<double> distance_now_;   // m, robot pairs (row-major, scene order) at this decision
   std::vector<double> print_distance_now_;
   double next_decision_ = 0, last_decision_ = -1;  // s
+  std::vector<std::size_t> decided_;   // this decision's robots so far, in priority order
+  std::vector<std::pair<world::ToolIndex, world::ToolTarget>> tool_targets_;  // scratch of place
   std::vector<std::int64_t> cell_keys_;  // scratch of update_print_boxes
   std::vector<Aabb> print_boxes_;     // boxes around the particles
 };

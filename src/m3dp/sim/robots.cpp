@@ -28,11 +28,7 @@ std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world
       const auto& base = *robot.mobile_base;
       world.make_diff_drive(index, world::DiffDriveDescription{base.left_wheel_joint, base.right_wheel_joint,
                                                                 base.wheel_radius, base.wheel_separation, 0});
-      if (base.path) {
-        const toolpath::Trajectory* path = &*base.path;
-        const PlanClock* clock = &clocks.at(r);
-        world.set_base_trajectory(index, [path, clock](double time) { return path->sample(clock->at(time)).position; });
-      }
+      if (base.path) world.set_base_trajectory(index, clocked_base_path(*base.path, clocks.at(r)));
     }
     if (!robot.initial_joint_positions.empty()) {
       const auto names = world.joint_names(index);
@@ -75,6 +71,10 @@ std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::S
     head_tools.emplace_back(index);
   }
   return head_tools;
+}
+
+world::BaseTrajectory clocked_base_path(const toolpath::Trajectory& path, const PlanClock& clock) {
+  return [path = &path, clock = &clock](double time) { return path->sample(clock->at(time)).position; };
 }
 
 std::optional<std::size_t> robot_of_print_head(const scene::Scene& scene, std::size_t head) {

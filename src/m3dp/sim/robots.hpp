@@ -37,6 +37,8 @@ std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world
 std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::Scene& scene, world::World& world,
                                                                   const std::vector<world::RobotIndex>& robots,
                                                                   Real particle_diameter, const std::vector<PlanClock>& clocks);
+/// A base path as the world follows it: sampled at the robot's plan clock (both must outlive it).
+world::BaseTrajectory clocked_base_path(const toolpath::Trajectory& path, const PlanClock& clock);
 /// The scene robot (scene order) that carries a print head; none for a head on an ideal gantry.
 std::optional<std::size_t> robot_of_print_head(const scene::Scene& scene, std::size_t head);
 

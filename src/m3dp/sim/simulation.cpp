@@ -62,6 +62,7 @@ Simulation::Simulation(const scene::Scene& scene)
 void Simulation::add_robots() {
   head_commands_.resize(scene_.print_heads.size());
   plan_clocks_.resize(scene_.robots.size());
+  for (std::size_t head = 0; head < scene_.print_heads.size(); ++head) head_robots_.push_back(robot_of_print_head(scene_, head));
   robots_ = add_scene_robots(scene_, world_, plan_clocks_);
   head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter(), plan_clocks_);
   if (scene_.coordinator.enabled) coordination_ = std::make_unique<PrioritizedCoordination>(scene_.coordinator, scene_);
@@ -78,7 +79,7 @@ void Simulation::set_coordination(bool on) {
 }
 
 double Simulation::path_time(std::size_t head) const {
-  const auto robot = robot_of_print_head(scene_, head);
+  const auto& robot = head_robots_.at(head);
   return robot ? plan_clocks_[*robot].at(solver_.time()) : solver_.time();
 }
 
@@ -100,7 +101,7 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   state.flow_scale = sample.volume_rate > 0 && nominal_flow > 0 ? sample.volume_rate / nominal_flow : Real(1);
   state.extruding = sample.extruding;
   // A robot the coordinator slows extrudes in proportion (the bead keeps its section); stopped, none.
-  if (const auto robot = robot_of_print_head(scene_, head_index)) {
+  if (const auto& robot = head_robots_[head_index]) {
     const double rate = plan_clocks_[*robot].rate;
     state.flow_scale *= Real(rate);
     state.extruding = state.extruding && rate > 0;
@@ -145,9 +146,8 @@ void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::Pat
   const double now = path_time(head_index);
   change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
               fmt::format("print head '{}'", head.name));
-  if (!head_tools_[head_index] || !head.mount) return;
-  for (std::size_t robot = 0; robot < scene_.robots.size(); ++robot)
-    if (scene_.robots[robot].name == head.mount->robot) world_.set_external_control(robots_[robot], false);
+  if (const auto robot = head_robots_[head_index]; robot && head_tools_[head_index])
+    world_.set_external_control(robots_[*robot], false);
 }
 
 void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
@@ -161,11 +161,7 @@ void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegm
   if (!had_path) base.path = toolpath::Trajectory({}, now);
   else here = base.path->sample(now).position;
   change_path(*base.path, here, std::move(segments), now, delay, append && had_path, fmt::format("robot '{}'", description.name));
-  if (!had_path) {
-    const toolpath::Trajectory* path = &*base.path;
-    const PlanClock* clock = &plan_clocks_[robot];
-    world_.set_base_trajectory(robots_[robot], [path, clock](double time) { return path->sample(clock->at(time)).position; });
-  }
+  if (!had_path) world_.set_base_trajectory(robots_[robot], clocked_base_path(*base.path, plan_clocks_[robot]));
   world_.set_external_control(robots_[robot], false);
 }
 

@@ -65,6 +65,8 @@ class Simulation {
   /// run at full speed from where they are. Null when off.
   void set_coordination(bool on);
   [[nodiscard]] const PrioritizedCoordination* coordination() const { return coordination_.get(); }
+  /// The scene robot (scene order) that carries a print head; none on an ideal gantry.
+  [[nodiscard]] std::optional<std::size_t> robot_of_head(std::size_t head) const { return head_robots_.at(head); }
   /// The clock the scene's robot `robot` (scene order) samples its paths at.
   [[nodiscard]] const PlanClock& plan_clock(std::size_t robot) const { return plan_clocks_.at(robot); }
   /// The time a print head's path is sampled at now: its robot's plan clock, or the simulation's.
@@ -134,6 +136,7 @@ class Simulation {
   std::vector<std::optional<world::ToolIndex>> head_tools_;
   std::vector<HeadCommand> head_commands_;  // per print head
   std::vector<PlanClock> plan_clocks_;      // per scene robot; sized once (the world's paths point into it)
+  std::vector<std::optional<std::size_t>> head_robots_;  // per print head: the scene robot carrying it
   std::unique_ptr<PrioritizedCoordination> coordination_;
   std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;

@@ -286,7 +286,8 @@ struct World::Impl {
     std::vector<Proxy> print_boxes;           // around the printed material
     std::vector<Eigen::VectorXd> saved_positions;  // per robot while placed; empty otherwise
     [[nodiscard]] Proxy proxy(std::shared_ptr<dart::dynamics::SimpleFrame> frame) const;
-    /// The least distance (m) between two sets of shapes, at most `best`; stops below `enough`.
+    /// The least distance (m) between two sets of shapes (infinity if one is empty); stops once
+    /// below `enough` and returns it.
     [[nodiscard]] double distance(const std::vector<Proxy>& first, const std::vector<Proxy>& second, bool with_tools,
                                   double enough) const;
   };
