@@ -364,15 +364,11 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         for (std::size_t i = 0; i < state.fluid.birth_time.size(); ++i) values(i) = state.time - double(state.fluid.birth_time[i]);
         return age;
       }, "Each particle's age (n), s: a copy.")
-      .def_property_readonly("layer", [](PySimulation& self) {
-        const auto& fluid = self.simulation().solver().state().fluid;
-        const sim::CameraRig& rig = self.simulation().cameras();
-        py::array_t<std::int32_t> layers(static_cast<py::ssize_t>(fluid.phase.size()));
-        auto values = layers.mutable_unchecked<1>();
-        for (std::size_t i = 0; i < fluid.phase.size(); ++i) values(i) = rig.particle_layer(fluid.phase[i], fluid.birth_time[i]);
-        return layers;
-      }, "Each particle's print layer (n), 0 first, by when its head's path began each layer; -1: not printed "
-         "by a path. A copy. Layers are those of the paths the run started with.")
+      .def_property_readonly("layer", [](py::object owner) {
+        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
+        return python::view(fluid.print_layer.data(), fluid.print_layer.size(), 1, owner);
+      }, "Each particle's print layer (n), 0 first: the layer its nozzle's path was on when it left (a path "
+         "set at run time counts its own layers); -1: not printed by a path. A read-only view, valid until the next step.")
       .def_property_readonly("material_names", [](PySimulation& self) {
         std::vector<std::string> names;
         for (const auto& entry : self.simulation().scene().materials) names.push_back(entry.material.name);

@@ -143,7 +143,7 @@ int render_command(const RenderOptions& options) {
   std::optional<TriangleMesh> printed;
   for (const auto& mesh : summary.value("meshes", nlohmann::json::array()))
     if (mesh.value("time_s", 1e300) <= time + 1e-9) printed = io::read_triangle_mesh(run / mesh.value("file", std::string()));
-  rig.show({bodies, nozzles, particles.positions, particles.material, particles.birth_time, printed ? &*printed : nullptr});
+  rig.show({bodies, nozzles, particles.positions, particles.material, particles.layer, printed ? &*printed : nullptr});
 
   // The camera.
   sensors::CameraSettings settings;

@@ -275,3 +275,58 @@ def test_layers_of_the_wall():
     assert 0.004 < z[layer == 1].mean() - z[layer == 0].mean() < 0.012
     # And it was born after every particle of the first.
     assert sim.birth_time[layer == 1].min() > sim.birth_time[layer == 0].max()
+
+
+TWO_HEADS = """<?xml version="1.0"?>
+<sdf version="1.9"><world name="two_heads">
+  <model name="floor"><static>true</static><link name="floor"><collision name="floor">
+    <pose>0 0 -0.01 0 0 0</pose><geometry><box><size>0.3 0.3 0.02</size></box></geometry>
+  </collision></link></model>
+  <plugin name="m3dp" filename="m3dp">
+    <solver><particle_radius unit="mm">1.5</particle_radius><end_time>7</end_time>
+      <bounds><min>-0.15 -0.15 -0.05</min><max>0.15 0.15 0.1</max></bounds></solver>
+    <material name="mortar" preset="printable_mortar"><rheology><max_viscosity>1e4</max_viscosity></rheology></material>
+    <!-- a: two layers along y = 0, the second from about 1.1 s. -->
+    <print_head name="a" material="mortar">
+      <nozzle><inner_diameter unit="mm">8</inner_diameter><exit_speed>0.1</exit_speed></nozzle>
+      <path speed="0.1">
+        <line><start>-0.05 0 0.006</start><end>0.05 0 0.006</end></line>
+        <line extrude="false"><start>0.05 0 0.006</start><end>0.05 0 0.012</end></line>
+        <line><start>0.05 0 0.012</start><end>-0.05 0 0.012</end></line>
+      </path>
+    </print_head>
+    <!-- b: one layer along y = 0.08 while a prints its second. -->
+    <print_head name="b" material="mortar">
+      <nozzle><inner_diameter unit="mm">8</inner_diameter><exit_speed>0.1</exit_speed></nozzle>
+      <path start_time="1.2" speed="0.1">
+        <line><start>-0.05 0.08 0.006</start><end>0.05 0.08 0.006</end></line>
+      </path>
+    </print_head>
+  </plugin>
+</world></sdf>"""
+
+
+def test_each_particle_keeps_the_layer_of_its_own_heads_path():
+    # Layers are counted on the path of the nozzle a particle left: b's one layer, printed while a
+    # prints its second, is b's layer 0; a path given at run time counts its own layers.
+    sim = m3dp.Simulation.from_string(TWO_HEADS, name="two_heads.sdf", threads=2)
+    sim.step_to(2.4)
+    y, z, layer = sim.positions[:, 1], sim.positions[:, 2], sim.layer
+    assert not layer.flags.writeable and not layer.flags.owndata, "a view"
+    of_a, of_b = y < 0.04, y > 0.04
+    assert of_a.sum() > 100 and of_b.sum() > 100
+    assert set(np.unique(layer[of_a])) == {0, 1}
+    assert 0.004 < z[of_a & (layer == 1)].mean() - z[of_a & (layer == 0)].mean() < 0.009
+    assert set(np.unique(layer[of_b])) == {0}, "b's material was printed in b's first layer"
+    assert sim.birth_time[of_b].min() > sim.birth_time[of_a & (layer == 1)].min(), "while a printed its second"
+    # b given two layers of its own at y = -0.08.
+    sim.set_path("b", """<path speed="0.1">
+      <line><start>-0.05 -0.08 0.006</start><end>0.05 -0.08 0.006</end></line>
+      <line extrude="false"><start>0.05 -0.08 0.006</start><end>0.05 -0.08 0.012</end></line>
+      <line><start>0.05 -0.08 0.012</start><end>-0.05 -0.08 0.012</end></line>
+    </path>""")
+    sim.step_to(6.6)  # 0.19 m of travel to its start, then 2 s of printing
+    y, z, layer = sim.positions[:, 1], sim.positions[:, 2], sim.layer
+    new = y < -0.04
+    assert set(np.unique(layer[new])) == {0, 1}
+    assert 0.004 < z[new & (layer == 1)].mean() - z[new & (layer == 0)].mean() < 0.009

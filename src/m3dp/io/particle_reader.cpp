@@ -170,13 +170,14 @@ ParticleFrame read_vtk_xml(const fs::path& file) {
   frame.positions.resize(count);
   for (std::size_t i = 0; i < count; ++i) frame.positions[i] = Vec3(coordinates[3 * i], coordinates[3 * i + 1], coordinates[3 * i + 2]);
   // Stable particle ids (m3dp run writes them): let a sequence be meshed incrementally.
-  // Material and birth time: what cameras draw a saved run's particles by (m3dp render).
+  // Material and layer: what cameras draw a saved run's particles by (m3dp render).
   for (const pugi::xml_node array : piece.child("PointData").children("DataArray")) {
     const std::string name = array.attribute("Name").as_string();
     if (array.attribute("NumberOfComponents").as_int(1) != 1) continue;
     if (name == "id") frame.ids = read_data_array<std::uint64_t>(file, array, count, 1, layout);
     else if (name == "material") frame.material = read_data_array<std::uint16_t>(file, array, count, 1, layout);
     else if (name == "birth_time") frame.birth_time = read_data_array<Real>(file, array, count, 1, layout);
+    else if (name == "layer") frame.layer = read_data_array<std::int32_t>(file, array, count, 1, layout);
   }
   for (const pugi::xml_node array : dataset.child("FieldData").children("DataArray"))
     if (std::string(array.attribute("Name").as_string()) == "particle_radius")

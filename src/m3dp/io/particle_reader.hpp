@@ -20,6 +20,7 @@ struct ParticleFrame {
   std::vector<std::uint64_t> ids;       // stable particle ids, from a point array "id" (.vtu/.vtp); empty if none
   std::vector<std::uint16_t> material;  // each particle's material index, from "material" (m3dp run writes it); empty if none
   std::vector<Real> birth_time;         // s, from "birth_time"; empty if none
+  std::vector<std::int32_t> layer;      // print layer (0 first, -1 none), from "layer"; empty if none
 };
 
 /// Reads positions from a .vtu, .vtp or .ply file. Throws InputError naming the file (and line

@@ -30,6 +30,9 @@ PointArray PointArray::of(std::string name, std::span<const std::uint64_t> value
 PointArray PointArray::of(std::string name, std::span<const std::uint8_t> values) {
   return {std::move(name), "UInt8", 1, values.data(), sizeof(std::uint8_t)};
 }
+PointArray PointArray::of(std::string name, std::span<const std::int32_t> values) {
+  return {std::move(name), "Int32", 1, values.data(), sizeof(std::int32_t)};
+}
 
 void write_vtu(const std::filesystem::path& file, std::span<const Vec3> points, const std::vector<PointArray>& arrays,
                const std::vector<FieldValue>& field_data, const VtuEncoding& encoding) {

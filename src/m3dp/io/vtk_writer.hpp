@@ -27,6 +27,7 @@ struct PointArray {
   static PointArray of(std::string name, std::span<const std::uint16_t> values);
   static PointArray of(std::string name, std::span<const std::uint64_t> values);
   static PointArray of(std::string name, std::span<const std::uint8_t> values);
+  static PointArray of(std::string name, std::span<const std::int32_t> values);
 };
 
 /// A single number stored with the whole dataset (VTK FieldData), e.g. the particle radius.

@@ -38,19 +38,6 @@ TriangleMesh transformed(const TriangleMesh& mesh, const Pose& pose) {
 
 }  // namespace
 
-std::vector<double> layer_start_times(const PathView& path, Real tolerance) {
-  std::vector<double> starts;
-  Real layer_height = 0;
-  for (const auto& vertex : path.vertices) {
-    if (!vertex.extruding) continue;
-    if (starts.empty() || std::abs(vertex.position.z() - layer_height) > tolerance) {
-      starts.push_back(vertex.time);
-      layer_height = vertex.position.z();
-    }
-  }
-  return starts;
-}
-
 CameraRig::CameraRig(const Simulation& simulation)
     : layout_(world_layout(simulation)), particle_radius_(simulation.solver().parameters().settings.particle_radius) {
   const auto& scene = simulation.scene();
@@ -76,30 +63,31 @@ CameraRig::CameraRig(const Simulation& simulation)
     nozzle_handles_.push_back(renderer_.add_body(nozzle.triangles, add_segment({0, "nozzle", "nozzle/" + nozzle.name, "", -1, 0, kNozzleColor})));
   printed_segment_ = add_segment({0, "printed_material", "printed_material", "", -1, 0, kPrintedMeshColor});
 
-  // Materials: a segment per print layer of the first print head that prints it (by birth time),
-  // and one for what no path printed (fluid blocks).
+  // Materials: a segment per print layer (each particle keeps the layer its nozzle's path was on
+  // when it left), and one for what no path printed (fluid blocks).
   const std::size_t phases = scene.materials.size();
   material_colors_.resize(phases);
-  layer_starts_.resize(phases);
   layer_segments_.resize(phases);
   for (std::size_t phase = 0; phase < phases; ++phase) {
     const auto& color = scene.materials[phase].color;
     material_colors_[phase] = color ? sensors::Rgb{(*color)[0], (*color)[1], (*color)[2]} : kMaterialPalette[phase % std::size(kMaterialPalette)];
-    for (std::size_t head = 0; head < scene.print_heads.size(); ++head) {
-      if (scene.material_index(scene.print_heads[head].material) != phase) continue;
-      const auto path = std::find_if(layout_.paths.begin(), layout_.paths.end(),
-                                     [&](const PathView& view) { return !view.base_path && view.name == scene.print_heads[head].name; });
-      if (path != layout_.paths.end()) layer_starts_[phase] = layer_start_times(*path, Real(0.25) * scene.print_heads[head].inner_diameter);
-      break;
+    // As many layers as the head with the most; each began when the first of them began it.
+    std::vector<double> starts;  // s, on the paths' clocks
+    for (const PathView& path : layout_.paths) {
+      if (path.base_path || scene.material_index(scene.print_heads[path.index].material) != phase) continue;
+      const auto head_starts = toolpath::layer_start_times(path.vertices, Real(0.25) * scene.print_heads[path.index].inner_diameter);
+      for (std::size_t layer = 0; layer < head_starts.size(); ++layer)
+        if (layer < starts.size()) starts[layer] = std::min(starts[layer], head_starts[layer]);
+        else starts.push_back(head_starts[layer]);
     }
-    if (layer_starts_[phase].size() > kMaxLayers) layer_starts_[phase].resize(kMaxLayers);
+    if (starts.size() > kMaxLayers) starts.resize(kMaxLayers);
     const std::string& name = scene.materials[phase].material.name;
     layer_segments_[phase].push_back(add_segment({0, "material", name, "", -1, 0, material_colors_[phase]}));
-    for (std::size_t layer = 0; layer < layer_starts_[phase].size(); ++layer) {
+    for (std::size_t layer = 0; layer < starts.size(); ++layer) {
       sensors::Rgb shaded = material_colors_[phase];
       const float shade = kLayerShade[layer % std::size(kLayerShade)];
       shaded = {shaded.r * shade, shaded.g * shade, shaded.b * shade};
-      layer_segments_[phase].push_back(add_segment({0, "material", name, "", static_cast<int>(layer), layer_starts_[phase][layer], shaded}));
+      layer_segments_[phase].push_back(add_segment({0, "material", name, "", static_cast<int>(layer), starts[layer], shaded}));
     }
   }
   std::vector<sensors::Rgb> palette;
@@ -143,14 +131,8 @@ void CameraRig::update(const Simulation& simulation) {
   const bool new_mesh = simulation.printed_mesh() && simulation.printed_mesh_version() != printed_version_;
   printed_version_ = simulation.printed_mesh_version();
   const auto settled = simulation.solver().settled_particles();
-  show({poses.bodies, nozzles, fluid.position, fluid.phase, fluid.birth_time, new_mesh ? simulation.printed_mesh().get() : nullptr,
+  show({poses.bodies, nozzles, fluid.position, fluid.phase, fluid.print_layer, new_mesh ? simulation.printed_mesh().get() : nullptr,
         settled.begin, settled.end, settled.build});
-}
-
-int CameraRig::particle_layer(std::uint16_t phase, Real birth_time) const {
-  if (phase >= layer_starts_.size()) return -1;
-  const auto& starts = layer_starts_[phase];
-  return static_cast<int>(std::upper_bound(starts.begin(), starts.end(), double(birth_time)) - starts.begin()) - 1;
 }
 
 void CameraRig::show(const State& state) {
@@ -163,11 +145,9 @@ void CameraRig::show(const State& state) {
   parallel_for_each_index(count, [&](std::size_t i) {
     const std::uint16_t phase = i < state.phases.size() && state.phases[i] < layer_segments_.size() ? state.phases[i] : 0;
     if (layer_segments_.empty()) return;
-    const auto& starts = layer_starts_[phase];
-    // Layer k began at starts[k]: the segments list "no layer" first, then each layer.
-    const double birth = i < state.birth_times.size() ? double(state.birth_times[i]) : 0.0;
-    const auto layer = static_cast<std::size_t>(std::upper_bound(starts.begin(), starts.end(), birth) - starts.begin());
-    particle_segments_[i] = layer_segments_[phase][std::min(layer, layer_segments_[phase].size() - 1)];
+    // The segments list "no layer" first, then each layer; layers past the last share its id.
+    const std::int32_t layer = i < state.layers.size() ? std::max(state.layers[i], -1) : -1;
+    particle_segments_[i] = layer_segments_[phase][std::min(static_cast<std::size_t>(layer + 1), layer_segments_[phase].size() - 1)];
   }, 4096);
   using Set = sensors::Renderer::ParticleSet;
   if (state.settled_end <= state.settled_begin || state.settled_end > count) {

@@ -25,7 +25,7 @@ struct Segment {
   std::string name;      // the body's, link's ("ur10/forearm_link") or material's name
   std::string robot;     // for a link
   int layer = -1;        // for a material: its print layer (0 first), -1: not printed by a path
-  double layer_start = 0;  // s: when that layer began
+  double layer_start = 0;  // s: when the first head printing it began that layer (on its path's clock)
   sensors::Rgb color;
 };
 
@@ -45,19 +45,16 @@ class CameraRig {
   /// What each segment id is (index: id): fixed when the rig is made, layers from the paths.
   [[nodiscard]] const std::vector<Segment>& legend() const { return legend_; }
   [[nodiscard]] const WorldLayout& layout() const { return layout_; }
-  /// A particle's print layer (0 first) by its material (phase) and birth time (s), as the
-  /// segmentation names it; -1: not printed by a path (a fluid block, or before the first layer).
-  [[nodiscard]] int particle_layer(std::uint16_t phase, Real birth_time) const;
-
   /// What the cameras see when it does not come from the simulation (a saved run: m3dp render):
   /// each layout body's and nozzle's pose (static ones ignored), the particles with their
-  /// material (phase) and birth time, and the printed mesh (null: none).
+  /// material (phase) and print layer (-1 or none: not printed by a path), and the printed mesh
+  /// (null: none).
   struct State {
     std::span<const Pose> bodies;
     std::span<const Pose> nozzles;
     std::span<const Vec3> positions;
     std::span<const std::uint16_t> phases;
-    std::span<const Real> birth_times;
+    std::span<const std::int32_t> layers;
     const TriangleMesh* printed_mesh = nullptr;
     /// Particles [settled_begin, settled_end) have not moved since build `settled_build` (their
     /// BVH is kept until it changes); none: every particle is drawn as moving.
@@ -103,7 +100,6 @@ class CameraRig {
   std::vector<Camera> cameras_;
   std::vector<Segment> legend_;
   std::vector<sensors::Rgb> material_colors_;                  // per phase
-  std::vector<std::vector<double>> layer_starts_;              // per phase: when each layer began (s)
   std::vector<std::vector<std::uint16_t>> layer_segments_;     // per phase: [0] no layer, [k + 1] layer k
   std::vector<std::uint16_t> particle_segments_;
   std::vector<Vec3> moving_positions_;               // the particles not settled, when some are
@@ -114,8 +110,5 @@ class CameraRig {
   std::uint64_t updated_step_ = ~0ull;
   double render_ms_ = 0;
 };
-
-/// Each layer's start time on a path: where its extruding height changes by more than `tolerance` (m).
-[[nodiscard]] std::vector<double> layer_start_times(const PathView& path, Real tolerance);
 
 }  // namespace m3dp::sim

@@ -8,7 +8,7 @@
 namespace m3dp::sim {
 
 namespace {
-constexpr const char* kMagic = "m3dp checkpoint 1";
+constexpr const char* kMagic = "m3dp checkpoint 2";  // 2: particles keep their print layer
 }
 
 void CheckpointRun::save(StateWriter& out) const {

@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 
@@ -13,6 +14,13 @@
 
 namespace m3dp::sim {
 
+namespace {
+/// When a print head's path begins each layer (s, on its clock): a layer is a height more than a
+/// quarter of the nozzle's bore from the last.
+std::vector<double> layer_start_times(const scene::PrintHead& head) {
+  return toolpath::layer_start_times(head.trajectory.polyline(head.inner_diameter), Real(0.25) * head.inner_diameter);
+}
+}  // namespace
 
 Simulation::Simulation(const scene::Scene& scene)
     : scene_(scene), solver_(scene::solver_parameters(scene)), world_(world::WorldSettings{scene.solver.gravity}) {
@@ -62,7 +70,10 @@ Simulation::Simulation(const scene::Scene& scene)
 void Simulation::add_robots() {
   head_commands_.resize(scene_.print_heads.size());
   plan_clocks_.resize(scene_.robots.size());
-  for (std::size_t head = 0; head < scene_.print_heads.size(); ++head) head_robots_.push_back(robot_of_print_head(scene_, head));
+  for (std::size_t head = 0; head < scene_.print_heads.size(); ++head) {
+    head_robots_.push_back(robot_of_print_head(scene_, head));
+    head_layer_starts_.push_back(layer_start_times(scene_.print_heads[head]));
+  }
   robots_ = add_scene_robots(scene_, world_, plan_clocks_);
   head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter(), plan_clocks_);
   if (scene_.coordinator.enabled) coordination_ = std::make_unique<PrioritizedCoordination>(scene_.coordinator, scene_);
@@ -110,6 +121,8 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   if (command.flow_scale) state.flow_scale = *command.flow_scale;
   if (command.extruding) state.extruding = *command.extruding;
   state.volume_rate = state.extruding ? nominal_flow * state.flow_scale : Real(0);
+  const auto& starts = head_layer_starts_[head_index];
+  state.print_layer = static_cast<std::int32_t>(std::upper_bound(starts.begin(), starts.end(), path_time(head_index)) - starts.begin()) - 1;
   return state;
 }
 
@@ -146,6 +159,7 @@ void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::Pat
   const double now = path_time(head_index);
   change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
               fmt::format("print head '{}'", head.name));
+  head_layer_starts_[head_index] = layer_start_times(head);
   if (const auto robot = head_robots_[head_index]; robot && head_tools_[head_index])
     world_.set_external_control(robots_[*robot], false);
 }
@@ -168,7 +182,7 @@ void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegm
 void Simulation::update_print_heads() {
   for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
     const NozzleState state = nozzle_state(i);
-    solver_.set_nozzle(static_cast<Index>(i), state.pose, state.velocity, state.extruding, state.flow_scale);
+    solver_.set_nozzle(static_cast<Index>(i), state.pose, state.velocity, state.extruding, state.flow_scale, state.print_layer);
   }
 }
 

@@ -39,6 +39,7 @@ class Simulation {
     bool extruding = false;
     Real volume_rate = 0;
     Real flow_scale = 1;  // volume_rate over the nozzle's nominal π D²/4 · U
+    std::int32_t print_layer = -1;  // the layer of its path it prints now (0 first)
   };
   [[nodiscard]] NozzleState nozzle_state(std::size_t head) const;
 
@@ -137,6 +138,7 @@ class Simulation {
   std::vector<HeadCommand> head_commands_;  // per print head
   std::vector<PlanClock> plan_clocks_;      // per scene robot; sized once (the world's paths point into it)
   std::vector<std::optional<std::size_t>> head_robots_;  // per print head: the scene robot carrying it
+  std::vector<std::vector<double>> head_layer_starts_;  // per print head: when its path begins each layer (s, its clock)
   std::unique_ptr<PrioritizedCoordination> coordination_;
   std::unique_ptr<coupling::FluidBodyCoupling> coupling_;
   double initial_fluid_mass_ = 0;

@@ -26,6 +26,7 @@ std::size_t append_particle(const Model& model, State& state, const Vec3& positi
   fluid.phase[i] = phase;
   fluid.id[i] = state.next_particle_id++;
   fluid.birth_time[i] = static_cast<Real>(state.time);
+  fluid.print_layer[i] = -1;
   fluid.viscosity[i] = model.phases[phase].rheology.viscosity;
   fluid.viscous_velocity[i] = velocity;
   fluid.rest_load[i] = -1;
@@ -131,7 +132,8 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
       nozzle.end_blockage(state.time);
       const std::size_t first = fluid.size();
       for (const Vec3& offset : geometry.disc_offsets)
-        append_particle(model, state, centre + nozzle.pose.rotate(offset), exit_velocity, settings.phase);
+        fluid.print_layer[append_particle(model, state, centre + nozzle.pose.rotate(offset), exit_velocity, settings.phase)] =
+            nozzle.print_layer;
       state.mass_emitted_total += static_cast<double>(geometry.disc_offsets.size()) * model.particle_mass[settings.phase];
       activate_appended(state, first);
       nozzle.pending_time -= geometry.layer_period;

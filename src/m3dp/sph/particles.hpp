@@ -25,6 +25,8 @@ struct FluidParticles {
   std::vector<std::uint16_t> neighbor_count;  // (n) fluid neighbours + boundary ones weighted as fluid, this step
   std::vector<std::uint64_t> id;         // (n) stable id for tracking across reorders
   std::vector<Real> birth_time;          // (n) s, simulated time the particle appeared
+  std::vector<std::int32_t> print_layer; // (n) the layer of its nozzle's path it was emitted in (0 first);
+                                         //     -1: not printed by a path (blocks, material set up)
   std::vector<Real> viscosity;           // (n) Pa·s, effective dynamic viscosity of this step (rheology, age)
   std::vector<Real> shear_rate;          // (n) 1/s, √(2 D:D) of this step (non-Newtonian phases only)
   std::vector<Vec3> viscous_change;      // (n) m/s, last step's velocity change by the implicit viscosity (warm start)
@@ -52,6 +54,7 @@ struct FluidParticles {
     visit(neighbor_count);
     visit(id);
     visit(birth_time);
+    visit(print_layer);
     visit(viscosity);
     visit(shear_rate);
     visit(viscous_change);

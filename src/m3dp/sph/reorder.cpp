@@ -24,6 +24,7 @@ void reorder_particles(const Model& model, State& state, Workspace& workspace) {
     else if constexpr (std::is_same_v<Element, Real>) gather(field, workspace.scratch_real);
     else if constexpr (std::is_same_v<Element, std::uint16_t>) gather(field, workspace.scratch_u16);
     else if constexpr (std::is_same_v<Element, std::uint64_t>) gather(field, workspace.scratch_u64);
+    else if constexpr (std::is_same_v<Element, std::int32_t>) gather(field, workspace.scratch_i32);
     else static_assert(sizeof(Element) == 0, "add a scratch buffer for this field type");
   });
 }

@@ -119,13 +119,15 @@ void Solver::set_body_motion(Index body, const Pose& pose, const Vec3& linear_ve
   target.is_static = false;
 }
 
-void Solver::set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding, Real flow_scale) {
+void Solver::set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding, Real flow_scale,
+                        std::int32_t print_layer) {
   if (!(flow_scale >= 0)) throw Error(fmt::format("sph::Solver::set_nozzle: flow_scale must be >= 0, got {}", flow_scale));
   auto& target = state_.nozzles.at(nozzle);
   target.flow_scale = flow_scale;
   target.pose = pose;
   target.velocity = nozzle_velocity;
   target.extruding = extruding;
+  target.print_layer = print_layer;
 }
 
 void Solver::restore(const State& saved) {

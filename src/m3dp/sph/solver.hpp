@@ -27,7 +27,9 @@ class Solver {
   // ---- inputs set between steps ----
   void set_body_motion(Index body, const Pose& pose, const Vec3& linear_velocity, const Vec3& angular_velocity);
   /// `flow_scale` multiplies the nominal flow π D²/4 · U (and the exit speed): G-code sets it per move.
-  void set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding, Real flow_scale = 1);
+  /// `print_layer`: the layer of its path the nozzle prints (0 first), kept by each particle it emits.
+  void set_nozzle(Index nozzle, const Pose& pose, const Vec3& nozzle_velocity, bool extruding, Real flow_scale = 1,
+                  std::int32_t print_layer = -1);
 
   /// Replaces the state with a saved one (a checkpoint); the workspace's caches are rebuilt.
   void restore(const State& saved);

@@ -29,6 +29,7 @@ struct NozzleState {
   Vec3 velocity = Vec3::Zero();       // m/s of the nozzle itself (added to the exit velocity)
   bool extruding = false;
   Real flow_scale = 1;                // flow / nominal flow π D²/4 · U (a G-code move's E rate); 1 = nominal
+  std::int32_t print_layer = -1;      // the layer of its path it prints now (0 first), given to what it emits
   double pending_time = 0;            // s of nominal extrusion not yet emitted as a layer
   std::uint64_t layers_emitted = 0;
   std::uint64_t particles_emitted = 0;
@@ -205,6 +206,7 @@ struct Workspace {
   std::vector<Vec3> scratch_vec3;
   std::vector<Real> scratch_real;
   std::vector<std::uint16_t> scratch_u16;
+  std::vector<std::int32_t> scratch_i32;
   std::vector<std::uint64_t> scratch_u64;
   std::vector<Real> height;          // (n) m, against gravity (load check)
   // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.

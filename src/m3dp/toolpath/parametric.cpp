@@ -158,4 +158,17 @@ TrajectorySample Trajectory::sample(double time) const {
   return sample;
 }
 
+std::vector<double> layer_start_times(std::span<const PathVertex> vertices, Real tolerance) {
+  std::vector<double> starts;
+  Real layer_height = 0;
+  for (const PathVertex& vertex : vertices) {
+    if (!vertex.extruding) continue;
+    if (starts.empty() || std::abs(vertex.position.z() - layer_height) > tolerance) {
+      starts.push_back(vertex.time);
+      layer_height = vertex.position.z();
+    }
+  }
+  return starts;
+}
+
 }  // namespace m3dp::toolpath

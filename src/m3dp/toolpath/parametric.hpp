@@ -2,6 +2,7 @@
 // Parametric print paths → a timed nozzle trajectory: position, velocity and whether to extrude
 // at any simulated time. Segments are walked in order at their speed; where a segment does not
 // start where the previous one ended, the head travels there in a straight line without extruding.
+#include <span>
 #include <variant>
 #include <vector>
 
@@ -55,6 +56,10 @@ struct PathVertex {
   double time = 0;               // s
   bool extruding = false;
 };
+
+/// When a path drawn as `vertices` begins each print layer (s, on its clock): the first vertex that
+/// extrudes more than `tolerance` (m) above or below the layer before.
+[[nodiscard]] std::vector<double> layer_start_times(std::span<const PathVertex> vertices, Real tolerance);
 
 /// Arc length of a curve (m) and the point at arc length s.
 Real curve_length(const Curve& curve);

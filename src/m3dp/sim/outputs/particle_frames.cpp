@@ -38,6 +38,7 @@ class ParticleFrames final : public RunObserver {
                   {io::PointArray::of("velocity", fluid.velocity), io::PointArray::of("density", density),
                    io::PointArray::of("pressure", pressure_), io::PointArray::of("material", fluid.phase),
                    io::PointArray::of("id", fluid.id), io::PointArray::of("birth_time", fluid.birth_time),
+                   io::PointArray::of("layer", fluid.print_layer),
                    io::PointArray::of("viscosity", fluid.viscosity), io::PointArray::of("shear_rate", fluid.shear_rate),
                    io::PointArray::of("rest_time", fluid.rest_time),
                    io::PointArray::of("angular_velocity", fluid.angular_velocity)},
