@@ -1,5 +1,6 @@
 """The examples are also tests: examples/gcode_from_python.py slices with PrusaSlicer, prints the
-G-code from Python and reads back the deposited volume."""
+G-code from Python and reads back the deposited volume; examples/bead_width_control.py closes the
+loop from a depth camera to the flow."""
 import pathlib
 import sys
 import tempfile
@@ -7,6 +8,7 @@ import tempfile
 import pytest
 
 sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "examples"))
+import bead_width_control  # noqa: E402
 import gcode_from_python  # noqa: E402
 
 
@@ -22,3 +24,25 @@ def test_gcode_from_python_deposits_what_the_gcode_commands():
     assert deposited + lost == pytest.approx(commanded, rel=0.005)
     assert deposited > 0.95 * commanded
     assert summary["volume_removed"] == 0
+
+
+def test_bead_width_control_corrects_a_flow_15_percent_short():
+    design = bead_width_control.DESIGN_WIDTH
+    design_volume = bead_width_control.DESIGN_VOLUME
+    open_widths, open_asked, open_summary = bead_width_control.print_wall(closed_loop=False, real_flow=0.85)
+    closed_widths, closed_asked, closed_summary = bead_width_control.print_wall(closed_loop=True, real_flow=0.85)
+    assert len(open_widths) == len(closed_widths) == bead_width_control.LAYERS
+    assert open_asked == [1.0] * bead_width_control.LAYERS
+    # Open loop every bead is narrow (pressed to the layer height, 15 % less material is narrower),
+    # and the wall holds 15 % less than designed.
+    assert all(width < 0.92 * design for width in open_widths)
+    assert open_summary["volume_emitted"] == pytest.approx(0.85 * design_volume, rel=0.01)
+    # Closed loop the first layer is as narrow (nothing measured yet); from the third on the beads
+    # are within 4 % of the design, and the last layer's error is at least 3x smaller.
+    assert closed_widths[0] == pytest.approx(open_widths[0], rel=0.01)
+    assert all(abs(width - design) < 0.04 * design for width in closed_widths[2:])
+    open_error, closed_error = abs(open_widths[-1] - design), abs(closed_widths[-1] - design)
+    assert closed_error * 3 <= open_error, (open_error, closed_error)
+    # The controller asked for about 1/0.85 of the nominal flow, and the wall holds what was designed.
+    assert 1.1 < closed_asked[-1] < 1.35
+    assert closed_summary["volume_emitted"] == pytest.approx(design_volume, rel=0.05)
