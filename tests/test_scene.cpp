@@ -531,6 +531,17 @@ TEST(Scene, WhatDartsUrdfLoaderWouldRefuseOrDropIsAnErrorAtTheUrdfsLine) {
     EXPECT_CONTAINS(errors, expected);
 }
 
+TEST(Scene, ARobotOfOnlyTheWorldLinkIsAnErrorAtItsLine) {
+  // Found by fuzz_urdf: DART loads it as a skeleton without bodies and asserts on its root.
+  const auto folder = std::filesystem::temp_directory_path() / ("m3dp_world_urdf_" + std::to_string(::getpid()));
+  std::filesystem::create_directories(folder);
+  std::ofstream(folder / "world.urdf") << "<?xml version=\"1.0\"?>\n<robot name=\"ur10\">\n  <link name=\"world\"/>\n</robot>\n";
+  const std::string errors = load_error(robot_scene("elbow_joint", "tool0", (folder / "world.urdf").string())).what();
+  std::filesystem::remove_all(folder);
+  EXPECT_CONTAINS(errors, (folder / "world.urdf").string() +
+                              ":3: error: the robot's only <link> is \"world\", which stands for the world frame: it needs a link of its own");
+}
+
 TEST(Scene, UrdfColoursAreKeptForCameras) {
   // A two-link robot: one link coloured in its visual, one by a named material at the top level.
   const auto folder = std::filesystem::temp_directory_path() / ("m3dp_colour_urdf_" + std::to_string(::getpid()));

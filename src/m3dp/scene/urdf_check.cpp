@@ -34,6 +34,9 @@ class UrdfChecker {
       check_link(link);
     }
     if (links.empty()) report(robot, "the robot has no <link>");
+    // DART's loader takes a link named "world" for the world frame (the robot is fixed to it), not a body.
+    else if (links.size() == 1 && links.contains("world"))
+      report(links.at("world"), "the robot's only <link> is \"world\", which stands for the world frame: it needs a link of its own");
 
     std::set<std::string> joint_names;
     std::map<std::string, std::string> parent_of;  // child link → parent link

@@ -445,6 +445,9 @@ RobotIndex World::add_robot(const RobotDescription& description) {
     throw InputError(SourceLocation{file, 0},
                      "DART's URDF loader rejected the robot (its reason is printed above); check the <link>, <joint> "
                      "and <inertial> elements");
+  // A URDF of nothing but a "world" link loads as a skeleton of no bodies (DART asserts on its root).
+  if (skeleton->getNumBodyNodes() == 0)
+    throw InputError(SourceLocation{file, 0}, "the robot has no link besides \"world\" (the world frame): nothing to simulate");
   skeleton->setName(description.name);
   // Place the base: a welded root (URDF root link "world") moves its weld, a floating base its free joint.
   Joint* root = skeleton->getRootJoint();
