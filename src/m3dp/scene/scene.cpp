@@ -1522,7 +1522,7 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
                           "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
                           "warm_start", "end_time", "bounds", "viscosity_solver", "max_viscosity_error",
                           "max_viscosity_iterations", "xsph", "rest_detection", "rest_speed", "rest_duration",
-                          "wake_speed", "wake_on_load", "load_wake_duration", "surface_tension_model", "max_volume_error",
+                          "wake_speed", "wake_on_load", "load_wake_duration", "rest_compression", "surface_tension_model", "max_volume_error",
                           "minimum_spacing", "shifting", "max_particles"});
   sph::SolverSettings& settings = scene_.solver;
   if (const auto limit = read_scalar(solver, "max_particles", Quantity::plain_number, Limits::positive(), Presence::optional))
@@ -1578,6 +1578,8 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
     settings.wake_speed = Real(*speed);
   if (const auto duration = read_scalar(solver, "load_wake_duration", Quantity::time, Limits::non_negative(), Presence::optional))
     settings.load_wake_duration = Real(*duration);
+  if (const auto compression = read_scalar(solver, "rest_compression", Quantity::fraction, Limits::positive(), Presence::optional))
+    settings.rest_compression = Real(*compression);
   if (const auto factor = read_scalar(solver, "xsph", Quantity::plain_number, Limits{std::nullopt, 0.0, 1.0},
                                       Presence::optional)) {
     settings.xsph_factor = Real(*factor);

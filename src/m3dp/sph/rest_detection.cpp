@@ -46,6 +46,7 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
   const Real rest_speed_squared = settings.rest_speed * settings.rest_speed;
   const Real wake_speed_squared = settings.wake_speed * settings.wake_speed;
   const Real time = static_cast<Real>(state.time);
+  const Real compressed = 1 + settings.rest_compression;
   auto wake = [&](std::size_t j) {
     std::atomic_ref<Real>(fluid.rest_time[j]).store(0, std::memory_order_relaxed);
     std::atomic_ref<int>(state.resting_woken).store(1, std::memory_order_relaxed);
@@ -59,7 +60,9 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
     // while its shear stress μ γ̇ stays below its (aged) yield stress.
     bool resting = false;
     // An elastic material never rests: its stress depends on where its neighbours are.
-    if (!phase.elasticity.enabled && speed_squared < rest_speed_squared) resting = unyielded(phase, fluid, i, time);
+    // Nor while compressed (settings.rest_compression): it would stay so (wake_compressed_rest).
+    if (!phase.elasticity.enabled && speed_squared < rest_speed_squared && fluid.density[i] <= compressed * phase.density)
+      resting = unyielded(phase, fluid, i, time);
     // A negative clock (woken by load) keeps counting from where it is; motion cannot shorten the hold.
     fluid.rest_time[i] = resting ? fluid.rest_time[i] + time_step : std::min(fluid.rest_time[i], Real(0));
     if (any_resting && speed_squared > wake_speed_squared)
@@ -152,6 +155,50 @@ void wake_loaded_rest(const Model& model, State& state, Workspace& workspace) {
     run_begin = run_end;
   }
   if (woken) state.resting_woken = 1;
+}
+
+void wake_compressed_rest(const Model& model, State& state, Workspace& workspace) {
+  // Every fourth step: resting material pressed for a few steps more costs nothing, the sums do.
+  if (!model.settings.rest_detection || state.step % 4 != 0) return;
+  auto& fluid = state.fluid;
+  const std::size_t active = state.active_count, count = fluid.size();
+  if (active == 0 || active == count) return;
+  // Resting particles are fixed neighbours: the density solve moves the moving ones until their own
+  // density is right, and a resting particle that moving ones were pressed against (a bead pressed
+  // onto the layer below) would stay compressed. Only those near moving material can have changed.
+  auto& near = workspace.near_motion;
+  near.assign(count - active, 0);
+  parallel_for_each_index(active, [&](std::size_t i) {
+    for (const Index j : workspace.fluid_neighbors.of(i))
+      if (j >= active) std::atomic_ref<std::uint8_t>(near[j - active]).store(1, std::memory_order_relaxed);
+  }, 512);
+  const Real support_squared = model.support_radius * model.support_radius;
+  const Real compressed = 1 + model.settings.rest_compression;  // ρ/ρ0
+  const auto& boundary = state.boundary;
+  std::atomic<int> woken{0};
+  with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
+    parallel_for_each_index(count - active, [&](std::size_t k) {
+      if (!near[k]) return;
+      const std::size_t j = active + k;
+      const Vec3 position = fluid.position[j];
+      // Its density where everything is now, as measure_density sums it.
+      Real fluid_sum = 0, wall_volume_sum = 0;
+      for (const SpatialHashGrid* grid : {&workspace.fluid_grid, &workspace.resting_grid, &workspace.recent_resting_grid})
+        grid->for_each_candidate(position, [&](Index other, const Vec3&) {
+          const Real distance_squared = (position - fluid.position[other]).squaredNorm();
+          if (distance_squared < support_squared) fluid_sum += kernel.W(std::sqrt(distance_squared));
+        });
+      for (const SpatialHashGrid* grid : {&workspace.static_boundary_grid, &workspace.moving_boundary_grid})
+        grid->for_each_candidate(position, [&](Index b, const Vec3& wall) {
+          const Real distance_squared = (position - wall).squaredNorm();
+          if (distance_squared < support_squared) wall_volume_sum += boundary.volume[b] * kernel.W(std::sqrt(distance_squared));
+        });
+      if (model.particle_volume * fluid_sum + wall_volume_sum <= compressed) return;
+      fluid.rest_time[j] = 0;
+      woken.store(1, std::memory_order_relaxed);
+    }, 512);
+  });
+  if (woken.load()) state.resting_woken = 1;
 }
 
 }  // namespace m3dp::sph::stages

@@ -91,6 +91,10 @@ struct SolverSettings {
   Real air_viscosity = Real(1.825e-5);        // Pa·s, dry air at 20 °C
   Vec3 air_velocity = Vec3::Zero();           // m/s
   Real rest_speed = Real(2e-3);               // m/s
+  // Resting material compressed beyond this fraction of ρ0 wakes (moving material was pressed
+  // against it), and material does not come to rest so compressed. Resting paste sits about 1 %
+  // above ρ0 (the volume correction's floor), the odd particle 2-3 %.
+  Real rest_compression = Real(0.03);
   Real rest_duration = Real(0.05);            // s
   Real wake_speed = Real(5e-3);               // m/s
   Real load_wake_duration = 1;                // s: material woken by load is simulated at least this long

@@ -36,7 +36,7 @@ const StepStats& Solver::step() {
   // viscosity/weiler2018.cpp.
   run(Stage::viscosity, {add_elastic_stiffness, solve_implicit_viscosity, apply_xsph, shift_particles, correct_volume});
   run(Stage::advect, {push_out_of_nozzles, advect_positions, relax_reference_shape, update_rest_clocks, wake_loaded_rest,
-                      keep_out_of_boundaries, collect_body_wrenches, finish_step});
+                      wake_compressed_rest, keep_out_of_boundaries, collect_body_wrenches, finish_step});
   return state_.last_step;
 }
 

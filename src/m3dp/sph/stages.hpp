@@ -93,6 +93,8 @@ void relax_reference_shape(const Model& model, State& state, Workspace& workspac
 void update_rest_clocks(const Model& model, State& state, Workspace& workspace);
 /// With wake_on_load: resting material whose load has grown towards its yield stress wakes.
 void wake_loaded_rest(const Model& model, State& state, Workspace& workspace);
+/// Resting material that moving material nearby has compressed (settings.rest_compression) wakes.
+void wake_compressed_rest(const Model& model, State& state, Workspace& workspace);
 /// Particles whose centre crossed a wall's geometric surface go back onto it.
 void keep_out_of_boundaries(const Model& model, State& state, Workspace& workspace);
 /// The clock, the step count and the step's statistics; then the state check (throws SimulationError).

@@ -42,6 +42,7 @@ void Workspace::reserve(std::size_t capacity) {
   scratch_vec3.reserve(capacity);
   scratch_real.reserve(capacity);
   scratch_u16.reserve(capacity);
+  near_motion.reserve(capacity);
   scratch_i32.reserve(capacity);
   scratch_u64.reserve(capacity);
   fluid_neighbors.counts.reserve(capacity);

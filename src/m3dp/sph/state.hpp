@@ -209,6 +209,7 @@ struct Workspace {
   std::vector<std::int32_t> scratch_i32;
   std::vector<std::uint64_t> scratch_u64;
   std::vector<Real> height;          // (n) m, against gravity (load check)
+  std::vector<std::uint8_t> near_motion;  // (resting) 1: a moving particle's neighbour this step
   // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.
   struct ViscositySystem {
     std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)
