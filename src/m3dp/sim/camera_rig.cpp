@@ -73,9 +73,9 @@ CameraRig::CameraRig(const Simulation& simulation)
     material_colors_[phase] = color ? sensors::Rgb{(*color)[0], (*color)[1], (*color)[2]} : kMaterialPalette[phase % std::size(kMaterialPalette)];
     // As many layers as the head with the most; each began when the first of them began it.
     std::vector<double> starts;  // s, on the paths' clocks
-    for (const PathView& path : layout_.paths) {
-      if (path.base_path || scene.material_index(scene.print_heads[path.index].material) != phase) continue;
-      const auto head_starts = toolpath::layer_start_times(path.vertices, Real(0.25) * scene.print_heads[path.index].inner_diameter);
+    for (std::size_t head = 0; head < scene.print_heads.size(); ++head) {
+      if (scene.material_index(scene.print_heads[head].material) != phase) continue;
+      const auto& head_starts = simulation.layer_start_times(head);
       for (std::size_t layer = 0; layer < head_starts.size(); ++layer)
         if (layer < starts.size()) starts[layer] = std::min(starts[layer], head_starts[layer]);
         else starts.push_back(head_starts[layer]);

@@ -17,7 +17,7 @@ namespace m3dp::sim {
 namespace {
 /// When a print head's path begins each layer (s, on its clock): a layer is a height more than a
 /// quarter of the nozzle's bore from the last.
-std::vector<double> layer_start_times(const scene::PrintHead& head) {
+std::vector<double> path_layer_starts(const scene::PrintHead& head) {
   return toolpath::layer_start_times(head.trajectory.polyline(head.inner_diameter), Real(0.25) * head.inner_diameter);
 }
 }  // namespace
@@ -72,7 +72,7 @@ void Simulation::add_robots() {
   plan_clocks_.resize(scene_.robots.size());
   for (std::size_t head = 0; head < scene_.print_heads.size(); ++head) {
     head_robots_.push_back(robot_of_print_head(scene_, head));
-    head_layer_starts_.push_back(layer_start_times(scene_.print_heads[head]));
+    head_layer_starts_.push_back(path_layer_starts(scene_.print_heads[head]));
   }
   robots_ = add_scene_robots(scene_, world_, plan_clocks_);
   head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter(), plan_clocks_);
@@ -159,7 +159,7 @@ void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::Pat
   const double now = path_time(head_index);
   change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
               fmt::format("print head '{}'", head.name));
-  head_layer_starts_[head_index] = layer_start_times(head);
+  head_layer_starts_[head_index] = path_layer_starts(head);
   if (const auto robot = head_robots_[head_index]; robot && head_tools_[head_index])
     world_.set_external_control(robots_[*robot], false);
 }

@@ -68,6 +68,8 @@ class Simulation {
   [[nodiscard]] const PrioritizedCoordination* coordination() const { return coordination_.get(); }
   /// The scene robot (scene order) that carries a print head; none on an ideal gantry.
   [[nodiscard]] std::optional<std::size_t> robot_of_head(std::size_t head) const { return head_robots_.at(head); }
+  /// When a print head's path (as it is now) begins each layer: s, on its path's clock.
+  [[nodiscard]] const std::vector<double>& layer_start_times(std::size_t head) const { return head_layer_starts_.at(head); }
   /// The clock the scene's robot `robot` (scene order) samples its paths at.
   [[nodiscard]] const PlanClock& plan_clock(std::size_t robot) const { return plan_clocks_.at(robot); }
   /// The time a print head's path is sampled at now: its robot's plan clock, or the simulation's.

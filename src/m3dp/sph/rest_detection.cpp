@@ -172,6 +172,9 @@ void wake_compressed_rest(const Model& model, State& state, Workspace& workspace
     for (const Index j : workspace.fluid_neighbors.of(i))
       if (j >= active) std::atomic_ref<std::uint8_t>(near[j - active]).store(1, std::memory_order_relaxed);
   }, 512);
+  // The moving particles where this step left them (the neighbour search's own grid is from before
+  // the step, and not built at all while it keeps its lists).
+  workspace.moved_grid.build(std::span<const Vec3>(fluid.position.data(), active), model.support_radius);
   const Real support_squared = model.support_radius * model.support_radius;
   const Real compressed = 1 + model.settings.rest_compression;  // ρ/ρ0
   const auto& boundary = state.boundary;
@@ -183,9 +186,9 @@ void wake_compressed_rest(const Model& model, State& state, Workspace& workspace
       const Vec3 position = fluid.position[j];
       // Its density where everything is now, as measure_density sums it.
       Real fluid_sum = 0, wall_volume_sum = 0;
-      for (const SpatialHashGrid* grid : {&workspace.fluid_grid, &workspace.resting_grid, &workspace.recent_resting_grid})
-        grid->for_each_candidate(position, [&](Index other, const Vec3&) {
-          const Real distance_squared = (position - fluid.position[other]).squaredNorm();
+      for (const SpatialHashGrid* grid : {&workspace.moved_grid, &workspace.resting_grid, &workspace.recent_resting_grid})
+        grid->for_each_candidate(position, [&](Index, const Vec3& other) {
+          const Real distance_squared = (position - other).squaredNorm();
           if (distance_squared < support_squared) fluid_sum += kernel.W(std::sqrt(distance_squared));
         });
       for (const SpatialHashGrid* grid : {&workspace.static_boundary_grid, &workspace.moving_boundary_grid})

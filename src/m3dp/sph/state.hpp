@@ -145,7 +145,7 @@ class CoarseViscosityLevelHolder {
 
 /// What the stages rebuild or cache; nothing here is needed to continue a run.
 struct Workspace {
-  SpatialHashGrid fluid_grid;    // the active particles, every step
+  SpatialHashGrid fluid_grid;    // the active particles, at each neighbour search without a skin
   // The resting particles (neighbours too, but fixed), in two grids: the settled ones, slots
   // [settled_begin, settled_end) when built, watched by the fluid (FluidParticles::watch_slots) and
   // built again only when one of them changed slot or the recent ones grew too many; and the recent
@@ -210,6 +210,7 @@ struct Workspace {
   std::vector<std::uint64_t> scratch_u64;
   std::vector<Real> height;          // (n) m, against gravity (load check)
   std::vector<std::uint8_t> near_motion;  // (resting) 1: a moving particle's neighbour this step
+  SpatialHashGrid moved_grid;             // the active particles where the step left them (wake_compressed_rest)
   // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.
   struct ViscositySystem {
     std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)
