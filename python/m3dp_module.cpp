@@ -483,9 +483,14 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         result["extruding"] = state.extruding;
         result["volume_rate"] = double(state.volume_rate);
         result["flow_scale"] = double(state.flow_scale);
+        // A nozzle with a bore: the pump's push (N along the axis, this step) and that over the bore's section (Pa, smoothed).
+        const auto& engine = self.simulation().solver().state().nozzles[python::head_index(self, head)];
+        result["extrusion_force"] = double(engine.extrusion_force);
+        result["extrusion_pressure"] = double(engine.extrusion_pressure);
         return result;
       }, py::arg("head"), "The nozzle exit's pose (material leaves along its −z), velocity (m/s), whether it extrudes, "
-                          "its flow (m³/s) and that flow over the nominal.")
+                          "its flow (m³/s), that flow over the nominal, and for a nozzle with a bore the pump's "
+                          "extrusion force (N) and pressure (Pa; 0 without a bore).")
       .def("set_extrusion", [](PySimulation& self, const std::string& head, std::optional<bool> extruding, std::optional<double> flow_scale) {
         sim::Simulation::HeadCommand command;
         command.extruding = extruding;

@@ -29,6 +29,8 @@ packages=(
   chromium
   # Real slicers with their printer profiles: the G-code reader's test slices with both.
   prusa-slicer slic3r
+  # Plots of studies (scripts/plot_deposition.py) with a real plotting library.
+  python3-matplotlib
   # The readers fuzzed with libFuzzer under AddressSanitizer and UndefinedBehaviorSanitizer (scripts/fuzz.sh).
   clang libclang-rt-14-dev
 )

@@ -20,6 +20,9 @@ struct Material {
   Ageing ageing;                       // none by default
   Real boundary_viscosity = 0;         // Pa·s, friction against walls, bodies and the nozzle (0 = free slip)
   bool sticks_to_walls = false;        // no slip: walls see the material's own effective viscosity instead
+  // The nozzle's bore (a nozzle with walls): free slip by default, as El Abbaoui et al. 2024 found
+  // printed concrete sections match best; true: no slip (the material's own viscosity at the bore).
+  bool nozzle_no_slip = false;
   Real surface_tension = 0;            // N/m against air (water at 20 °C: 0.0728); 0 = none
   Real adhesion = 0;                   // N/m, work of adhesion to walls, σ(1 + cos θ) by Young–Dupré; 0 = none
   Granular granular;                   // enabled: discrete spheres with contacts instead of a fluid
@@ -27,9 +30,11 @@ struct Material {
   Elasticity elasticity;               // enabled: a shear stress from the deformation of a reference shape
 
   [[nodiscard]] bool has_surface_forces() const { return surface_tension > 0 || adhesion > 0; }
-  [[nodiscard]] bool has_wall_friction() const { return sticks_to_walls || boundary_viscosity > 0; }
-  /// Viscosity (Pa·s) of the wall term for a particle of effective viscosity `particle_viscosity`.
-  [[nodiscard]] Real wall_viscosity(Real particle_viscosity) const {
+  [[nodiscard]] bool has_wall_friction() const { return sticks_to_walls || boundary_viscosity > 0 || nozzle_no_slip; }
+  /// Viscosity (Pa·s) of the wall term for a particle of effective viscosity `particle_viscosity`,
+  /// against a nozzle's bore or against any other wall.
+  [[nodiscard]] Real wall_viscosity(Real particle_viscosity, bool nozzle_bore = false) const {
+    if (nozzle_bore) return nozzle_no_slip ? particle_viscosity : 0;
     return sticks_to_walls ? particle_viscosity : boundary_viscosity;
   }
 };

@@ -1665,8 +1665,8 @@ void SceneReader::read_material(const pugi::xml_node& element) {
 
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base, FieldLocations& fields) {
-  check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "surface_tension", "adhesion",
-                           "granular", "micropolar", "elasticity", "source", "color"});
+  check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "nozzle_wall", "surface_tension",
+                           "adhesion", "granular", "micropolar", "elasticity", "source", "color"});
   const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
@@ -1709,6 +1709,14 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
       material.boundary_viscosity = Real(*value);
       material.sticks_to_walls = false;
     }
+  }
+  // The slip of a nozzle's bore: free_slip (the default) or no_slip.
+  if (const pugi::xml_node wall = element.child("nozzle_wall")) {
+    const std::string value(trim(wall.child_value()));
+    leaf_text(wall, {});
+    if (value == "no_slip") material.nozzle_no_slip = true;
+    else if (value == "free_slip") material.nozzle_no_slip = false;
+    else report(wall, fmt::format("<nozzle_wall> must be free_slip or no_slip, got '{}'", value));
   }
   // σ against air, and the work of adhesion σ(1 + cos θ) to walls (both N/m; adhesion with Akinci et al.
   // 2013's model only).
@@ -1953,7 +1961,7 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
 
   if (const pugi::xml_node nozzle = find_child(element, "nozzle", Presence::required)) {
     check_attributes(nozzle, {});
-    check_children(nozzle, {"inner_diameter", "exit_speed", "direction"});
+    check_children(nozzle, {"inner_diameter", "exit_speed", "direction", "bore_length", "outer_diameter"});
     if (const auto diameter =
             read_scalar(nozzle, "inner_diameter", Quantity::length, Limits::positive(), Presence::required)) {
       head.inner_diameter = Real(*diameter);
@@ -1968,6 +1976,18 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
       head.exit_speed = Real(*speed);
     }
     if (const auto direction = read_direction(nozzle, "direction", Presence::optional)) head.direction = *direction;
+    // A nozzle with walls: the bore above the exit and the tip's lip (sph::NozzleSettings).
+    // The engine checks the bore against the particles (sph::check_parameters) at these elements' lines.
+    if (const auto length = read_scalar(nozzle, "bore_length", Quantity::length, Limits::non_negative(), Presence::optional))
+      head.bore_length = Real(*length);
+    record_field(head.nozzle_fields, "bore_length", nozzle, "bore_length");
+    record_field(head.nozzle_fields, "outer_diameter", nozzle, "outer_diameter");
+    if (const auto diameter = read_scalar(nozzle, "outer_diameter", Quantity::length, Limits::positive(), Presence::optional)) {
+      head.outer_diameter = Real(*diameter);
+      if (head.outer_diameter <= head.inner_diameter)
+        report(nozzle.child("outer_diameter"), fmt::format("<outer_diameter> {} m must be larger than <inner_diameter> {} m",
+                                                           head.outer_diameter, head.inner_diameter));
+    }
   }
   if (const pugi::xml_node path = find_child(element, "path", Presence::required)) {
     if (auto trajectory = read_path(path)) head.trajectory = std::move(*trajectory);
@@ -2343,7 +2363,8 @@ void SceneReader::report_parameter_problems(const std::vector<sph::ParameterProb
         break;
       }
       case sph::ParameterProblem::Subject::nozzle:
-        location = problem.index < scene_.print_heads.size() ? scene_.print_heads[problem.index].where : location;
+        if (problem.index < scene_.print_heads.size())
+          location = location_of(scene_.print_heads[problem.index].nozzle_fields, problem.field, scene_.print_heads[problem.index].where);
         owner = fmt::format("print head '{}'", parameters.nozzles[problem.index].name);
         break;
     }
@@ -2392,7 +2413,8 @@ sph::Parameters solver_parameters(const Scene& scene) {
   for (const auto& entry : scene.materials) parameters.phases.push_back(entry.material);
   for (const auto& head : scene.print_heads)
     parameters.nozzles.push_back(
-        sph::NozzleSettings{head.name, head.inner_diameter, head.exit_speed, scene.material_index(head.material)});
+        sph::NozzleSettings{head.name, head.inner_diameter, head.exit_speed, scene.material_index(head.material), head.bore_length,
+                            head.outer_diameter});
   return parameters;
 }
 

@@ -112,6 +112,9 @@ struct PrintHead {
   Real inner_diameter = Real(0.01);  // m
   Real exit_speed = Real(0.1);       // m/s
   Vec3 direction = Vec3(0, 0, -1);   // unit vector the material leaves along
+  Real bore_length = 0;              // m of bore above the exit, as walls (0: none, the exit is the inlet)
+  Real outer_diameter = 0;           // m, the tip's lip (0: a wall one particle thick)
+  FieldLocations nozzle_fields = {};  // where its nozzle's elements are (for the engine's checks)
   toolpath::Trajectory trajectory;
   std::optional<NozzleMount> mount;  // none: an ideal gantry moves the nozzle exactly along the path
   SourceLocation where;

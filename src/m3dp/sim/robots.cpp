@@ -59,8 +59,9 @@ std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::S
     tool.link = head.mount->link;
     tool.offset = head.mount->offset;
     tool.body_radius = head.mount->barrel_radius;
-    // The barrel ends a particle diameter before the exit, so the first layer is never blocked by it.
-    tool.body_clearance = particle_diameter;
+    // The barrel ends a particle diameter before the exit, so the first layer is never blocked by it,
+    // or above a bore, whose walls the engine carries (sph::NozzleSettings::bore_length).
+    tool.body_clearance = particle_diameter + head.bore_length;
     const world::ToolIndex index = world.add_tool(robots[robot], tool);
     const toolpath::Trajectory* trajectory = &head.trajectory;
     const Vec3 axis = head.direction.normalized();

@@ -104,6 +104,8 @@ struct RunSummary {
     std::uint64_t layers_emitted = 0, particles_emitted = 0, steps_blocked = 0;
     double volume_commanded = 0, volume_emitted = 0, volume_lost = 0;  // m³
     double blocked_time = 0;                                           // s in all
+    double volume_primed = 0;                                          // m³ that filled a bore (in volume_emitted)
+    double extrusion_pressure = -1, extrusion_pressure_max = -1;       // Pa at the end and the largest; < 0: no bore
     sph::NozzleState::Blockage longest_blockage;                       // duration 0: never blocked
   };
   std::vector<Nozzle> nozzles;

@@ -13,6 +13,16 @@ namespace m3dp::sph::stages {
 void move_bodies(const Model& model, State& state, Workspace& workspace) {
   auto& boundary = state.boundary;
   const Real support = model.support_radius;
+  // A nozzle's bore moves with the nozzle.
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+    for (const std::int32_t index : {model.nozzle_geometry[n].bore_body, model.nozzle_geometry[n].piston_body}) {
+      if (index < 0) continue;
+      BoundaryBody& body = state.bodies[static_cast<std::size_t>(index)];
+      body.pose = state.nozzles[n].pose;
+      body.linear_velocity = state.nozzles[n].velocity;
+      body.angular_velocity.setZero();
+    }
+  }
   const Real cell_size = workspace.search_cell_size;
   if (workspace.static_boundary_dirty) {
     ++workspace.fixed_grids_version;

@@ -4,6 +4,8 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_reduce.h>
 
+#include <algorithm>
+#include <cmath>
 #include <functional>
 
 #include "m3dp/core/parallel.hpp"
@@ -51,9 +53,12 @@ Vec3 without_push_into_nozzles(const Model& model, const State& state, const Vec
     const Vec3 offset = position - nozzle.pose.position;
     const Real axial = offset.dot(axis);
     const Real radius = model.nozzles[n].inner_diameter / 2 + model.particle_diameter;
-    if (axial < -model.particle_diameter || axial > 2 * model.particle_diameter ||
-        (offset - axial * axis).squaredNorm() > radius * radius)
+    // A bore's whole length (a pump's check valve): the piston zone is not moved at all.
+    const NozzleGeometry& geometry = model.nozzle_geometry[n];
+    const Real upstream = geometry.has_bore() ? model.nozzles[n].bore_length + model.particle_diameter : model.particle_diameter;
+    if (axial < -upstream || axial > 2 * model.particle_diameter || (offset - axial * axis).squaredNorm() > radius * radius)
       continue;
+    if (geometry.has_bore() && axial < geometry.piston_depth - model.nozzles[n].bore_length) return Vec3::Zero();
     const Real backwards = displacement.dot(axis);
     if (backwards < 0) displacement -= backwards * axis;
   }
@@ -81,13 +86,11 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
     const Real exit_speed = settings.exit_speed * nozzle.flow_scale;
     const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
     const Vec3 exit_velocity = exit_speed * axis + nozzle.velocity;
-    while (nozzle.pending_time >= geometry.layer_period) {
-      // The layer was due (pending − period) seconds ago: place it that far along the axis.
-      // pending_time counts nominal seconds: at the nominal speed that is the distance travelled.
-      const Real travelled = static_cast<Real>((nozzle.pending_time - geometry.layer_period) * settings.exit_speed);
-      const Vec3 centre = nozzle.pose.position + travelled * axis;
-      const Real reach = settings.inner_diameter / 2 + diameter;
-      auto blocked_by = [&](const std::vector<Vec3>& points, Real clearance_squared) {
+    // Layers come in at the exit, or at the top of a bore.
+    const Vec3 inlet = nozzle.pose.position - (geometry.has_bore() ? settings.bore_length : Real(0)) * axis;
+    Vec3 centre = inlet;
+    const Real reach = settings.inner_diameter / 2 + diameter;
+    auto blocked_by = [&](const std::vector<Vec3>& points, Real clearance_squared) {
         return tbb::parallel_reduce(
             tbb::blocked_range<std::size_t>(0, points.size(), 4096), false,
             [&](const tbb::blocked_range<std::size_t>& range, bool blocked) {
@@ -103,6 +106,33 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
             },
             std::logical_or<bool>());
       };
+    auto emit_disc = [&] {
+      const std::size_t first = fluid.size();
+      for (const Vec3& offset : geometry.disc_offsets)
+        fluid.print_layer[append_particle(model, state, centre + nozzle.pose.rotate(offset), exit_velocity, settings.phase)] =
+            nozzle.print_layer;
+      state.mass_emitted_total += static_cast<double>(geometry.disc_offsets.size()) * model.particle_mass[settings.phase];
+      activate_appended(state, first);
+      nozzle.particles_emitted += geometry.disc_offsets.size();
+      state.last_step.particles_emitted += geometry.disc_offsets.size();
+    };
+    if (geometry.has_bore() && !nozzle.primed) {
+      // A primed pump: the bore is filled at the first extrusion, disc by disc down to the tip,
+      // where nothing is in the way (a nozzle started in material keeps what is there).
+      nozzle.primed = true;
+      const double disc_volume = static_cast<double>(geometry.disc_offsets.size()) * std::pow(static_cast<double>(diameter), 3);
+      for (Real depth = diameter; depth <= settings.bore_length - diameter / 2; depth += diameter) {
+        centre = inlet + depth * axis;
+        if (blocked_by(fluid.position, fluid_clearance_squared)) continue;
+        emit_disc();
+        nozzle.volume_primed += disc_volume;
+      }
+    }
+    while (nozzle.pending_time >= geometry.layer_period) {
+      // The layer was due (pending − period) seconds ago: place it that far along the axis.
+      // pending_time counts nominal seconds: at the nominal speed that is the distance travelled.
+      const Real travelled = static_cast<Real>((nozzle.pending_time - geometry.layer_period) * settings.exit_speed);
+      centre = inlet + travelled * axis;
       auto blocked_by_boundary = [&] {
         bool blocked = false;
         for (const Vec3& offset : geometry.disc_offsets) {
@@ -130,21 +160,130 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
         break;
       }
       nozzle.end_blockage(state.time);
-      const std::size_t first = fluid.size();
-      for (const Vec3& offset : geometry.disc_offsets)
-        fluid.print_layer[append_particle(model, state, centre + nozzle.pose.rotate(offset), exit_velocity, settings.phase)] =
-            nozzle.print_layer;
-      state.mass_emitted_total += static_cast<double>(geometry.disc_offsets.size()) * model.particle_mass[settings.phase];
-      activate_appended(state, first);
+      emit_disc();
       nozzle.pending_time -= geometry.layer_period;
       ++nozzle.layers_emitted;
-      nozzle.particles_emitted += geometry.disc_offsets.size();
-      state.last_step.particles_emitted += geometry.disc_offsets.size();
     }
   }
 }
 
+namespace {
+
+/// The pump stalls (the exit is blocked) when the material ahead of a bore's piston is compressed by
+/// kPumpStallCompression of ρ0 while less than half the commanded flow leaves the bore, or by
+/// kPumpStallCompressionAlways whatever leaves. The volume correction keeps moving material within
+/// 1 %, but a stiff paste pushed through a pressed lip runs several % over it in the bore while it
+/// flows (a 10⁴ Pa·s paste at g = D/2 stalled on compression alone at 3 % one step in four, 9 % of
+/// its flow lost); a bore closed by the bed and pressed to 8-10 % pushed material through the bed's
+/// one layer of particles. The outflow is the bore's particle count balance, smoothed over two layer periods.
+constexpr Real kPumpStallCompression = Real(0.03);
+constexpr Real kPumpStallCompressionAlways = Real(0.1);
+/// The time over which the reported extrusion pressure is smoothed (s).
+constexpr double kPressureSmoothing = 0.05;
+
+/// The pump of each nozzle with a bore: material in the piston zone (the bore's top, where discs come
+/// in) moves with the nozzle at the commanded flow along the axis, unless the material ahead of it is
+/// compressed (a blocked exit). With `measure`, the force that took (Σ m Δv / Δt along the axis) is
+/// the nozzle's extrusion force, and over the bore's section its extrusion pressure.
+void drive_pistons(const Model& model, State& state, bool measure) {
+  auto& fluid = state.fluid;
+  const Real diameter = model.particle_diameter;
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+    NozzleState& nozzle = state.nozzles[n];
+    const NozzleSettings& settings = model.nozzles[n];
+    const NozzleGeometry& geometry = model.nozzle_geometry[n];
+    if (!geometry.has_bore()) continue;
+    const bool driving = nozzle.extruding && nozzle.flow_scale > 0;
+    const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
+    const Vec3 top = nozzle.pose.position - settings.bore_length * axis;
+    const Real radius_squared = settings.inner_diameter * settings.inner_diameter / 4;
+    // The discs advance a spacing each layer period (their section is π D²/4 within rounding).
+    const Real disc_speed = static_cast<Real>(diameter / geometry.layer_period);
+    const Vec3 piston_velocity = nozzle.velocity + disc_speed * nozzle.flow_scale * axis;
+    const Real time_step = state.time_step;
+    // The material ahead of the piston (count and Σ ρ/ρ0) and in the whole bore (count).
+    struct Sums {
+      double density_ratio = 0;
+      std::size_t ahead = 0, in_bore = 0;
+    };
+    const std::size_t count = state.active_count;
+    auto in_bore = [&](std::size_t i, Real& depth) {
+      const Vec3 offset = fluid.position[i] - top;
+      depth = offset.dot(axis);
+      return depth >= -diameter && depth <= settings.bore_length && (offset - depth * axis).squaredNorm() <= radius_squared;
+    };
+    if (driving) {
+      const Sums ahead = tbb::parallel_deterministic_reduce(
+          tbb::blocked_range<std::size_t>(0, count, 2048), Sums{},
+          [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
+            for (std::size_t i = range.begin(); i != range.end(); ++i) {
+              Real depth = 0;
+              if (!in_bore(i, depth)) continue;
+              ++sums.in_bore;
+              if (depth < geometry.piston_depth || depth > geometry.piston_depth + 3 * diameter) continue;
+              sums.density_ratio += fluid.density[i] / model.phases[fluid.phase[i]].density;
+              ++sums.ahead;
+            }
+            return sums;
+          },
+          [](Sums a, const Sums& b) {
+            a.density_ratio += b.density_ratio;
+            a.ahead += b.ahead;
+            a.in_bore += b.in_bore;
+            return a;
+          });
+      const double compression = ahead.ahead > 0 ? ahead.density_ratio / static_cast<double>(ahead.ahead) - 1 : 0;
+      if (measure && time_step > 0) {
+        // Particles that left the bore this step: those that came in less the bore's gain.
+        const double left = static_cast<double>(nozzle.particles_emitted - nozzle.bore_emitted) -
+                            (static_cast<double>(ahead.in_bore) - static_cast<double>(nozzle.bore_particles));
+        const double blend = std::min(1.0, time_step / (2 * geometry.layer_period));
+        nozzle.bore_outflow += static_cast<Real>(blend * (left / time_step - nozzle.bore_outflow));
+        nozzle.bore_particles = ahead.in_bore;
+        nozzle.bore_emitted = nozzle.particles_emitted;
+      }
+      const double commanded = static_cast<double>(geometry.disc_offsets.size()) / geometry.layer_period * nozzle.flow_scale;  // particles/s
+      nozzle.pump_stalled = compression > kPumpStallCompressionAlways ||
+                            (compression > kPumpStallCompression && nozzle.bore_outflow < 0.5 * commanded);
+    }
+    if (!driving || nozzle.pump_stalled) {
+      if (measure) {
+        nozzle.extrusion_force = 0;
+        nozzle.extrusion_pressure = 0;
+      }
+      continue;
+    }
+    // The particles of the piston zone, in a fixed order: their impulse summed per chunk.
+    const double impulse = tbb::parallel_deterministic_reduce(
+        tbb::blocked_range<std::size_t>(0, count, 2048), 0.0,
+        [&](const tbb::blocked_range<std::size_t>& range, double sum) {
+          for (std::size_t i = range.begin(); i != range.end(); ++i) {
+            Real depth = 0;
+            if (!in_bore(i, depth) || depth > geometry.piston_depth) continue;
+            sum += static_cast<double>(fluid.mass[i] * (piston_velocity - fluid.velocity[i]).dot(axis));
+            fluid.velocity[i] = piston_velocity;
+          }
+          return sum;
+        },
+        std::plus<double>());
+    if (measure && time_step > 0) {
+      // The pump's push: what moving the piston zone took, and the material's push on the lid (last step's).
+      const Vec3& lid_force = state.bodies[static_cast<std::size_t>(geometry.piston_body)].fluid_force;
+      nozzle.extrusion_force = static_cast<Real>(impulse / time_step) - lid_force.dot(axis);
+      const double area = kPi * settings.inner_diameter * settings.inner_diameter / 4;
+      const double blend = std::min(1.0, time_step / kPressureSmoothing);
+      nozzle.extrusion_pressure += static_cast<Real>(blend * (nozzle.extrusion_force / area - nozzle.extrusion_pressure));
+      nozzle.extrusion_pressure_max = std::max(nozzle.extrusion_pressure_max, nozzle.extrusion_pressure);
+    }
+  }
+}
+
+}  // namespace
+
+void drive_pumps(const Model& model, State& state, Workspace& /*workspace*/) { drive_pistons(model, state, false); }
+
 void push_out_of_nozzles(const Model& model, State& state, Workspace& /*workspace*/) {
+  drive_pistons(model, state, true);
   // The extruder pushes: material in a nozzle's exit cross-section, up to one spacing in front of
   // it, leaves at least at the exit speed (a velocity inlet). Where the bead below fills the gap
   // (slow printing, small gaps) this squeezes it sideways; without it the new layers would find no
@@ -154,7 +293,7 @@ void push_out_of_nozzles(const Model& model, State& state, Workspace& /*workspac
   for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
     const NozzleState& nozzle = state.nozzles[n];
     const NozzleSettings& settings = model.nozzles[n];
-    if (!nozzle.extruding || nozzle.flow_scale <= 0) continue;
+    if (!nozzle.extruding || nozzle.flow_scale <= 0 || model.nozzle_geometry[n].has_bore()) continue;
     const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
     const Real target_speed = settings.exit_speed * nozzle.flow_scale + nozzle.velocity.dot(axis);
     const Real radius_squared = settings.inner_diameter * settings.inner_diameter / 4;

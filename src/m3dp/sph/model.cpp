@@ -10,13 +10,30 @@ namespace m3dp::sph {
 
 namespace {
 
-/// Disc samples on a square lattice of spacing `spacing` inside radius D/2 (at least the centre).
+/// Disc samples inside radius D/2 (at least the centre): on a square lattice of spacing `spacing`, or
+/// inside a bore in rings.
 NozzleGeometry make_nozzle_geometry(const NozzleSettings& nozzle, Real spacing) {
   NozzleGeometry geometry;
+  const bool bore = nozzle.bore_length > 0;
+  if (bore) {
+    // Inside a bore the material fills the section at rest density: rings a spacing apart from
+    // D/2 − d/2 inwards (the wall's particles half a spacing outside D/2), each ring a spacing
+    // between points, so that a disc holds π D²/4 / d² particles and keeps d from the wall.
+    for (Real ring_radius = nozzle.inner_diameter / 2 - spacing / 2; ring_radius > Real(0.25) * spacing; ring_radius -= spacing) {
+      const int count = std::max(3, static_cast<int>(std::lround(2 * kPi * ring_radius / spacing)));
+      for (int k = 0; k < count; ++k) {
+        const double angle = 2 * kPi * k / count;
+        geometry.disc_offsets.emplace_back(ring_radius * Real(std::cos(angle)), ring_radius * Real(std::sin(angle)), 0);
+      }
+    }
+    const Real innermost = std::fmod(nozzle.inner_diameter / 2 - spacing / 2, spacing);
+    if (innermost <= Real(0.25) * spacing + Real(1e-6) * spacing) geometry.disc_offsets.emplace_back(Vec3::Zero());
+  }
   const Real radius = nozzle.inner_diameter / 2;
   const int half_count = static_cast<int>(std::ceil(radius / spacing)) + 1;
   // Offset the lattice by half a spacing when that packs more points (even counts across).
   for (const Real shift : {Real(0), Real(0.5)}) {
+    if (bore) break;
     std::vector<Vec3> offsets;
     for (int i = -half_count; i <= half_count; ++i)
       for (int j = -half_count; j <= half_count; ++j) {
@@ -30,6 +47,36 @@ NozzleGeometry make_nozzle_geometry(const NozzleSettings& nozzle, Real spacing) 
   const double flux = kPi * nozzle.inner_diameter * nozzle.inner_diameter / 4 * nozzle.exit_speed;  // m³/s
   geometry.flux = flux;
   geometry.layer_period = flux > 0 ? geometry.disc_offsets.size() * particle_volume / flux : 0;
+  if (bore) {
+    // Akinci particles half a spacing inside the solid: the bore's wall at radius D/2 + d/2 from the
+    // tip (z = d/2) to a spacing above the bore's top, the tip's annulus at z = d/2 out to the outer
+    // radius − d/2, and the outside at that radius, each ring at the spacing along its circumference.
+    const Real half = spacing / 2;
+    const Real inner = nozzle.inner_diameter / 2 + half;
+    const Real outer = std::max(nozzle.outer_diameter / 2 - half, inner + 2 * spacing);
+    auto ring = [&](Real ring_radius, Real z) {
+      const int count = std::max(6, static_cast<int>(std::lround(2 * kPi * ring_radius / spacing)));
+      for (int k = 0; k < count; ++k) {
+        const double angle = 2 * kPi * (k + Real(0.5) * (static_cast<int>(std::lround(z / spacing)) & 1)) / count;
+        geometry.bore_points.emplace_back(ring_radius * Real(std::cos(angle)), ring_radius * Real(std::sin(angle)), z);
+      }
+    };
+    for (Real ring_radius = inner; ring_radius <= outer + Real(1e-3) * spacing; ring_radius += spacing) ring(ring_radius, half);
+    const Real top = nozzle.bore_length + spacing;
+    for (Real z = half + spacing; z <= top + Real(1e-3) * spacing; z += spacing) {
+      ring(inner, z);
+      ring(outer, z);
+    }
+    // The piston: a lid a spacing above where discs come in (the pump's face: the material cannot
+    // escape upwards, so the pressure that drives it out builds), and the top two spacings of the
+    // bore, whose material the pump moves at the commanded flow.
+    const int lid_half_count = static_cast<int>(std::ceil(inner / spacing));
+    for (int i = -lid_half_count; i <= lid_half_count; ++i)
+      for (int j = -lid_half_count; j <= lid_half_count; ++j)
+        if (std::hypot(i * spacing, j * spacing) < inner - Real(0.5) * spacing)
+          geometry.piston_points.emplace_back(i * spacing, j * spacing, nozzle.bore_length + spacing);
+    geometry.piston_depth = 2 * spacing;
+  }
   return geometry;
 }
 
@@ -192,9 +239,19 @@ std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
       problems.push_back(
           phase_problem(p, "granular.restitution", fmt::format("must be in (0, 1], got {}", phase.granular.restitution)));
   }
-  for (std::size_t n = 0; n < parameters.nozzles.size(); ++n)
-    if (parameters.nozzles[n].phase >= parameters.phases.size())
+  for (std::size_t n = 0; n < parameters.nozzles.size(); ++n) {
+    const NozzleSettings& nozzle = parameters.nozzles[n];
+    if (nozzle.phase >= parameters.phases.size())
       problems.push_back({ParameterProblem::Subject::nozzle, n, "material", "names no material"});
+    if (!(nozzle.bore_length >= 0))
+      problems.push_back({ParameterProblem::Subject::nozzle, n, "bore_length", fmt::format("must be >= 0 m, got {}", nozzle.bore_length)});
+    else if (nozzle.bore_length > 0 && nozzle.bore_length < 2 * settings.particle_radius * 2)
+      problems.push_back({ParameterProblem::Subject::nozzle, n, "bore_length",
+                          fmt::format("must be 0 (no bore) or at least two particle diameters ({} m), got {}; a bore of two nozzle "
+                                      "diameters is usual", 4 * settings.particle_radius, nozzle.bore_length)});
+    if (!(nozzle.outer_diameter >= 0))
+      problems.push_back({ParameterProblem::Subject::nozzle, n, "outer_diameter", fmt::format("must be >= 0 m, got {}", nozzle.outer_diameter)});
+  }
   return problems;
 }
 

@@ -43,6 +43,14 @@ struct NozzleGeometry {
   std::vector<Vec3> disc_offsets;  // in the nozzle frame, z = 0
   double layer_period = 0;         // s between layers at the set exit speed
   double flux = 0;                 // m³/s: π D²/4 · U, the flow at flow scale 1
+  // A nozzle with a bore (NozzleSettings::bore_length > 0): its walls in the nozzle frame (exit plane
+  // z = 0, the bore above it), the body that carries them (set by the Solver), and the depth below
+  // the bore's top where the piston drives the material.
+  std::vector<Vec3> bore_points;
+  std::vector<Vec3> piston_points;  // the lid over the bore, a spacing above where discs come in
+  std::int32_t bore_body = -1, piston_body = -1;
+  Real piston_depth = 0;           // m
+  [[nodiscard]] bool has_bore() const { return !bore_points.empty(); }
 };
 
 /// One thing wrong with the parameters. `field` is the setting's or material's field as the scene

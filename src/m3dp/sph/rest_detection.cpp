@@ -53,6 +53,18 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
   };
   // With none resting there is nothing to wake: no pass over the fast particles' lists.
   const bool any_resting = active < fluid.size();
+  // Material a nozzle with a bore is still laying does not rest: within its lip's radius and two bores
+  // of its exit the moving nozzle drags, bends and presses the strand (a rope hanging from it to the
+  // layer below, still to be laid down, is not at rest however slow its foot).
+  auto being_laid = [&](const Vec3& position) {
+    for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+      if (!state.nozzles[n].extruding || !model.nozzle_geometry[n].has_bore()) continue;
+      const NozzleSettings& nozzle = model.nozzles[n];
+      const Real reach = std::max(nozzle.outer_diameter, nozzle.inner_diameter) / 2 + 2 * nozzle.inner_diameter;
+      if ((position - state.nozzles[n].pose.position).squaredNorm() < reach * reach) return true;
+    }
+    return false;
+  };
   parallel_for_each_index(active, [&](std::size_t i) {
     const FluidPhase& phase = model.phases[fluid.phase[i]];
     const Real speed_squared = fluid.velocity[i].squaredNorm();
@@ -61,7 +73,8 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
     bool resting = false;
     // An elastic material never rests: its stress depends on where its neighbours are.
     // Nor while compressed (settings.rest_compression): it would stay so (wake_compressed_rest).
-    if (!phase.elasticity.enabled && speed_squared < rest_speed_squared && fluid.density[i] <= compressed * phase.density)
+    if (!phase.elasticity.enabled && speed_squared < rest_speed_squared && fluid.density[i] <= compressed * phase.density &&
+        !being_laid(fluid.position[i]))
       resting = unyielded(phase, fluid, i, time);
     // A negative clock (woken by load) keeps counting from where it is; motion cannot shorten the hold.
     fluid.rest_time[i] = resting ? fluid.rest_time[i] + time_step : std::min(fluid.rest_time[i], Real(0));

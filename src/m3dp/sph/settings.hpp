@@ -107,6 +107,13 @@ struct NozzleSettings {
   Real inner_diameter = Real(0.01);   // m
   Real exit_speed = Real(0.1);        // m/s, mean speed of material leaving the nozzle
   std::uint16_t phase = 0;
+  // A nozzle with walls: the bore's inner wall over `bore_length` above the exit and the flat tip, an
+  // annulus out to `outer_diameter` (the lip that presses a bead), as boundary particles moving with
+  // the nozzle. Material enters at the bore's top, driven at the commanded flow by a piston zone (a
+  // pump: the flow is imposed, the pressure follows), and leaves pushed by the material behind it.
+  // bore_length 0: no walls, the exit plane is a velocity inlet one particle deep.
+  Real bore_length = 0;               // m
+  Real outer_diameter = 0;            // m; below inner_diameter + 2 particle diameters: that (a thin wall)
 };
 
 /// Everything the engine is given.

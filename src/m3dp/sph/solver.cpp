@@ -12,6 +12,18 @@ Solver::Solver(Parameters parameters) : model_(compile_model(std::move(parameter
   state_.nozzles.resize(model_.nozzles.size());
   state_.time_step = model_.settings.max_time_step;
   workspace_.search_cell_size = model_.support_radius;
+  // Each nozzle with a bore carries its walls as a moving body, posed by move_bodies from the nozzle.
+  for (std::size_t n = 0; n < model_.nozzles.size(); ++n) {
+    NozzleGeometry& geometry = model_.nozzle_geometry[n];
+    if (!geometry.has_bore()) continue;
+    geometry.bore_body = static_cast<std::int32_t>(add_body("nozzle/" + model_.nozzles[n].name, geometry.bore_points, Pose{}, false));
+    geometry.piston_body =
+        static_cast<std::int32_t>(add_body("nozzle/" + model_.nozzles[n].name + "/piston", geometry.piston_points, Pose{}, false));
+    for (const std::int32_t index : {geometry.bore_body, geometry.piston_body}) {
+      const BoundaryBody& body = state_.bodies[static_cast<std::size_t>(index)];
+      for (Index k = 0; k < body.particle_count; ++k) state_.boundary.nozzle_bore[body.first_particle + k] = 1;
+    }
+  }
 }
 
 const StepStats& Solver::step() {
@@ -30,7 +42,7 @@ const StepStats& Solver::step() {
   run(Stage::density, {reset_body_wrenches, compute_density_and_factor});
   run(Stage::divergence, {solve_divergence});
   run(Stage::forces, {update_effective_viscosity, add_gravity_and_explicit_viscosity, add_surface_tension, add_air_drag,
-                      add_elastic_forces, choose_time_step, apply_micropolar, integrate_accelerations});
+                      add_elastic_forces, choose_time_step, apply_micropolar, integrate_accelerations, drive_pumps});
   run(Stage::pressure, {solve_density});
   // Viscosity after the pressure solve, right before the velocities move the particles: see
   // viscosity/weiler2018.cpp.
@@ -63,6 +75,7 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
     boundary.position.push_back(pose.apply(local));
     boundary.velocity.push_back(Vec3::Zero());
     boundary.body.push_back(body_index);
+    boundary.nozzle_bore.push_back(0);
   }
   // Akinci 2012, eq. 4: V_b = 1 / Σ_k W_bk (times the model's boundary_volume_scale). Static bodies are summed together, so where walls meet or
   // overlap (a tank built from boxes) the shared region is not counted twice; a moving body on its own

@@ -85,6 +85,9 @@ void apply_xsph(const Model& model, State& state, Workspace& workspace);
 // ---- advect (emission.cpp, advection.cpp, rest_detection.cpp, boundary_push_out.cpp) ----
 /// The extruder pushes: material in a nozzle's exit leaves at least at the exit speed.
 void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace);
+/// The pumps of nozzles with a bore drive their piston zones (before the density solve, so that it
+/// sees the flow; push_out_of_nozzles drives them again after the solves and measures the force).
+void drive_pumps(const Model& model, State& state, Workspace& workspace);
 /// x += Δt v.
 void advect_positions(const Model& model, State& state, Workspace& workspace);
 /// Elastic materials with a relaxation time: the reference shape creeps towards the current one.

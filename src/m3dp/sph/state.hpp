@@ -45,6 +45,18 @@ struct NozzleState {
     double start = 0, duration = 0;   // s
     Vec3 position = Vec3::Zero();     // m, the nozzle's exit when it began
   } longest_blockage;
+  // A nozzle with a bore: filled at its first extrusion (a primed pump), and the pump's push on the
+  // material (the piston's force along the axis, and that over the bore's section, smoothed over 0.05 s).
+  bool primed = false;
+  double volume_primed = 0;           // m³ put in the bore to fill it (emitted, but not commanded)
+  Real extrusion_force = 0;           // N, this step
+  Real extrusion_pressure = 0;        // Pa
+  Real extrusion_pressure_max = 0;    // Pa, the largest so far
+  bool pump_stalled = false;          // the material ahead of the piston was compressed: it did not push
+  // The bore's outflow (particles/s, smoothed), from its particle count and the particles emitted
+  // when it was last taken (at the end of a step's solves).
+  Real bore_outflow = 0;
+  std::uint64_t bore_particles = 0, bore_emitted = 0;
   /// Ends the present blockage at `now` (s), keeping it if it is the longest; nothing if it flows.
   void end_blockage(double now);
 };

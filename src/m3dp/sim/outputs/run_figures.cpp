@@ -69,6 +69,11 @@ class RunFigures final : public RunObserver {
       report.volume_emitted = double(nozzle.particles_emitted) * particle_volume;
       report.volume_lost = nozzle.volume_lost;
       report.blocked_time = nozzle.blocked_time;
+      report.volume_primed = nozzle.volume_primed;
+      if (solver.model().nozzle_geometry[n].has_bore()) {
+        report.extrusion_pressure = nozzle.extrusion_pressure;
+        report.extrusion_pressure_max = nozzle.extrusion_pressure_max;
+      }
       report.longest_blockage = nozzle.longest_blockage;
       summary.volume.commanded += report.volume_commanded;
       summary.volume.emitted += report.volume_emitted;

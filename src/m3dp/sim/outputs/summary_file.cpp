@@ -38,6 +38,11 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                             {"volume_emitted_m3", nozzle.volume_emitted},
                             {"volume_lost_m3", nozzle.volume_lost},
                             {"blocked_time_s", nozzle.blocked_time}};
+    if (nozzle.extrusion_pressure >= 0) {
+      entry["volume_primed_m3"] = nozzle.volume_primed;
+      entry["extrusion_pressure_Pa"] = nozzle.extrusion_pressure;
+      entry["extrusion_pressure_max_Pa"] = nozzle.extrusion_pressure_max;
+    }
     if (nozzle.longest_blockage.duration > 0) {
       const Vec3& at = nozzle.longest_blockage.position;
       entry["longest_blockage"] = {{"start_s", nozzle.longest_blockage.start},

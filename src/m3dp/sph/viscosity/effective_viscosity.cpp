@@ -46,6 +46,7 @@ void update_effective_viscosity(const Model& model, State& state, Workspace& wor
         const std::size_t boundary_first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[boundary_first + k];
+          if (phase.wall_viscosity(fluid.viscosity[i], boundary.nozzle_bore[b] != 0) <= 0) continue;  // slips there
           gradient += (calibration.boundary_gradient * workspace.boundary_pair_gradient[boundary_first + k] * (boundary.velocity[b] - velocity_i)) *
                       (position_i - boundary.position[b]).transpose();
         }
