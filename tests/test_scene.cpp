@@ -409,6 +409,34 @@ TEST(Scene, NozzleNarrowerThanAParticle) {
   expect_error_at(text, "<inner_diameter>", "the nozzle is narrower than one particle");
 }
 
+// A nozzle with walls: its bore and lip reach the engine in SI units, the material's bore slip is read,
+// and a bore shorter than two particles, a lip inside the bore or an unknown slip are errors at their line.
+TEST(Scene, NozzleBoreAndLipAreReadAndChecked) {
+  const std::string bore = R"(<exit_speed>0.1</exit_speed>
+          <bore_length unit="mm">20</bore_length>
+          <outer_diameter unit="cm">3</outer_diameter>)";
+  std::string text = replaced(valid_scene(), "<exit_speed>0.1</exit_speed>", bore);
+  text = replaced(text, R"(<boundary_viscosity unit="cP">2</boundary_viscosity>)",
+                  R"(<boundary_viscosity unit="cP">2</boundary_viscosity>
+        <nozzle_wall>no_slip</nozzle_wall>)");
+  const auto scene = load_scene_from_string(text, "bore.sdf");
+  ASSERT_EQ(scene.print_heads.size(), 1u);
+  EXPECT_FLOAT_EQ(scene.print_heads[0].bore_length, 0.02f);
+  EXPECT_FLOAT_EQ(scene.print_heads[0].outer_diameter, 0.03f);
+  EXPECT_TRUE(scene.find_material("water")->material.nozzle_no_slip);
+  const m3dp::sph::Parameters parameters = m3dp::scene::solver_parameters(scene);
+  EXPECT_FLOAT_EQ(parameters.nozzles[0].bore_length, 0.02f);
+  EXPECT_FLOAT_EQ(parameters.nozzles[0].outer_diameter, 0.03f);
+  EXPECT_FALSE(load_scene_from_string(valid_scene(), "plain.sdf").find_material("water")->material.nozzle_no_slip) << "free slip by default";
+
+  expect_error_at(replaced(text, R"(<bore_length unit="mm">20</bore_length>)", "<bore_length>0.004</bore_length>"), "<bore_length>",
+                  "<bore_length> must be 0 (no bore) or at least two particle diameters (0.02 m), got 0.004");
+  expect_error_at(replaced(text, R"(<outer_diameter unit="cm">3</outer_diameter>)", "<outer_diameter>0.005</outer_diameter>"),
+                  "<outer_diameter>", "<outer_diameter> 0.005 m must be larger than <inner_diameter> 0.01 m");
+  expect_error_at(replaced(text, "<nozzle_wall>no_slip</nozzle_wall>", "<nozzle_wall>sticky</nozzle_wall>"), "<nozzle_wall>",
+                  "<nozzle_wall> must be free_slip or no_slip, got 'sticky'");
+}
+
 TEST(Scene, DynamicModelsAreReadAndChecked) {
   // The tank made dynamic: its box moves, its plane cannot.
   const std::string dynamic = replaced(valid_scene(), "<static>true</static>", "<static>false</static>");

@@ -1,0 +1,181 @@
+#include "deposition.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <vector>
+
+#include "m3dp/core/types.hpp"
+#include "m3dp/sph/boundary_sampling.hpp"
+#include "m3dp/sph/solver.hpp"
+#include "m3dp/surface/mesh_tools.hpp"
+#include "m3dp/surface/surface.hpp"
+
+namespace m3dp::deposition {
+
+double nominal_area(const StrandCase& strand) { return kPi * strand.diameter * strand.diameter / 4 / strand.speed_ratio; }
+
+double rounded_box_width(const StrandCase& strand) {
+  const double flow_ratio = 1 / strand.speed_ratio, gap = strand.gap_ratio;
+  return strand.diameter * (kPi / 4 * flow_ratio / gap + gap * (1 - kPi / 4));
+}
+
+bool pressed(const StrandCase& strand) {
+  return strand.gap_ratio <= 1 + 1e-9 && 1 / strand.speed_ratio >= strand.gap_ratio * strand.gap_ratio - 1e-9;
+}
+
+namespace {
+
+/// Moves the nozzle along x at height `exit_height` from x = `from` to `to` at `speed` (m/s),
+/// extruding, then `settle` s more without; `each_step` sees every step while extruding.
+template <typename EachStep>
+void print_line(sph::Solver& solver, double from, double to, double exit_height, double speed, double settle, EachStep&& each_step) {
+  const double start = solver.time(), duration = std::abs(to - from) / speed;
+  const double direction = to > from ? 1 : -1;
+  while (solver.time() < start + duration + settle) {
+    const double elapsed = std::min(solver.time() - start, duration);
+    const bool extruding = solver.time() - start < duration;
+    Pose pose;
+    pose.position = Vec3(Real(from + direction * elapsed * speed), 0, Real(exit_height));
+    solver.set_nozzle(0, pose, extruding ? Vec3(Real(direction * speed), 0, 0) : Vec3::Zero(), extruding);
+    solver.step();
+    if (extruding) each_step(pose.position.x());
+  }
+}
+
+/// The time a nozzle takes to rise or move to a new start without extruding (s): 0.2 s.
+void move_nozzle(sph::Solver& solver, const Vec3& from, const Vec3& to, double duration) {
+  const double start = solver.time();
+  while (solver.time() < start + duration) {
+    const double s = std::min(1.0, (solver.time() - start) / duration);
+    Pose pose;
+    pose.position = from + Real(s) * (to - from);
+    solver.set_nozzle(0, pose, (to - from) / Real(duration), false);
+    solver.step();
+  }
+}
+
+}  // namespace
+
+StrandResult lay_strand(const StrandCase& strand) {
+  const auto wall_start = std::chrono::steady_clock::now();
+  const double D = strand.diameter, d = D / strand.particles_across;
+  const double gap = strand.gap_ratio * D, travel_speed = strand.speed_ratio * strand.exit_speed;
+  const double length = strand.length;
+  sph::Parameters parameters;
+  parameters.settings.particle_radius = Real(d / 2);
+  parameters.settings.max_time_step = Real(2e-3);
+  parameters.settings.rest_detection = strand.rest_detection;
+  parameters.settings.bounds.min = Vec3(Real(-0.1), Real(-0.1), Real(-0.05));
+  parameters.settings.bounds.max = Vec3(Real(length + 0.1), Real(0.1), Real(0.1));
+  material::Material material = strand.material;
+  if (strand.viscosity_cap > 0) material.rheology.max_viscosity = Real(strand.viscosity_cap);
+  parameters.phases.push_back(material);
+  sph::NozzleSettings nozzle{"nozzle", Real(D), Real(strand.exit_speed), 0};
+  nozzle.bore_length = Real(strand.bore_ratio * D);
+  nozzle.outer_diameter = Real(strand.outer_ratio * D);
+  parameters.nozzles.push_back(nozzle);
+  sph::Solver solver(parameters);
+  // The bed's top at z = 0, 5 cm beyond the line each way.
+  const Real bed_length = Real(length + 0.1);
+  solver.add_body("bed", sph::sample_box_surface(BoxShape{Vec3(bed_length, Real(0.12), Real(4 * d))}, Real(d), Real(-d / 2)).points,
+                  Pose{Vec3(Real(length / 2), 0, Real(-2 * d)), Quat::Identity()}, true);
+  solver.reserve(static_cast<std::size_t>(3 * nominal_area(strand) * (length + 0.1) / (d * d * d)) + 20000);
+
+  const double low = 0.2 * length, high = 0.8 * length;
+  constexpr int kStations = 31;
+  auto station_of = [&](double x) { return static_cast<int>(std::floor((x - low) / (high - low) * kStations)); };
+
+  double bottom = 0;  // the surface below the strand measured
+  std::uint64_t first_id = 0;
+  if (strand.on_layer) {
+    // The layer below: the same material pressed at g = D/2, V/U = 1 (a rounded box D/2 high), along +x.
+    print_line(solver, 0, length, D / 2, strand.exit_speed, 0.3, [](Real) {});
+    // Its top, station by station in the window.
+    std::vector<double> tops(kStations, 0);
+    for (const Vec3& p : solver.fluid().position) {
+      const int s = station_of(p.x());
+      if (s >= 0 && s < kStations) tops[s] = std::max(tops[s], double(p.z()) + d / 2);
+    }
+    for (const double top : tops) bottom += top / kStations;
+    // Up and back to the start above the layer, without extruding; the strand runs along +x again.
+    const Vec3 end(Real(length), 0, Real(D / 2));
+    const Vec3 raised(Real(length), 0, Real(bottom + gap + D));
+    move_nozzle(solver, end, raised, 0.2);
+    move_nozzle(solver, raised, Vec3(0, 0, Real(bottom + gap + D)), 0.5);
+    move_nozzle(solver, Vec3(0, 0, Real(bottom + gap + D)), Vec3(0, 0, Real(bottom + gap)), 0.2);
+    first_id = solver.state().next_particle_id;
+  }
+  double pressure_sum = 0;
+  std::size_t pressure_samples = 0;
+  print_line(solver, 0, length, bottom + gap, travel_speed, 0.3, [&](Real x) {
+    if (x < low || x > high) return;
+    pressure_sum += solver.state().nozzles[0].extrusion_pressure;
+    ++pressure_samples;
+  });
+
+  // The strand's particles in the window, station by station.
+  const auto& fluid = solver.fluid();
+  std::vector<Vec3> strand_points;
+  struct Station {
+    double y_min = 1, y_max = -1, top = -1, lowest = 1, y_sum = 0, column = 0;
+  };
+  std::vector<Station> stations(kStations);
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < fluid.size(); ++i) {
+    if (fluid.id[i] < first_id) continue;
+    const Vec3& p = fluid.position[i];
+    strand_points.push_back(p);
+    const int s = station_of(p.x());
+    if (s < 0 || s >= kStations) continue;
+    ++count;
+    Station& station = stations[s];
+    station.y_min = std::min(station.y_min, double(p.y()));
+    station.y_max = std::max(station.y_max, double(p.y()));
+    station.top = std::max(station.top, double(p.z()));
+    station.lowest = std::min(station.lowest, double(p.z()));
+    station.y_sum += p.y();
+  }
+  // The strand's height at its centreline: the material's volume (d³ a particle) per footprint in a
+  // band one spacing wide about the section's middle, which does not depend on how the particles pack
+  // against the walls (pressed, the first layer sits up to 0.4 d into the floor's Akinci particles,
+  // so the highest particle's top overstates the height by about that).
+  for (std::size_t i = 0; i < fluid.size(); ++i) {
+    if (fluid.id[i] < first_id) continue;
+    const Vec3& p = fluid.position[i];
+    const int s = station_of(p.x());
+    if (s < 0 || s >= kStations) continue;
+    Station& station = stations[s];
+    const double middle = (station.y_min + station.y_max) / 2;
+    if (std::abs(p.y() - middle) < d / 2) station.column += 1;
+  }
+  StrandResult result;
+  result.bottom = bottom;
+  int landed = 0;
+  for (const Station& station : stations) {
+    result.width += (station.y_max - station.y_min + d) / kStations;
+    result.height += station.column * d * d * d / (d * (high - low) / kStations) / kStations;
+    result.top += (station.top + d / 2 - bottom) / kStations;
+    // On the surface: its lowest particle's centre no more than a particle diameter above it.
+    if (station.lowest - d / 2 <= bottom + d / 2) ++landed;
+  }
+  result.landed = double(landed) / kStations;
+  result.counted_area = double(count) * d * d * d / (high - low);
+  // The section of the particles' surface, the union of spheres of radius 1.31 r (the fair surface of
+  // their volume: see test_materials' strands), at the stations' centres.
+  surface::SurfaceSettings spheres;
+  spheres.particle_radius = Real(d / 2);
+  spheres.method = surface::Method::spherical;
+  spheres.sphere_radius = Real(1.31 * d / 2);
+  const TriangleMesh mesh = surface::reconstruct_surface(strand_points, spheres);
+  for (int k = 0; k < kStations; ++k)
+    result.area += surface::cross_section_area(mesh, 0, low + (high - low) * (k + 0.5) / kStations) / kStations;
+  result.extrusion_pressure = pressure_samples > 0 ? pressure_sum / double(pressure_samples) : 0;
+  result.steps = static_cast<unsigned long long>(solver.state().step);
+  result.blocked_layers = solver.state().nozzles[0].blocked_layers;
+  result.particles = fluid.size();
+  result.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+  return result;
+}
+
+}  // namespace m3dp::deposition

@@ -1,0 +1,52 @@
+#pragma once
+// One strand laid by a nozzle with a bore (sph::NozzleSettings::bore_length) along x over a floor or
+// over a strand of the same material laid before, and its steady section measured: the deposition
+// tests (test_deposition) and the grid study (m3dp_deposition_grid, behind a flag) share it.
+// D = nozzle bore, g = gap from the exit to the surface below, U = mean extrusion speed, V = travel speed.
+#include <string>
+
+#include "m3dp/material/material.hpp"
+
+namespace m3dp::deposition {
+
+struct StrandCase {
+  std::string label;
+  material::Material material;
+  double diameter = 0.01;            // m, D
+  double gap_ratio = 0.5;            // g/D
+  double speed_ratio = 1;            // V/U
+  double exit_speed = 0.05;          // m/s, U
+  double outer_ratio = 3;            // the tip's outer diameter / D
+  double bore_ratio = 2;             // bore length / D
+  double particles_across = 8;       // D / particle diameter
+  double length = 0.2;               // m of line; the middle 60 % is measured
+  bool on_layer = false;             // laid on a strand printed before (same material, pressed at g = D/2)
+  double viscosity_cap = 0;          // Pa·s; 0: the material's own
+  bool rest_detection = true;
+};
+
+struct StrandResult {
+  double area = 0;           // m², the section of the particles' surface (union of spheres of 1.31 r), steady part
+  double counted_area = 0;   // m², the particles' volume per length there
+  double width = 0;          // m
+  double height = 0;         // m, at the centreline: the material's volume per footprint (see lay_strand)
+  double top = 0;            // m, the highest particles' tops over the surface below
+  double landed = 0;         // fraction of the steady part whose bottom lies on the surface below (within d)
+  double extrusion_pressure = 0;  // Pa, mean over the steady part
+  double bottom = 0;         // m, the surface below
+  double seconds = 0;        // wall time
+  unsigned long long steps = 0, blocked_layers = 0;
+  std::size_t particles = 0;
+};
+
+/// Lays the strand and measures it.
+StrandResult lay_strand(const StrandCase& strand);
+
+/// The reference section's area (U/V)·πD²/4 (m²).
+double nominal_area(const StrandCase& strand);
+/// The rounded box's width for a pressed strand (g ≤ D, U/V ≥ (g/D)²), m: w/D = (π/4)(U/V)/(g/D) + (g/D)(1 − π/4).
+double rounded_box_width(const StrandCase& strand);
+/// Whether the nozzle presses the strand: g/D ≤ 1 and U/V ≥ (g/D)².
+bool pressed(const StrandCase& strand);
+
+}  // namespace m3dp::deposition

@@ -1,0 +1,86 @@
+// The deposition grid of issue 38, one command: strands from a nozzle with a bore over g/D × V/U for a
+// Newtonian paste and a Bingham mortar (pressed where g/D ≤ 1 and U/V ≥ (g/D)², free elsewhere),
+// each against mass conservation and its reference section. Prints a CSV table (stdout or -o FILE)
+// that scripts/plot_deposition.py draws; not in CI (about a minute a point on two cores).
+//   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N]
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include "deposition.hpp"
+#include "m3dp/core/types.hpp"
+
+using namespace m3dp;
+
+namespace {
+
+material::Material mortar() {
+  material::Material mortar = material::newtonian("mortar", 2100, 10, 10);
+  mortar.rheology.model = material::RheologyModel::bingham;
+  mortar.rheology.yield_stress = 1000;
+  mortar.rheology.max_viscosity = 1e4;
+  return mortar;
+}
+
+material::Material newtonian_paste() {
+  material::Material paste = material::newtonian("paste", 1800, 1e4, 0);
+  paste.sticks_to_walls = true;
+  return paste;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  std::string output;
+  bool quick = false;
+  double cap = 0, across = 8;
+  for (int k = 1; k < argc; ++k) {
+    if (!std::strcmp(argv[k], "-o") && k + 1 < argc) output = argv[++k];
+    else if (!std::strcmp(argv[k], "--quick")) quick = true;
+    else if (!std::strcmp(argv[k], "--cap") && k + 1 < argc) cap = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--across") && k + 1 < argc) across = std::atof(argv[++k]);
+    else {
+      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE]\n", argv[0]);
+      return 2;
+    }
+  }
+  std::FILE* out = output.empty() ? stdout : std::fopen(output.c_str(), "w");
+  if (!out) {
+    std::fprintf(stderr, "cannot write %s\n", output.c_str());
+    return 1;
+  }
+  std::fprintf(out, "material,regime,surface,g_over_D,V_over_U,area_ratio,height_mm,reference_height_mm,width_mm,reference_width_mm,"
+                    "landed,extrusion_pressure_Pa,blocked_steps,particles,seconds\n");
+  const std::vector<double> gaps = quick ? std::vector<double>{0.5, 1.5} : std::vector<double>{0.25, 0.5, 0.75, 1.0, 1.5, 2.0};
+  const std::vector<double> speeds = quick ? std::vector<double>{1} : std::vector<double>{0.5, 1, 1.5, 2};
+  for (const bool bingham : {true, false}) {
+    for (const double gap : gaps)
+      for (const double speed : speeds)
+        for (const bool on_layer : {false, true}) {
+          deposition::StrandCase strand;
+          strand.material = bingham ? mortar() : newtonian_paste();
+          strand.gap_ratio = gap;
+          strand.speed_ratio = speed;
+          strand.particles_across = across;
+          strand.viscosity_cap = cap;
+          strand.on_layer = on_layer;
+          const bool pressed = deposition::pressed(strand);
+          if (on_layer && pressed) continue;   // pressed strands: on the floor
+          if (!bingham && !pressed) continue;  // free ropes: the mortar that holds its shape
+          const auto result = deposition::lay_strand(strand);
+          const double round = strand.diameter * std::sqrt(1 / speed);
+          const double reference_height = pressed ? gap * strand.diameter : round;
+          const double reference_width = pressed ? deposition::rounded_box_width(strand) : round;
+          std::fprintf(out, "%s,%s,%s,%.2f,%.2f,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.1f,%llu,%zu,%.1f\n", bingham ? "bingham_mortar" : "newtonian_paste",
+                       pressed ? "pressed" : "free", on_layer ? "layer" : "floor", gap, speed, result.area / deposition::nominal_area(strand),
+                       1e3 * result.height, 1e3 * reference_height, 1e3 * result.width, 1e3 * reference_width, result.landed,
+                       result.extrusion_pressure, result.blocked_layers, result.particles, result.seconds);
+          std::fflush(out);
+        }
+  }
+  if (out != stdout) std::fclose(out);
+  return 0;
+}
