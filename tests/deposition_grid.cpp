@@ -2,7 +2,10 @@
 // Newtonian paste and a Bingham mortar (pressed where g/D ≤ 1 and U/V ≥ (g/D)², free elsewhere),
 // each against mass conservation and its reference section. Prints a CSV table (stdout or -o FILE)
 // that scripts/plot_deposition.py draws; not in CI (about a minute a point on two cores).
-//   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N]
+//   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N] [--gap G/D --speed V/U]
+//                               [--no-rest] [--particles PREFIX]
+// (--gap and --speed: that one point of the grid only; --particles: each strand's particles at the
+// end as PREFIX_MATERIAL_G_V_SURFACE.csv.)
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -10,10 +13,11 @@
 #include <string>
 #include <vector>
 
-#include "deposition.hpp"
+#include "m3dp/sim/strand_deposition.hpp"
 #include "m3dp/core/types.hpp"
 
 using namespace m3dp;
+namespace deposition = m3dp::sim::deposition;
 
 namespace {
 
@@ -34,16 +38,21 @@ material::Material newtonian_paste() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  std::string output;
-  bool quick = false;
-  double cap = 0, across = 8;
+  std::string output, particles_csv;
+  bool quick = false, rest_detection = true;
+  double cap = 0, across = 8, only_gap = 0, only_speed = 0;
   for (int k = 1; k < argc; ++k) {
     if (!std::strcmp(argv[k], "-o") && k + 1 < argc) output = argv[++k];
     else if (!std::strcmp(argv[k], "--quick")) quick = true;
+    else if (!std::strcmp(argv[k], "--no-rest")) rest_detection = false;
     else if (!std::strcmp(argv[k], "--cap") && k + 1 < argc) cap = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--across") && k + 1 < argc) across = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--gap") && k + 1 < argc) only_gap = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--particles") && k + 1 < argc) particles_csv = argv[++k];
+    else if (!std::strcmp(argv[k], "--speed") && k + 1 < argc) only_speed = std::atof(argv[++k]);
     else {
-      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE]\n", argv[0]);
+      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX]\n",
+                   argv[0]);
       return 2;
     }
   }
@@ -54,8 +63,10 @@ int main(int argc, char** argv) {
   }
   std::fprintf(out, "material,regime,surface,g_over_D,V_over_U,area_ratio,height_mm,reference_height_mm,width_mm,reference_width_mm,"
                     "landed,extrusion_pressure_Pa,blocked_steps,particles,seconds\n");
-  const std::vector<double> gaps = quick ? std::vector<double>{0.5, 1.5} : std::vector<double>{0.25, 0.5, 0.75, 1.0, 1.5, 2.0};
-  const std::vector<double> speeds = quick ? std::vector<double>{1} : std::vector<double>{0.5, 1, 1.5, 2};
+  std::vector<double> gaps = quick ? std::vector<double>{0.5, 1.5} : std::vector<double>{0.25, 0.5, 0.75, 1.0, 1.5, 2.0};
+  std::vector<double> speeds = quick ? std::vector<double>{1} : std::vector<double>{0.5, 1, 1.5, 2};
+  if (only_gap > 0) gaps = {only_gap};
+  if (only_speed > 0) speeds = {only_speed};
   for (const bool bingham : {true, false}) {
     for (const double gap : gaps)
       for (const double speed : speeds)
@@ -67,6 +78,10 @@ int main(int argc, char** argv) {
           strand.particles_across = across;
           strand.viscosity_cap = cap;
           strand.on_layer = on_layer;
+          strand.rest_detection = rest_detection;
+          if (!particles_csv.empty())
+            strand.particles_csv = particles_csv + "_" + (bingham ? "bingham" : "newtonian") + "_" + std::to_string(gap) + "_" +
+                                   std::to_string(speed) + (on_layer ? "_layer" : "_floor") + ".csv";
           const bool pressed = deposition::pressed(strand);
           if (on_layer && pressed) continue;   // pressed strands: on the floor
           if (!bingham && !pressed) continue;  // free ropes: the mortar that holds its shape

@@ -8,11 +8,12 @@
 
 #include <algorithm>
 
-#include "deposition.hpp"
+#include "m3dp/sim/strand_deposition.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 #include "m3dp/sph/solver.hpp"
 
 using namespace m3dp;
+namespace deposition = m3dp::sim::deposition;
 using deposition::StrandCase;
 
 namespace {

@@ -18,6 +18,7 @@
 #include "m3dp/sim/presets.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
+#include "m3dp/sim/strand_deposition.hpp"
 
 namespace m3dp::app {
 
@@ -25,8 +26,9 @@ void add_bench_options(CLI::App& command, BenchOptions& options) {
   command.add_option("scenario", options.scenario,
                      "dam_break (the solver alone), ur10_wall (robot printing, everything) or clay_print (a "
                      "Herschel-Bulkley clay at up to --max-viscosity, implicit viscosity) or wall_layers (a clay wall "
-                     "of --layers layers: the cost of a step at the top layer against the second)")
-      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers"}))
+                     "of --layers layers: the cost of a step at the top layer against the second) or strand (a pressed "
+                     "and a free mortar strand from a nozzle with a bore, and from the exit-plane inlet)")
+      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers", "strand"}))
       ->capture_default_str();
   command.add_option("--scene", options.scene_file, "ur10_wall: scene file to run instead of the project's");
   command.add_option("--particles", options.particles, "Fluid particles in the dam-break column or the clay slab")
@@ -194,11 +196,45 @@ int bench_wall_layers(const BenchOptions& options) {
   return 0;
 }
 
+/// A pressed (g/D = 0.5, V/U = 1) and a free (g/D = 1.5, V/U = 1) strand of the demo's mortar (capped at
+/// 10⁴ Pa·s), D = 10 mm, 8 particles across, a 0.2 m line, each from a nozzle with a bore (2 D, lip 3 D)
+/// and from the exit-plane inlet: particle-steps per second in the strand's pass and the bore's cost.
+int bench_strand(const BenchOptions& /*options*/) {
+  namespace deposition = sim::deposition;
+  material::Material mortar = material::newtonian("mortar", 2100, 10, 10);
+  mortar.rheology.model = material::RheologyModel::bingham;
+  mortar.rheology.yield_stress = 1000;
+  mortar.rheology.max_viscosity = 1e4;
+  fmt::print("strand: the printable mortar (1 kPa, 10 Pa*s, capped at 1e4 Pa*s), D = 10 mm, 8 particles across, U = 50 mm/s, a 0.2 m "
+             "line, {} threads\n",
+             ThreadLimit::active_threads());
+  fmt::print("case,nozzle,steps,particles,particle_steps_per_s,ms_per_step,area_ratio,landed\n");
+  for (const double gap : {0.5, 1.5}) {
+    double seconds[2] = {0, 0};
+    for (const double bore : {2.0, 0.0}) {
+      deposition::StrandCase strand;
+      strand.material = mortar;
+      strand.gap_ratio = gap;
+      strand.speed_ratio = 1;
+      strand.bore_ratio = bore;
+      const deposition::StrandResult result = deposition::lay_strand(strand);
+      seconds[bore > 0 ? 0 : 1] = result.step_seconds;
+      fmt::print("{},{},{},{},{:.3g},{:.3f},{:.4f},{:.2f}\n", gap <= 1 ? "pressed g/D=0.5" : "free g/D=1.5", bore > 0 ? "bore" : "inlet",
+                 result.steps, result.particles, result.particle_steps / result.step_seconds,
+                 1e3 * result.step_seconds / double(std::max<unsigned long long>(1, result.steps)),
+                 result.area / deposition::nominal_area(strand), result.landed);
+    }
+    fmt::print("{}: the bore's pass costs {:.2f}x the inlet's\n", gap <= 1 ? "pressed" : "free", seconds[0] / seconds[1]);
+  }
+  return 0;
+}
+
 int bench_command(const BenchOptions& options) {
   ThreadLimit thread_limit(options.threads);
   if (options.scenario == "wall_layers") return bench_wall_layers(options);
   if (options.scenario == "ur10_wall") return bench_ur10_wall(options);
   if (options.scenario == "clay_print") return bench_clay_print(options);
+  if (options.scenario == "strand") return bench_strand(options);
   sim::DamBreakSetup setup;
   setup.column_width = Real(0.5);
   setup.depth = Real(0.25);

@@ -1,13 +1,14 @@
 #pragma once
-// One strand laid by a nozzle with a bore (sph::NozzleSettings::bore_length) along x over a floor or
-// over a strand of the same material laid before, and its steady section measured: the deposition
-// tests (test_deposition) and the grid study (m3dp_deposition_grid, behind a flag) share it.
+// One strand laid by a nozzle with a bore (sph::NozzleSettings::bore_length; or the exit-plane inlet)
+// along x over a floor or over a strand of the same material laid before, and its steady section
+// measured: the deposition tests (test_deposition), the grid study (tests/deposition_grid) and
+// `m3dp bench strand` share it.
 // D = nozzle bore, g = gap from the exit to the surface below, U = mean extrusion speed, V = travel speed.
 #include <string>
 
 #include "m3dp/material/material.hpp"
 
-namespace m3dp::deposition {
+namespace m3dp::sim::deposition {
 
 struct StrandCase {
   std::string label;
@@ -17,12 +18,14 @@ struct StrandCase {
   double speed_ratio = 1;            // V/U
   double exit_speed = 0.05;          // m/s, U
   double outer_ratio = 3;            // the tip's outer diameter / D
-  double bore_ratio = 2;             // bore length / D
+  double bore_ratio = 2;             // bore length / D; 0: no bore (the exit plane is the inlet)
   double particles_across = 8;       // D / particle diameter
   double length = 0.2;               // m of line; the middle 60 % is measured
   bool on_layer = false;             // laid on a strand printed before (same material, pressed at g = D/2)
   double viscosity_cap = 0;          // Pa·s; 0: the material's own
   bool rest_detection = true;
+  std::string particles_csv;         // where to write the particles at the end (x, y, z, id, at rest, of the strand
+                                     // measured or the layer below); empty: nowhere
 };
 
 struct StrandResult {
@@ -36,6 +39,8 @@ struct StrandResult {
   double bottom = 0;         // m, the surface below
   double seconds = 0;        // wall time
   unsigned long long steps = 0, blocked_layers = 0;
+  double particle_steps = 0;  // Σ over steps of the particles simulated (moving)
+  double step_seconds = 0;    // wall time in the solver's steps
   std::size_t particles = 0;
 };
 
@@ -49,4 +54,4 @@ double rounded_box_width(const StrandCase& strand);
 /// Whether the nozzle presses the strand: g/D ≤ 1 and U/V ≥ (g/D)².
 bool pressed(const StrandCase& strand);
 
-}  // namespace m3dp::deposition
+}  // namespace m3dp::sim::deposition

@@ -1,7 +1,8 @@
-#include "deposition.hpp"
+#include "m3dp/sim/strand_deposition.hpp"
 
 #include <algorithm>
 #include <chrono>
+#include <fstream>
 #include <cmath>
 #include <vector>
 
@@ -11,7 +12,7 @@
 #include "m3dp/surface/mesh_tools.hpp"
 #include "m3dp/surface/surface.hpp"
 
-namespace m3dp::deposition {
+namespace m3dp::sim::deposition {
 
 double nominal_area(const StrandCase& strand) { return kPi * strand.diameter * strand.diameter / 4 / strand.speed_ratio; }
 
@@ -29,7 +30,8 @@ namespace {
 /// Moves the nozzle along x at height `exit_height` from x = `from` to `to` at `speed` (m/s),
 /// extruding, then `settle` s more without; `each_step` sees every step while extruding.
 template <typename EachStep>
-void print_line(sph::Solver& solver, double from, double to, double exit_height, double speed, double settle, EachStep&& each_step) {
+void print_line(sph::Solver& solver, double from, double to, double exit_height, double speed, double settle, EachStep&& each_step,
+                StrandResult* cost = nullptr) {
   const double start = solver.time(), duration = std::abs(to - from) / speed;
   const double direction = to > from ? 1 : -1;
   while (solver.time() < start + duration + settle) {
@@ -38,7 +40,12 @@ void print_line(sph::Solver& solver, double from, double to, double exit_height,
     Pose pose;
     pose.position = Vec3(Real(from + direction * elapsed * speed), 0, Real(exit_height));
     solver.set_nozzle(0, pose, extruding ? Vec3(Real(direction * speed), 0, 0) : Vec3::Zero(), extruding);
+    const auto step_start = std::chrono::steady_clock::now();
     solver.step();
+    if (cost) {
+      cost->step_seconds += std::chrono::duration<double>(std::chrono::steady_clock::now() - step_start).count();
+      cost->particle_steps += double(solver.state().active_count);
+    }
     if (extruding) each_step(pose.position.x());
   }
 }
@@ -73,7 +80,7 @@ StrandResult lay_strand(const StrandCase& strand) {
   parameters.phases.push_back(material);
   sph::NozzleSettings nozzle{"nozzle", Real(D), Real(strand.exit_speed), 0};
   nozzle.bore_length = Real(strand.bore_ratio * D);
-  nozzle.outer_diameter = Real(strand.outer_ratio * D);
+  nozzle.outer_diameter = strand.bore_ratio > 0 ? Real(strand.outer_ratio * D) : Real(0);
   parameters.nozzles.push_back(nozzle);
   sph::Solver solver(parameters);
   // The bed's top at z = 0, 5 cm beyond the line each way.
@@ -108,11 +115,15 @@ StrandResult lay_strand(const StrandCase& strand) {
   }
   double pressure_sum = 0;
   std::size_t pressure_samples = 0;
-  print_line(solver, 0, length, bottom + gap, travel_speed, 0.3, [&](Real x) {
-    if (x < low || x > high) return;
-    pressure_sum += solver.state().nozzles[0].extrusion_pressure;
-    ++pressure_samples;
-  });
+  StrandResult result;
+  print_line(
+      solver, 0, length, bottom + gap, travel_speed, 0.3,
+      [&](Real x) {
+        if (x < low || x > high) return;
+        pressure_sum += solver.state().nozzles[0].extrusion_pressure;
+        ++pressure_samples;
+      },
+      &result);
 
   // The strand's particles in the window, station by station.
   const auto& fluid = solver.fluid();
@@ -149,7 +160,13 @@ StrandResult lay_strand(const StrandCase& strand) {
     const double middle = (station.y_min + station.y_max) / 2;
     if (std::abs(p.y() - middle) < d / 2) station.column += 1;
   }
-  StrandResult result;
+  if (!strand.particles_csv.empty()) {
+    std::ofstream csv(strand.particles_csv);
+    csv << "x,y,z,id,resting,strand\n";
+    for (std::size_t i = 0; i < fluid.size(); ++i)
+      csv << fluid.position[i].x() << ',' << fluid.position[i].y() << ',' << fluid.position[i].z() << ',' << fluid.id[i] << ','
+          << (i >= solver.state().active_count) << ',' << (fluid.id[i] >= first_id) << '\n';
+  }
   result.bottom = bottom;
   int landed = 0;
   for (const Station& station : stations) {
@@ -178,4 +195,4 @@ StrandResult lay_strand(const StrandCase& strand) {
   return result;
 }
 
-}  // namespace m3dp::deposition
+}  // namespace m3dp::sim::deposition
