@@ -53,14 +53,15 @@ void update_rest_clocks(const Model& model, State& state, Workspace& workspace) 
   };
   // With none resting there is nothing to wake: no pass over the fast particles' lists.
   const bool any_resting = active < fluid.size();
-  // Material a nozzle with a bore is still laying does not rest: within its lip's radius and two bores
-  // of its exit the moving nozzle drags, bends and presses the strand (a rope hanging from it to the
-  // layer below, still to be laid down, is not at rest however slow its foot).
+  // Material a nozzle with a bore is still laying does not rest: within its lip's radius of its exit
+  // the moving nozzle drags, bends and presses the strand (a rope hanging from it to the layer below,
+  // still to be laid down, is not at rest however slow its foot). Two bores more cost a pressed strand
+  // 1.6× and landed no more of a rope (docs/decisions.md).
   auto being_laid = [&](const Vec3& position) {
     for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
       if (!state.nozzles[n].extruding || !model.nozzle_geometry[n].has_bore()) continue;
       const NozzleSettings& nozzle = model.nozzles[n];
-      const Real reach = std::max(nozzle.outer_diameter, nozzle.inner_diameter) / 2 + 2 * nozzle.inner_diameter;
+      const Real reach = std::max(nozzle.outer_diameter, nozzle.inner_diameter) / 2;
       if ((position - state.nozzles[n].pose.position).squaredNorm() < reach * reach) return true;
     }
     return false;
