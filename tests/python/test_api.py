@@ -330,3 +330,16 @@ def test_each_particle_keeps_the_layer_of_its_own_heads_path():
     new = y < -0.04
     assert set(np.unique(layer[new])) == {0, 1}
     assert 0.004 < z[new & (layer == 1)].mean() - z[new & (layer == 0)].mean() < 0.009
+
+
+def test_a_nozzle_with_a_bore_reports_its_pump(printed):
+    """A nozzle with walls (scenes/ur10_wall_bore.sdf) reports the pump's push while it prints and
+    keeps the flow commanded; the exit-plane inlet reports none."""
+    sim = m3dp.Simulation(ROOT / "scenes" / "ur10_wall_bore.sdf", threads=2)
+    sim.step_to(2.5)
+    nozzle = sim.nozzle("nozzle")
+    assert nozzle["extruding"]
+    assert nozzle["extrusion_force"] > 0 and nozzle["extrusion_pressure"] > 0, nozzle
+    assert printed.nozzle("nozzle")["extrusion_pressure"] == 0
+    summary = sim.close()
+    assert summary["status"] == "completed", summary
