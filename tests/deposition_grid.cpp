@@ -3,7 +3,7 @@
 // each against mass conservation and its reference section. Prints a CSV table (stdout or -o FILE)
 // that scripts/plot_deposition.py draws; not in CI (about a minute a point on two cores).
 //   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N] [--gap G/D --speed V/U]
-//                               [--no-rest] [--particles PREFIX]
+//                               [--no-rest] [--particles PREFIX] [--bore L/D (0: the exit-plane inlet)]
 // (--gap and --speed: that one point of the grid only; --particles: each strand's particles at the
 // end as PREFIX_MATERIAL_G_V_SURFACE.csv.)
 #include <cmath>
@@ -40,18 +40,19 @@ material::Material newtonian_paste() {
 int main(int argc, char** argv) {
   std::string output, particles_csv;
   bool quick = false, rest_detection = true;
-  double cap = 0, across = 8, only_gap = 0, only_speed = 0;
+  double cap = 0, across = 8, only_gap = 0, only_speed = 0, bore = 2;
   for (int k = 1; k < argc; ++k) {
     if (!std::strcmp(argv[k], "-o") && k + 1 < argc) output = argv[++k];
     else if (!std::strcmp(argv[k], "--quick")) quick = true;
     else if (!std::strcmp(argv[k], "--no-rest")) rest_detection = false;
+    else if (!std::strcmp(argv[k], "--bore") && k + 1 < argc) bore = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--cap") && k + 1 < argc) cap = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--across") && k + 1 < argc) across = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--gap") && k + 1 < argc) only_gap = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--particles") && k + 1 < argc) particles_csv = argv[++k];
     else if (!std::strcmp(argv[k], "--speed") && k + 1 < argc) only_speed = std::atof(argv[++k]);
     else {
-      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX]\n",
+      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D]\n",
                    argv[0]);
       return 2;
     }
@@ -79,6 +80,7 @@ int main(int argc, char** argv) {
           strand.viscosity_cap = cap;
           strand.on_layer = on_layer;
           strand.rest_detection = rest_detection;
+          strand.bore_ratio = bore;
           if (!particles_csv.empty())
             strand.particles_csv = particles_csv + "_" + (bingham ? "bingham" : "newtonian") + "_" + std::to_string(gap) + "_" +
                                    std::to_string(speed) + (on_layer ? "_layer" : "_floor") + ".csv";

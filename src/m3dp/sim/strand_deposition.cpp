@@ -148,7 +148,7 @@ StrandResult lay_strand(const StrandCase& strand) {
     station.y_sum += p.y();
   }
   // The strand's height at its centreline: the material's volume (d³ a particle) per footprint in a
-  // band one spacing wide about the section's middle, which does not depend on how the particles pack
+  // band two spacings wide about the section's middle, which does not depend on how the particles pack
   // against the walls (pressed, the first layer sits up to 0.4 d into the floor's Akinci particles,
   // so the highest particle's top overstates the height by about that).
   for (std::size_t i = 0; i < fluid.size(); ++i) {
@@ -158,7 +158,7 @@ StrandResult lay_strand(const StrandCase& strand) {
     if (s < 0 || s >= kStations) continue;
     Station& station = stations[s];
     const double middle = (station.y_min + station.y_max) / 2;
-    if (std::abs(p.y() - middle) < d / 2) station.column += 1;
+    if (std::abs(p.y() - middle) < d) station.column += 1;
   }
   if (!strand.particles_csv.empty()) {
     std::ofstream csv(strand.particles_csv);
@@ -171,7 +171,7 @@ StrandResult lay_strand(const StrandCase& strand) {
   int landed = 0;
   for (const Station& station : stations) {
     result.width += (station.y_max - station.y_min + d) / kStations;
-    result.height += station.column * d * d * d / (d * (high - low) / kStations) / kStations;
+    result.height += station.column * d * d * d / (2 * d * (high - low) / kStations) / kStations;
     result.top += (station.top + d / 2 - bottom) / kStations;
     // On the surface: its lowest particle's centre no more than a particle diameter above it.
     if (station.lowest - d / 2 <= bottom + d / 2) ++landed;
