@@ -19,24 +19,6 @@
 using namespace m3dp;
 namespace deposition = m3dp::sim::deposition;
 
-namespace {
-
-material::Material mortar() {
-  material::Material mortar = material::newtonian("mortar", 2100, 10, 10);
-  mortar.rheology.model = material::RheologyModel::bingham;
-  mortar.rheology.yield_stress = 1000;
-  mortar.rheology.max_viscosity = 1e4;
-  return mortar;
-}
-
-material::Material newtonian_paste() {
-  material::Material paste = material::newtonian("paste", 1800, 1e4, 0);
-  paste.sticks_to_walls = true;
-  return paste;
-}
-
-}  // namespace
-
 int main(int argc, char** argv) {
   std::string output, particles_csv;
   bool quick = false, rest_detection = true;
@@ -73,7 +55,7 @@ int main(int argc, char** argv) {
       for (const double speed : speeds)
         for (const bool on_layer : {false, true}) {
           deposition::StrandCase strand;
-          strand.material = bingham ? mortar() : newtonian_paste();
+          strand.material = bingham ? deposition::printable_mortar() : deposition::stiff_newtonian_paste();
           strand.gap_ratio = gap;
           strand.speed_ratio = speed;
           strand.particles_across = across;

@@ -7,6 +7,8 @@
 #include <cstdlib>
 
 #include <algorithm>
+#include <string>
+#include <utility>
 
 #include "m3dp/sim/strand_deposition.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
@@ -18,23 +20,6 @@ using deposition::StrandCase;
 
 namespace {
 
-/// The demo's printable mortar (data/materials.xml: Bingham, τ0 = 1 kPa, μp = 10 Pa·s), capped at 10⁴ Pa·s.
-material::Material mortar() {
-  material::Material mortar = material::newtonian("mortar", 2100, 10, 10);
-  mortar.rheology.model = material::RheologyModel::bingham;
-  mortar.rheology.yield_stress = 1000;
-  mortar.rheology.max_viscosity = 1e4;
-  return mortar;
-}
-
-/// A stiff Newtonian paste (a clay-like 10⁴ Pa·s) that flows little over the seconds measured and
-/// sticks to the bed (the nozzle's bore and lip slip: Material::nozzle_no_slip is off).
-material::Material newtonian_paste() {
-  material::Material paste = material::newtonian("paste", 1800, 1e4, 0);
-  paste.sticks_to_walls = true;
-  return paste;
-}
-
 void report(const StrandCase& strand, const deposition::StrandResult& result) {
   std::printf("%s: g/D %.2f V/U %.2f: area %.4g mm^2 (particles %.4g) against %.4g (%+.1f %%); height %.2f mm (particles' top %.2f), width %.2f mm; "
               "landed %.0f %%; extrusion pressure %.0f Pa; %llu steps, %zu particles, %llu blocked, %.1f s\n",
@@ -44,19 +29,27 @@ void report(const StrandCase& strand, const deposition::StrandResult& result) {
               result.seconds);
 }
 
+/// Lays a strand of `material` at g/D `gap` and V/U `speed` along a line `length` m long, and prints it.
+std::pair<StrandCase, deposition::StrandResult> lay(std::string label, material::Material material, double gap, double speed,
+                                                    double length = 0.2) {
+  StrandCase strand;
+  strand.label = std::move(label);
+  strand.material = std::move(material);
+  strand.gap_ratio = gap;
+  strand.speed_ratio = speed;
+  strand.length = length;
+  auto result = deposition::lay_strand(strand);
+  report(strand, result);
+  return {strand, result};
+}
+
 }  // namespace
 
 // Pressed (g/D ≤ 1, U/V ≥ (g/D)²): the lip sets the height, mass conservation the area, and the
 // section is the rounded box. At g/D = 0.5 and V/U = 1 (D = 10 mm, 8 particles across).
 TEST(Deposition, PressedNewtonianPasteIsTheRoundedBox) {
-  StrandCase strand;
-  strand.label = "pressed Newtonian paste";
-  strand.material = newtonian_paste();
-  strand.gap_ratio = 0.5;
-  strand.speed_ratio = 1;
-  strand.length = 0.12;  // m: a 10⁴ Pa·s paste costs five times the mortar a step
-  const auto result = deposition::lay_strand(strand);
-  report(strand, result);
+  // A 0.12 m line: a 10⁴ Pa·s paste costs five times the mortar a step.
+  const auto [strand, result] = lay("pressed Newtonian paste", deposition::stiff_newtonian_paste(), 0.5, 1, 0.12);
   const double gap = strand.gap_ratio * strand.diameter, width = deposition::rounded_box_width(strand);
   std::printf("  reference: height %.2f mm (tolerance 5 %%), rounded-box width %.2f mm (8 %%), area (3 %%)\n", 1e3 * gap, 1e3 * width);
   EXPECT_NEAR(result.area / deposition::nominal_area(strand), 1, 0.03);
@@ -72,13 +65,7 @@ TEST(Deposition, PressedNewtonianPasteIsTheRoundedBox) {
 // The Bingham mortar keeps the area; its bead stands 5 % above the gap and is 8.5 % narrower than the
 // rounded box (docs/validation.md): its bounds here are 8 and 10 %, short of the 5 and 8 % asked.
 TEST(Deposition, PressedMortarKeepsItsArea) {
-  StrandCase strand;
-  strand.label = "pressed mortar";
-  strand.material = mortar();
-  strand.gap_ratio = 0.5;
-  strand.speed_ratio = 1;
-  const auto result = deposition::lay_strand(strand);
-  report(strand, result);
+  const auto [strand, result] = lay("pressed mortar", deposition::printable_mortar(), 0.5, 1);
   const double gap = strand.gap_ratio * strand.diameter, width = deposition::rounded_box_width(strand);
   std::printf("  reference: height %.2f mm, rounded-box width %.2f mm\n", 1e3 * gap, 1e3 * width);
   EXPECT_NEAR(result.area / deposition::nominal_area(strand), 1, 0.03);
@@ -90,13 +77,7 @@ TEST(Deposition, PressedMortarKeepsItsArea) {
 // Free (U/V < (g/D)²): a mortar rope laid from 1.5 D lands along the whole line with its mass. It lands
 // flattened (height about 0.8 of the round rope's D √(U/V), width 1.26): docs/validation.md.
 TEST(Deposition, FreeMortarRopeLandsOnTheFloor) {
-  StrandCase strand;
-  strand.label = "free mortar on the floor";
-  strand.material = mortar();
-  strand.gap_ratio = 1.5;
-  strand.speed_ratio = 1;
-  const auto result = deposition::lay_strand(strand);
-  report(strand, result);
+  const auto [strand, result] = lay("free mortar on the floor", deposition::printable_mortar(), 1.5, 1);
   const double round = strand.diameter * std::sqrt(1 / strand.speed_ratio);
   std::printf("  reference: landed along >= 95 %%, a round rope of diameter D sqrt(U/V) = %.2f mm\n", 1e3 * round);
   EXPECT_GE(result.landed, 0.95);
@@ -114,7 +95,7 @@ TEST(Deposition, ABlockedExitIsReportedAndHolds) {
   parameters.settings.max_time_step = Real(2e-3);
   parameters.settings.bounds.min = Vec3(-0.1f, -0.1f, -0.05f);
   parameters.settings.bounds.max = Vec3(0.1f, 0.1f, 0.1f);
-  parameters.phases.push_back(mortar());
+  parameters.phases.push_back(deposition::printable_mortar());
   sph::NozzleSettings nozzle{"nozzle", D, Real(0.05), 0};
   nozzle.bore_length = 2 * D;
   nozzle.outer_diameter = 3 * D;

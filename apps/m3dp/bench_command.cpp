@@ -201,10 +201,7 @@ int bench_wall_layers(const BenchOptions& options) {
 /// and from the exit-plane inlet: particle-steps per second in the strand's pass and the bore's cost.
 int bench_strand(const BenchOptions& /*options*/) {
   namespace deposition = sim::deposition;
-  material::Material mortar = material::newtonian("mortar", 2100, 10, 10);
-  mortar.rheology.model = material::RheologyModel::bingham;
-  mortar.rheology.yield_stress = 1000;
-  mortar.rheology.max_viscosity = 1e4;
+  const material::Material mortar = deposition::printable_mortar();
   fmt::print("strand: the printable mortar (1 kPa, 10 Pa*s, capped at 1e4 Pa*s), D = 10 mm, 8 particles across, U = 50 mm/s, a 0.2 m "
              "line, {} threads\n",
              ThreadLimit::active_threads());

@@ -14,6 +14,20 @@
 
 namespace m3dp::sim::deposition {
 
+material::Material printable_mortar() {
+  material::Material mortar = material::newtonian("mortar", 2100, 10, 10);
+  mortar.rheology.model = material::RheologyModel::bingham;
+  mortar.rheology.yield_stress = 1000;
+  mortar.rheology.max_viscosity = 1e4;
+  return mortar;
+}
+
+material::Material stiff_newtonian_paste() {
+  material::Material paste = material::newtonian("paste", 1800, 1e4, 0);
+  paste.sticks_to_walls = true;
+  return paste;
+}
+
 double nominal_area(const StrandCase& strand) { return kPi * strand.diameter * strand.diameter / 4 / strand.speed_ratio; }
 
 double rounded_box_width(const StrandCase& strand) {

@@ -44,6 +44,13 @@ struct StrandResult {
   std::size_t particles = 0;
 };
 
+/// The demo's printable mortar (data/materials.xml: Bingham, τ0 = 1 kPa, μp = 10 Pa·s, 10 Pa·s against
+/// walls), capped at 10⁴ Pa·s as the demo caps it.
+material::Material printable_mortar();
+/// A stiff Newtonian paste (a clay-like 10⁴ Pa·s, 1800 kg/m³) that flows little over the seconds
+/// measured and sticks to the bed (the nozzle's bore and lip slip: Material::nozzle_no_slip is off).
+material::Material stiff_newtonian_paste();
+
 /// Lays the strand and measures it.
 StrandResult lay_strand(const StrandCase& strand);
 

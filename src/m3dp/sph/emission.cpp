@@ -5,7 +5,6 @@
 #include <tbb/parallel_reduce.h>
 
 #include <algorithm>
-#include <cmath>
 #include <functional>
 
 #include "m3dp/core/parallel.hpp"
@@ -91,21 +90,21 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
     Vec3 centre = inlet;
     const Real reach = settings.inner_diameter / 2 + diameter;
     auto blocked_by = [&](const std::vector<Vec3>& points, Real clearance_squared) {
-        return tbb::parallel_reduce(
-            tbb::blocked_range<std::size_t>(0, points.size(), 4096), false,
-            [&](const tbb::blocked_range<std::size_t>& range, bool blocked) {
-              for (std::size_t i = range.begin(); i != range.end() && !blocked; ++i) {
-                if ((points[i] - centre).squaredNorm() > reach * reach) continue;
-                for (const Vec3& offset : geometry.disc_offsets)
-                  if ((points[i] - (centre + nozzle.pose.rotate(offset))).squaredNorm() < clearance_squared) {
-                    blocked = true;
-                    break;
-                  }
-              }
-              return blocked;
-            },
-            std::logical_or<bool>());
-      };
+      return tbb::parallel_reduce(
+          tbb::blocked_range<std::size_t>(0, points.size(), 4096), false,
+          [&](const tbb::blocked_range<std::size_t>& range, bool blocked) {
+            for (std::size_t i = range.begin(); i != range.end() && !blocked; ++i) {
+              if ((points[i] - centre).squaredNorm() > reach * reach) continue;
+              for (const Vec3& offset : geometry.disc_offsets)
+                if ((points[i] - (centre + nozzle.pose.rotate(offset))).squaredNorm() < clearance_squared) {
+                  blocked = true;
+                  break;
+                }
+            }
+            return blocked;
+          },
+          std::logical_or<bool>());
+    };
     auto emit_disc = [&] {
       const std::size_t first = fluid.size();
       for (const Vec3& offset : geometry.disc_offsets)
@@ -120,7 +119,7 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
       // A primed pump: the bore is filled at the first extrusion, disc by disc down to the tip,
       // where nothing is in the way (a nozzle started in material keeps what is there).
       nozzle.primed = true;
-      const double disc_volume = static_cast<double>(geometry.disc_offsets.size()) * std::pow(static_cast<double>(diameter), 3);
+      const double disc_volume = static_cast<double>(geometry.disc_offsets.size()) * model.particle_volume;
       for (Real depth = diameter; depth <= settings.bore_length - diameter / 2; depth += diameter) {
         centre = inlet + depth * axis;
         if (blocked_by(fluid.position, fluid_clearance_squared)) continue;
