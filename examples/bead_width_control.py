@@ -91,7 +91,7 @@ def main():
         widths, asked, summary = print_wall(closed_loop, args.real_flow, args.threads, verbose=True)
         errors[closed_loop] = abs(widths[-1] - DESIGN_WIDTH)
         print(f"  last layer {widths[-1] * 1000:.2f} mm wide against {DESIGN_WIDTH * 1000:.2f} mm: "
-              f"error {errors[closed_loop] * 1000:.2f} mm; material laid {summary['volume_emitted'] * 1e6:.1f} cm³ "
+              f"error {errors[closed_loop] * 1000:.2f} mm; material laid {summary['volume_m3']['emitted'] * 1e6:.1f} cm³ "
               f"of the {DESIGN_VOLUME * 1e6:.1f} cm³ designed\n")
     print(f"width error of the last layer: open loop {errors[False] * 1000:.2f} mm, closed loop "
           f"{errors[True] * 1000:.2f} mm ({errors[False] / max(errors[True], 1e-9):.1f}x smaller)")

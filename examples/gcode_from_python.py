@@ -91,7 +91,7 @@ def main():
         gcode = slice_part(pathlib.Path(folder))
         print(f"sliced {PART.name} at 0.2 scale: {sum(1 for _ in gcode.open())} lines of G-code")
         deposited, summary = print_gcode(gcode, args.until, args.out)
-    commanded, lost = summary["volume_commanded"], summary["volume_lost_at_nozzles"]
+    commanded, lost = summary["volume_m3"]["commanded"], summary["volume_m3"]["lost_at_nozzles"]
     print(f"printed {args.until:g} s: {deposited * 1e6:.2f} cm³ deposited, {commanded * 1e6:.2f} cm³ commanded by the G-code "
           f"({100 * (deposited / commanded - 1):+.2f} %); {lost * 1e6:.2f} cm³ could not leave the nozzle "
           f"while the layer below blocked it")

@@ -1,7 +1,7 @@
 // The Python API (import m3dp): a simulation stepped from the user's code, its state as numpy
 // arrays, robots and print heads commanded between steps, and the run folder's outputs on request.
-// Arrays that look into the simulation (particles, camera images) are read-only views valid until
-// the next step; small ones (joints, poses) are copies.
+// Arrays of the state (particles, camera images) are read-only snapshots of the step they were read
+// in, copied once a step; a kept one never changes under its holder.
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
@@ -10,8 +10,11 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <map>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -50,16 +53,14 @@ Vec3 vec3_from(const std::vector<double>& values, const char* what) {
   return Vec3(Real(values[0]), Real(values[1]), Real(values[2]));
 }
 
-/// A read-only numpy view of `count` rows of `columns` values of T at `data`, kept alive by `owner`.
+/// A read-only numpy array of `count` rows of `columns` values of T copied from `data`.
 template <class T>
-py::array view(const T* data, std::size_t count, std::size_t columns, py::handle owner) {
-  std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(count)}, strides{static_cast<py::ssize_t>(columns * sizeof(T))};
-  if (columns > 1) {
-    shape.push_back(static_cast<py::ssize_t>(columns));
-    strides.push_back(sizeof(T));
-  }
-  py::array array(py::dtype::of<T>(), shape, strides, data, owner);
-  py::detail::array_proxy(array.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
+py::array read_only_copy(const T* data, std::size_t count, std::size_t columns) {
+  std::vector<py::ssize_t> shape{static_cast<py::ssize_t>(count)};
+  if (columns > 1) shape.push_back(static_cast<py::ssize_t>(columns));
+  py::array_t<T> array(shape);
+  if (count > 0) std::memcpy(array.mutable_data(), data, count * columns * sizeof(T));
+  array.attr("flags").attr("writeable") = false;
   return array;
 }
 
@@ -69,7 +70,7 @@ py::array view(const T* data, std::size_t count, std::size_t columns, py::handle
 class PySimulation {
  public:
   PySimulation(const scene::Scene& scene, int threads)
-      : arena_(threads > 0 ? threads : tbb::task_arena::automatic), threads_(threads) {
+      : arena_(checked_threads(threads) > 0 ? threads : tbb::task_arena::automatic), threads_(threads) {
     arena_.execute([&] {
       simulation_ = std::make_unique<sim::Simulation>(scene);
       start_run({});
@@ -78,21 +79,28 @@ class PySimulation {
   }
   ~PySimulation() {
     try {
-      close();
+      finish();
     } catch (...) {
       // A destructor must not throw; close() was the place to hear of it.
     }
   }
 
   sim::Simulation& simulation() { return *simulation_; }
+  /// The simulation, for a command (`what`): refused once the run is closed, since nothing would
+  /// step it again and a command silently dropped is worse than an error.
+  sim::Simulation& open_simulation(const char* what) {
+    if (!run_) throw Error(fmt::format("{}: the simulation is closed", what));
+    return *simulation_;
+  }
   const std::vector<std::string>& robot_names() const { return robot_names_; }
 
   void step() {
-    if (!run_) throw Error("the simulation is closed");
+    if (!run_) throw Error("step: the simulation is closed");
     arena_.execute([&] { run_->step(); });
   }
   void step_to(double time) {
     if (!std::isfinite(time)) throw Error("step_to: the time must be a number (s)");
+    (void)open_simulation("step_to");
     // Without the GIL for a tenth of a second of steps at a time: taking it back every step would
     // wait out Python's switch interval (5 ms) whenever another thread runs Python.
     while (simulation_->time() < time - 1e-12) {
@@ -109,6 +117,7 @@ class PySimulation {
   /// From now on the run folder's outputs (frames, meshes, cameras, run.mcap if `mcap`, summary)
   /// go to `directory`, starting at the present; the outputs started before finish first.
   void record(const fs::path& directory, bool mcap) {
+    (void)open_simulation("record");
     if (directory.empty()) throw Error("record: an output folder is needed");
     sim::RunOptions options;
     options.output_directory = directory;
@@ -117,40 +126,20 @@ class PySimulation {
     arena_.execute([&] { start_run(options); });
   }
 
-  /// Ends the run: its outputs complete their files; the summary's figures as a dict.
-  py::dict close() {
-    py::dict summary;
-    if (!run_) return summary;
+  /// Ends the run: its outputs complete their files. The summary as summary.json holds it (the same
+  /// keys, one serialiser), as a dict; again on later calls.
+  py::object close() {
+    finish();
+    return py::module_::import("json").attr("loads")(closed_summary_);
+  }
+  void finish() {
+    if (!run_) return;
     const sim::RunSummary result = finish_run();
-    summary["status"] = std::string(sim::to_string(result.status));
-    summary["error"] = result.error;
-    summary["simulated_time"] = result.simulated_time;
-    summary["steps"] = result.steps;
-    summary["particles"] = result.particles;
-    summary["output_directory"] = result.output_directory;
-    summary["volume_emitted"] = result.volume.emitted;
-    summary["volume_commanded"] = result.volume.commanded;
-    summary["volume_lost_at_nozzles"] = result.volume.lost_at_nozzles;
-    summary["volume_removed"] = result.volume.removed;
-    summary["mass_emitted"] = result.mass_emitted;
-    py::dict robots;
-    for (const auto& robot : result.robots) {
-      py::dict entry;
-      entry["contacts_with_robots"] = robot.contacts.with_robots;
-      entry["contacts_with_printed_material"] = robot.contacts.with_printed_material;
-      entry["contacts_with_other"] = robot.contacts.with_other;
-      if (robot.coordination) {
-        entry["waiting_time"] = robot.coordination->waiting_time;
-        entry["slowed_time"] = robot.coordination->slowed_time;
-      }
-      robots[py::str(robot.name)] = entry;
-    }
-    summary["robots"] = robots;
+    closed_summary_ = sim::summary_json_text(result, *simulation_);
     run_.reset();
-    return summary;
   }
 
-  py::dict camera_images(const std::string& name, py::handle owner) {
+  py::dict camera_images(const std::string& name) {
     auto& rig = simulation_->cameras();
     for (std::size_t camera = 0; camera < rig.size(); ++camera) {
       if (rig.settings(camera).name != name) continue;
@@ -158,20 +147,13 @@ class PySimulation {
       arena_.execute([&] { (void)rig.image(*simulation_, camera); (void)rig.points(*simulation_, camera); });
       const sensors::CameraImage& image = rig.image(*simulation_, camera);
       const auto rows = static_cast<py::ssize_t>(image.height), columns = static_cast<py::ssize_t>(image.width);
-      auto image_view = [&](const auto* data, py::ssize_t channels) {
-        using T = std::remove_cv_t<std::remove_pointer_t<decltype(data)>>;
-        std::vector<py::ssize_t> shape{rows, columns}, strides{columns * channels * py::ssize_t(sizeof(T)), channels * py::ssize_t(sizeof(T))};
-        if (channels > 1) {
-          shape.push_back(channels);
-          strides.push_back(sizeof(T));
-        }
-        py::array array(py::dtype::of<T>(), shape, strides, data, owner);
-        py::detail::array_proxy(array.ptr())->flags &= ~py::detail::npy_api::NPY_ARRAY_WRITEABLE_;
-        return array;
+      auto image_view = [&](const char* what, const auto* data, py::ssize_t channels) {
+        py::array array = snapshot(fmt::format("camera {} {}", name, what), data, std::size_t(rows * columns), std::size_t(channels));
+        return channels > 1 ? array.reshape({rows, columns, channels}) : array.reshape({rows, columns});
       };
-      if (!image.rgb.empty()) result["rgb"] = image_view(image.rgb.data(), 3);
-      if (!image.depth.empty()) result["depth"] = image_view(image.depth.data(), 1);
-      if (!image.segment.empty()) result["segmentation"] = image_view(image.segment.data(), 1);
+      if (!image.rgb.empty()) result["rgb"] = image_view("rgb", image.rgb.data(), 3);
+      if (!image.depth.empty()) result["depth"] = image_view("depth", image.depth.data(), 1);
+      if (!image.segment.empty()) result["segmentation"] = image_view("segmentation", image.segment.data(), 1);
       const auto& points = rig.points(*simulation_, camera);
       py::array_t<float> xyz({static_cast<py::ssize_t>(points.size()), py::ssize_t(3)});
       py::array_t<std::uint16_t> segments(static_cast<py::ssize_t>(points.size()));
@@ -204,6 +186,21 @@ class PySimulation {
     return legend;
   }
 
+  /// The array `key` of this step: copied from the state at its first read in a step, the same
+  /// object for later reads in the step. A copy, not a view: the state's arrays are reordered and
+  /// grown by the next step, and an array kept across it must not silently show other particles.
+  template <class T>
+  py::array snapshot(const std::string& key, const T* data, std::size_t count, std::size_t columns) {
+    const std::int64_t step = simulation_->solver().state().step;
+    if (step != snapshot_step_) {
+      snapshots_.clear();
+      snapshot_step_ = step;
+    }
+    auto found = snapshots_.find(key);
+    if (found == snapshots_.end()) found = snapshots_.emplace(key, read_only_copy(data, count, columns)).first;
+    return found->second;
+  }
+
   template <class Call>
   auto in_arena(Call&& call) {
     return arena_.execute(std::forward<Call>(call));
@@ -223,8 +220,16 @@ class PySimulation {
     return summary;
   }
 
+  static int checked_threads(int threads) {
+    if (threads < 0) throw Error(fmt::format("threads = {}: expected 0 (every core) or a number of threads ≥ 1", threads));
+    return threads;
+  }
+
   tbb::task_arena arena_;
   int threads_ = 0;
+  std::string closed_summary_;  // summary.json's text, once closed
+  std::int64_t snapshot_step_ = -1;             // the step the snapshots are of
+  std::map<std::string, py::array> snapshots_;  // arrays read in this step, by what they are
   std::unique_ptr<sim::Simulation> simulation_;
   std::unique_ptr<sim::Run> run_;
   std::vector<std::string> robot_names_;
@@ -248,17 +253,29 @@ std::size_t head_index(PySimulation& self, const std::string& name) {
   throw Error(fmt::format("no print head '{}' in the scene (print heads: {})", name, fmt::join(names, ", ")));
 }
 
-/// The tool of the print head the robot carries (the one named, or its only one).
-world::ToolIndex robot_tool(PySimulation& self, std::size_t robot, const std::optional<std::string>& head_name) {
+/// The print head the robot carries (the one named, or its only one).
+std::size_t robot_head(PySimulation& self, std::size_t robot, const std::optional<std::string>& head_name) {
   sim::Simulation& simulation = self.simulation();
   const std::string& robot_name = self.robot_names()[robot];
   for (std::size_t head = 0; head < simulation.scene().print_heads.size(); ++head) {
     const auto& description = simulation.scene().print_heads[head];
     if (!description.mount || description.mount->robot != robot_name) continue;
     if (head_name && description.name != *head_name) continue;
-    if (const auto tool = simulation.print_head_tool(head)) return *tool;
+    if (simulation.print_head_tool(head)) return head;
   }
   throw Error(fmt::format("robot '{}' carries no print head{}", robot_name, head_name ? fmt::format(" '{}'", *head_name) : ""));
+}
+
+/// A target for a print head (Simulation::command_head_target) from Python's arguments.
+void command_target(PySimulation& self, std::size_t head, const std::vector<double>& position, const std::vector<double>& axis,
+                    std::optional<double> max_speed, std::optional<double> max_acceleration, const char* what) {
+  world::ToolTarget target;
+  target.position = vec3_from(position, fmt::format("{} position", what).c_str());
+  target.axis = vec3_from(axis, fmt::format("{} axis", what).c_str());
+  world::MotionLimits limits;
+  if (max_speed) limits.max_speed = *max_speed;
+  if (max_acceleration) limits.max_acceleration = *max_acceleration;
+  self.simulation().command_head_target(head, target, limits);
 }
 
 /// A <path> element given at run time; `name` (default: path.xml beside the scene) names it in
@@ -267,7 +284,23 @@ scene::PathSegments read_path(PySimulation& self, const std::string& path, const
   return scene::load_path_from_string(path, name ? *name : self.simulation().scene().file.parent_path() / "path.xml");
 }
 
+/// m3dp.SceneWarning: what the scene reader warned of (an element ignored, a G-code command skipped).
+PyObject* scene_warning = nullptr;
+
+/// A simulation of `scene`, its warnings first given to Python's warnings module (file:line: what),
+/// where `warnings.simplefilter("error")` turns them into exceptions.
+std::unique_ptr<PySimulation> simulation_of(const scene::Scene& scene, int threads) {
+  for (const auto& warning : scene.warnings) {
+    const std::string text = fmt::format("{}: {}", warning.location.str(), warning.message);
+    if (PyErr_WarnEx(scene_warning, text.c_str(), 1) != 0) throw py::error_already_set();
+  }
+  return std::make_unique<PySimulation>(scene, threads);
+}
+
 void translate_errors(py::module_& module) {
+  scene_warning = PyErr_NewExceptionWithDoc("m3dp.SceneWarning", "A warning from the scene reader (file:line: what).",
+                                            PyExc_UserWarning, nullptr);
+  module.add_object("SceneWarning", py::handle(scene_warning));
   static py::exception<Error> error(module, "Error", PyExc_RuntimeError);
   static py::exception<SimulationError> simulation_error(module, "SimulationError", error.ptr());
   static py::exception<InputError> input_error(module, "InputError", error.ptr());
@@ -306,13 +339,15 @@ Simulation(scene, threads=0): scene is an SDF world file (str or path); threads 
 Simulation.from_string(text, name="scene.sdf") reads the scene from a string (paths in it are
 relative to the current folder). Errors in the scene raise m3dp.InputError with .file and .line.
 
-Arrays that look into the simulation (particles, camera images) are read-only views, valid until
-the next step; copy them (numpy.array(x)) to keep them. Joints and poses are copies.)")
-      .def(py::init([](const fs::path& file, int threads) { return std::make_unique<PySimulation>(scene::load_scene(file), threads); }),
+Arrays of the state (particles, camera images) are read-only snapshots of the step they are read
+in: copied at the first read in a step (later reads in the step return the same array), they never
+change after; read them again after a step for the new state. Rows of the particle arrays read in
+one step belong together (ids tells which particle a row is: the order changes between steps).)")
+      .def(py::init([](const fs::path& file, int threads) { return python::simulation_of(scene::load_scene(file), threads); }),
            py::arg("scene"), py::arg("threads") = 0)
       .def_static("from_string",
                   [](const std::string& text, const std::string& name, int threads) {
-                    return std::make_unique<PySimulation>(scene::load_scene_from_string(text, name), threads);
+                    return python::simulation_of(scene::load_scene_from_string(text, name), threads);
                   },
                   py::arg("text"), py::arg("name") = "scene.sdf", py::arg("threads") = 0)
       .def("step", &PySimulation::step, py::call_guard<py::gil_scoped_release>(),
@@ -332,30 +367,29 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
       .def("__exit__", [](PySimulation& self, py::args) { self.close(); })
       // ---- particles ----
       .def_property_readonly("particle_count", [](PySimulation& self) { return self.simulation().solver().state().fluid.position.size(); })
-      .def_property_readonly("positions", [](py::object owner) {
-        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
-        return python::view(fluid.position.empty() ? nullptr : fluid.position.front().data(), fluid.position.size(), 3, owner);
-      }, "Particle positions (n, 3), m: a read-only view, valid until the next step.")
-      .def_property_readonly("velocities", [](py::object owner) {
-        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
-        return python::view(fluid.velocity.empty() ? nullptr : fluid.velocity.front().data(), fluid.velocity.size(), 3, owner);
-      }, "Particle velocities (n, 3), m/s: a read-only view, valid until the next step.")
-      .def_property_readonly("density", [](py::object owner) {
-        PySimulation& self = owner.cast<PySimulation&>();
+      .def_property_readonly("positions", [](PySimulation& self) {
+        const auto& fluid = self.simulation().solver().state().fluid;
+        return self.snapshot("positions", fluid.position.empty() ? nullptr : fluid.position.front().data(), fluid.position.size(), 3);
+      }, "Particle positions (n, 3), m: a read-only snapshot of this step.")
+      .def_property_readonly("velocities", [](PySimulation& self) {
+        const auto& fluid = self.simulation().solver().state().fluid;
+        return self.snapshot("velocities", fluid.velocity.empty() ? nullptr : fluid.velocity.front().data(), fluid.velocity.size(), 3);
+      }, "Particle velocities (n, 3), m/s: a read-only snapshot of this step.")
+      .def_property_readonly("density", [](PySimulation& self) {
         const auto* measured = self.in_arena([&] { return &self.simulation().measured_density(); });
-        return python::view(measured->density.data(), measured->density.size(), 1, owner);
+        return self.snapshot("density", measured->density.data(), measured->density.size(), 1);
       }, "Each particle's density (n), kg/m³, measured where the particles are now (as the frames write it).")
-      .def_property_readonly("material", [](py::object owner) {
-        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
-        return python::view(fluid.phase.data(), fluid.phase.size(), 1, owner);
+      .def_property_readonly("material", [](PySimulation& self) {
+        const auto& fluid = self.simulation().solver().state().fluid;
+        return self.snapshot("material", fluid.phase.data(), fluid.phase.size(), 1);
       }, "Each particle's material (n): an index into material_names.")
-      .def_property_readonly("ids", [](py::object owner) {
-        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
-        return python::view(fluid.id.data(), fluid.id.size(), 1, owner);
+      .def_property_readonly("ids", [](PySimulation& self) {
+        const auto& fluid = self.simulation().solver().state().fluid;
+        return self.snapshot("ids", fluid.id.data(), fluid.id.size(), 1);
       }, "Each particle's stable id (n): particles are reordered between steps; ids follow them.")
-      .def_property_readonly("birth_time", [](py::object owner) {
-        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
-        return python::view(fluid.birth_time.data(), fluid.birth_time.size(), 1, owner);
+      .def_property_readonly("birth_time", [](PySimulation& self) {
+        const auto& fluid = self.simulation().solver().state().fluid;
+        return self.snapshot("birth_time", fluid.birth_time.data(), fluid.birth_time.size(), 1);
       }, "When each particle was emitted (n), s of simulated time.")
       .def_property_readonly("age", [](PySimulation& self) {
         const auto& state = self.simulation().solver().state();
@@ -364,11 +398,26 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         for (std::size_t i = 0; i < state.fluid.birth_time.size(); ++i) values(i) = state.time - double(state.fluid.birth_time[i]);
         return age;
       }, "Each particle's age (n), s: a copy.")
-      .def_property_readonly("layer", [](py::object owner) {
-        const auto& fluid = owner.cast<PySimulation&>().simulation().solver().state().fluid;
-        return python::view(fluid.print_layer.data(), fluid.print_layer.size(), 1, owner);
+      .def_property_readonly("layer", [](PySimulation& self) {
+        const auto& fluid = self.simulation().solver().state().fluid;
+        return self.snapshot("layer", fluid.print_layer.data(), fluid.print_layer.size(), 1);
       }, "Each particle's print layer (n), 0 first: the layer its nozzle's path was on when it left (a path "
-         "set at run time counts its own layers); -1: not printed by a path. A read-only view, valid until the next step.")
+         "set at run time counts its own layers); -1: not printed by a path. A read-only snapshot of this step.")
+      .def_property_readonly("particle_radius", [](PySimulation& self) { return double(self.simulation().solver().parameters().settings.particle_radius); },
+                             "The particles' radius r (m); they sit 2r apart on a lattice.")
+      .def_property_readonly("particle_volume", [](PySimulation& self) { return double(self.simulation().solver().model().particle_volume); },
+                             "The volume one particle stands for at its rest density (m³): (2r)³.")
+      .def_property_readonly("volume_m3", [](PySimulation& self) {
+        const auto balance = self.simulation().volume_balance();
+        py::dict result;
+        result["commanded"] = balance.commanded;
+        result["emitted"] = balance.emitted;
+        result["lost_at_nozzles"] = balance.lost_at_nozzles;
+        result["removed"] = balance.removed;
+        result["in_particles"] = balance.in_particles;
+        return result;
+      }, "Where the printed volume went so far (m³), as summary.json's volume_m3: commanded (asked of the nozzles), "
+         "emitted, lost_at_nozzles (asked while blocked, never emitted), removed (left the bounds), in_particles (now).")
       .def_property_readonly("material_names", [](PySimulation& self) {
         std::vector<std::string> names;
         for (const auto& entry : self.simulation().scene().materials) names.push_back(entry.material.name);
@@ -413,12 +462,24 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
       .def("base_pose", [](PySimulation& self, const std::string& robot) {
         return python::pose_array(self.simulation().world().base_pose(self.simulation().robots()[python::robot_index(self, robot)]));
       }, py::arg("robot"))
-      .def("set_external_control", [](PySimulation& self, const std::string& robot, bool external) {
-        self.simulation().world().set_external_control(self.simulation().robots()[python::robot_index(self, robot)], external);
+      .def("set_external_control", [](PySimulation& self, const std::string& name, bool external) {
+        sim::Simulation& simulation = self.open_simulation("set_external_control");
+        const auto& robots = self.robot_names();
+        if (std::find(robots.begin(), robots.end(), name) == robots.end()) {
+          // A print head on an ideal gantry: held where it is, or back to its path.
+          const std::size_t head = python::head_index(self, name);
+          if (simulation.robot_of_head(head)) throw Error(fmt::format("print head '{}' is on robot '{}': switch the robot", name, robots[*simulation.robot_of_head(head)]));
+          if (!external) return simulation.release_head(head);
+          const auto state = simulation.nozzle_state(head);
+          simulation.command_head_target(head, world::ToolTarget{state.pose.position, state.pose.orientation * Vec3(0, 0, -1)}, {});
+          return;
+        }
+        simulation.world().set_external_control(simulation.robots()[python::robot_index(self, name)], external);
       }, py::arg("robot"), py::arg("external") = true,
-         "True: the robot leaves its scene paths and holds still until commanded; False: back to its scene paths "
-         "(where they are at the present time). The commands below switch it to external control themselves.")
-      .def("set_coordination", [](PySimulation& self, bool on) { self.simulation().set_coordination(on); }, py::arg("on") = true,
+         "True: the robot (or a print head on an ideal gantry) leaves its scene paths and holds still until commanded, "
+         "not extruding unless set_extrusion says so; False: back to its scene paths (where they are at the present time), "
+         "travelling there without extruding. The commands below switch it to external control themselves.")
+      .def("set_coordination", [](PySimulation& self, bool on) { self.open_simulation("set_coordination").set_coordination(on); }, py::arg("on") = true,
          "Switches the multi-robot coordinator on (with the scene's <coordinator> settings, or the defaults) or off "
          "(every robot follows its paths at full speed from where they are).")
       .def_property_readonly("coordination", [](PySimulation& self) -> py::object {
@@ -455,19 +516,31 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         return self.simulation().world().external_control(self.simulation().robots()[python::robot_index(self, robot)]);
       }, py::arg("robot"))
       .def("set_joint_targets", [](PySimulation& self, const std::string& robot, const std::vector<double>& targets) {
-        self.simulation().world().command_joint_targets(self.simulation().robots()[python::robot_index(self, robot)], targets);
+        self.open_simulation("set_joint_targets").world().command_joint_targets(self.simulation().robots()[python::robot_index(self, robot)], targets);
       }, py::arg("robot"), py::arg("targets"), "Joint position targets (rad or m, joint_names order), held until the next command.")
       .def("set_nozzle_target", [](PySimulation& self, const std::string& robot, const std::vector<double>& position,
-                                   const std::vector<double>& axis, std::optional<std::string> head) {
-        world::ToolTarget target;
-        target.position = python::vec3_from(position, "set_nozzle_target position");
-        target.axis = python::vec3_from(axis, "set_nozzle_target axis");
-        self.simulation().world().command_tool_target(python::robot_tool(self, python::robot_index(self, robot), head), target);
+                                   const std::vector<double>& axis, std::optional<std::string> head, std::optional<double> max_speed,
+                                   std::optional<double> max_acceleration) {
+        (void)self.open_simulation("set_nozzle_target");
+        python::command_target(self, python::robot_head(self, python::robot_index(self, robot), head), position, axis, max_speed,
+                               max_acceleration, "set_nozzle_target");
       }, py::arg("robot"), py::arg("position"), py::arg("axis") = std::vector<double>{0, 0, -1}, py::arg("head") = py::none(),
-         "Where the robot's nozzle exit should be (m, world) and where it should point (the material leaves along it), "
-         "reached through the robot's inverse kinematics; held until the next command.")
+         py::arg("max_speed") = py::none(), py::arg("max_acceleration") = py::none(),
+         "Where the robot's nozzle exit should go (m, world) and where it should point (the material leaves along it): "
+         "along a straight line within max_speed (m/s, default 0.25) and max_acceleration (m/s², default 2.5), through "
+         "the robot's inverse kinematics; held until the next command. A target out of reach raises m3dp.Error. The "
+         "head extrudes only when set_extrusion says so.")
+      .def("set_head_target", [](PySimulation& self, const std::string& head, const std::vector<double>& position,
+                                 const std::vector<double>& axis, std::optional<double> max_speed, std::optional<double> max_acceleration) {
+        (void)self.open_simulation("set_head_target");
+        python::command_target(self, python::head_index(self, head), position, axis, max_speed, max_acceleration, "set_head_target");
+      }, py::arg("head"), py::arg("position"), py::arg("axis") = std::vector<double>{0, 0, -1}, py::arg("max_speed") = py::none(),
+         py::arg("max_acceleration") = py::none(),
+         "set_nozzle_target by the print head's name: for a head on a robot, and for one on an ideal gantry (which goes "
+         "there itself; a target outside the scene's bounds raises m3dp.Error). set_external_control(head, False) sends a "
+         "gantry head back to its path.")
       .def("set_base_velocity", [](PySimulation& self, const std::string& robot, double speed, double turn_rate) {
-        self.simulation().world().command_base_velocity(self.simulation().robots()[python::robot_index(self, robot)], speed, turn_rate);
+        self.open_simulation("set_base_velocity").world().command_base_velocity(self.simulation().robots()[python::robot_index(self, robot)], speed, turn_rate);
       }, py::arg("robot"), py::arg("speed"), py::arg("turn_rate"), "A mobile base's forward speed (m/s) and turn rate (rad/s).")
       // ---- print heads ----
       .def_property_readonly("print_heads", [](PySimulation& self) {
@@ -487,19 +560,37 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         const auto& engine = self.simulation().solver().state().nozzles[python::head_index(self, head)];
         result["extrusion_force"] = double(engine.extrusion_force);
         result["extrusion_pressure"] = double(engine.extrusion_pressure);
+        // Its share of the volume balance so far (m³), and whether the space before its exit is blocked now.
+        result["volume_commanded_m3"] = engine.volume_commanded;
+        result["volume_emitted_m3"] = double(engine.particles_emitted) * double(self.simulation().solver().model().particle_volume);
+        result["volume_lost_m3"] = engine.volume_lost;
+        result["blocked"] = engine.blocked_since >= 0;
+        result["blocked_time_s"] = engine.blocked_time;
+        // Who moves it (its path, external commands, or its way back to its path) and, under a
+        // target, where it is asked to be now on its way and whether it has arrived.
+        const std::size_t index = python::head_index(self, head);
+        result["control"] = std::string(sim::Simulation::to_string(self.simulation().head_control(index)));
+        if (const auto* target = self.simulation().head_target(index)) {
+          const Eigen::Vector3d goal = target->target(), on_the_way = target->position();
+          result["target"] = python::vector_array({goal.x(), goal.y(), goal.z()});
+          result["target_now"] = python::vector_array({on_the_way.x(), on_the_way.y(), on_the_way.z()});
+          result["arrived"] = target->arrived();
+        }
         return result;
       }, py::arg("head"), "The nozzle exit's pose (material leaves along its −z), velocity (m/s), whether it extrudes, "
-                          "its flow (m³/s), that flow over the nominal, and for a nozzle with a bore the pump's "
-                          "extrusion force (N) and pressure (Pa; 0 without a bore).")
+                          "its flow (m³/s), that flow over the nominal, for a nozzle with a bore the pump's "
+                          "extrusion force (N) and pressure (Pa; 0 without a bore), the volume it was asked for, "
+                          "emitted and lost (m³), whether it is blocked now and for how long it was in all (s).")
       .def("set_extrusion", [](PySimulation& self, const std::string& head, std::optional<bool> extruding, std::optional<double> flow_scale) {
         sim::Simulation::HeadCommand command;
         command.extruding = extruding;
         if (flow_scale) command.flow_scale = Real(*flow_scale);
-        self.simulation().command_head(python::head_index(self, head), command);
+        self.open_simulation("set_extrusion").command_head(python::head_index(self, head), command);
       }, py::arg("head"), py::arg("extruding") = py::none(), py::arg("flow_scale") = py::none(),
          "Extrusion on or off and the flow as a fraction of the nominal; None: as the head's path says.")
       .def("set_path", [](PySimulation& self, const std::string& head, const std::string& path, bool append,
                           std::optional<fs::path> name) {
+        (void)self.open_simulation("set_path");
         scene::PathSegments read = python::read_path(self, path, name);
         self.simulation().set_head_path(python::head_index(self, head), std::move(read.segments), read.start_time, append);
       }, py::arg("head"), py::arg("path"), py::arg("append") = false, py::arg("name") = py::none(),
@@ -510,6 +601,7 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
          "carrying the head goes back to following its path. world.pvd and run.mcap keep drawing the first path.")
       .def("set_base_path", [](PySimulation& self, const std::string& robot, const std::string& path, bool append,
                                std::optional<fs::path> name) {
+        (void)self.open_simulation("set_base_path");
         scene::PathSegments read = python::read_path(self, path, name);
         self.simulation().set_base_path(python::robot_index(self, robot), std::move(read.segments), read.start_time, append);
       }, py::arg("robot"), py::arg("path"), py::arg("append") = false, py::arg("name") = py::none(),
@@ -521,9 +613,9 @@ the next step; copy them (numpy.array(x)) to keep them. Joints and poses are cop
         for (const auto& camera : self.simulation().scene().cameras) names.push_back(camera.settings.name);
         return names;
       })
-      .def("camera", [](py::object owner, const std::string& name) { return owner.cast<PySimulation&>().camera_images(name, owner); },
+      .def("camera", [](py::object owner, const std::string& name) { return owner.cast<PySimulation&>().camera_images(name); },
            py::arg("name"), "The camera's image now (rendered once a step): rgb (h, w, 3) uint8, depth (h, w) float32 m "
                             "(inf: nothing), segmentation (h, w) uint16 (see camera_legend), points (m, 3) in the camera's "
-                            "point-cloud frame, and the camera's pose. Images are views valid until the next step.")
+                            "point-cloud frame, and the camera's pose. Images are read-only snapshots of this step.")
       .def("camera_legend", &PySimulation::camera_legend, "What each segmentation id is: kind, name, robot, layer.");
 }

@@ -231,6 +231,25 @@ TEST(Outputs, ExplodingStateStopsWithAReport) {
   EXPECT_LT(summary.simulated_time, 0.1);
 }
 
+TEST(Outputs, MaterialLeavingTheBoundsFailsTheRun) {
+  // No floor under the block: it falls out of the bounds within a few tenths of a second, which
+  // must not end "completed" (a run where nearly every particle left once did).
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  scene::Scene scene = sim::hydrostatic_scene(setup);
+  scene.bodies.clear();
+  scene.solver.bounds.min.z() = Real(-0.05);
+  sim::Simulation simulation(scene);
+  const auto summary = sim::run_simulation(simulation, {});
+  EXPECT_EQ(summary.status, sim::RunStatus::failed);
+  EXPECT_NE(summary.error.find("% of the material, left the bounds"), std::string::npos) << summary.error;
+  EXPECT_NE(summary.error.find("<bounds>"), std::string::npos) << summary.error;
+  // It stops when more than half has gone, not at the first particle out.
+  EXPECT_GT(summary.mass_lost, 0.5 * summary.mass_initial);
+  EXPECT_LT(summary.mass_lost, 0.9 * summary.mass_initial);
+  EXPECT_LT(summary.simulated_time, 0.5);
+}
+
 TEST(Outputs, ProgressLineShowsTimeSpeedParticlesAndEta) {
   ProgressSample sample;
   sample.simulated_time_s = 0.5;

@@ -15,6 +15,11 @@ NOZZLE_FLOW = np.pi * 0.008**2 / 4 * 0.05  # m³/s: 8 mm nozzle, 0.05 m/s exit s
 PRINTING_TIME = (0.4 + 0.4 + 0.3) / 0.05  # s of extrusion in all: the chunks' lengths at 0.05 m/s
 
 
+def robots(summary):
+    """summary.json's robots (a list) by name."""
+    return {robot["name"]: robot for robot in summary["robots"]}
+
+
 def run(coordinated):
     sim = m3dp.Simulation(SCENE, threads=2)
     if not coordinated:
@@ -34,7 +39,8 @@ def coordinated():
 def test_coordinated_robots_touch_nothing(coordinated):
     summary, coordination, _ = coordinated
     assert summary["status"] == "completed"
-    for name, robot in summary["robots"].items():
+    for robot in summary["robots"]:
+        name = robot["name"]
         assert robot["contacts_with_robots"] == 0, name
         assert robot["contacts_with_printed_material"] == 0, name
         assert robot["contacts_with_other"] == 0, name
@@ -55,7 +61,7 @@ def test_the_robot_of_lower_priority_waits(coordinated):
     assert coordination["turtlebot_2"]["conflicts"] > 0
     assert coordination["turtlebot_2"]["waiting_time"] > 0.3
     assert coordination["turtlebot_2"]["waiting_time"] + coordination["turtlebot_2"]["slowed_time"] > 2
-    assert summary["robots"]["turtlebot_2"]["waiting_time"] == coordination["turtlebot_2"]["waiting_time"]
+    assert robots(summary)["turtlebot_2"]["coordination"]["waiting_time_s"] == coordination["turtlebot_2"]["waiting_time"]
     assert all(report["rate"] == 1 for report in coordination.values())  # all done: nothing holds anyone
 
 
@@ -68,15 +74,15 @@ def test_the_wall_is_complete(coordinated):
     assert counts.min() > 0, f"gaps at x = {edges[:-1][counts == 0]}"
     # The material laid is what the three chunks ask for: a stopped nozzle extrudes nothing, a slowed
     # one in proportion.
-    assert summary["volume_emitted"] == pytest.approx(NOZZLE_FLOW * PRINTING_TIME, rel=0.03)
+    assert summary["volume_m3"]["emitted"] == pytest.approx(NOZZLE_FLOW * PRINTING_TIME, rel=0.03)
 
 
 def test_without_the_coordinator_the_arms_collide():
     summary, coordination, _ = run(False)
     assert coordination is None
-    assert summary["robots"]["turtlebot_1"]["contacts_with_robots"] > 0
-    assert summary["robots"]["turtlebot_2"]["contacts_with_robots"] > 0
-    assert "waiting_time" not in summary["robots"]["turtlebot_2"]
+    assert robots(summary)["turtlebot_1"]["contacts_with_robots"] > 0
+    assert robots(summary)["turtlebot_2"]["contacts_with_robots"] > 0
+    assert "coordination" not in robots(summary)["turtlebot_2"]
 
 
 BLOCKED_SCENE = """<?xml version="1.0"?>

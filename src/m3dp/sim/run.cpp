@@ -122,6 +122,7 @@ bool Run::finished() const { return impl_->finished; }
 void Run::step() {
   Impl& run = *impl_;
   if (run.finished) throw Error("the run has finished: it cannot step");
+  if (run.summary.status == RunStatus::failed) throw SimulationError("the run failed and cannot go on: " + run.summary.error);
   Simulation& simulation = run.simulation;
   try {
     run.schedule.after_step(simulation, simulation.step());

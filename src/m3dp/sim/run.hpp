@@ -183,6 +183,10 @@ class Run {
 /// Runs `simulation` to the end time (or until a stop request / failure), writing the run folder.
 RunSummary run_simulation(Simulation& simulation, const RunOptions& options);
 
+/// The summary as summary.json holds it (JSON text, SI units in the keys): the file's, and what the
+/// Python API's close() returns.
+std::string summary_json_text(const RunSummary& summary, const Simulation& simulation);
+
 /// The one-screen text summary printed at the end of `m3dp run`.
 std::string format_summary(const RunSummary& summary, const std::filesystem::path& output_directory);
 

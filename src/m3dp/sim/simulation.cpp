@@ -69,6 +69,8 @@ Simulation::Simulation(const scene::Scene& scene)
 
 void Simulation::add_robots() {
   head_commands_.resize(scene_.print_heads.size());
+  head_control_.assign(scene_.print_heads.size(), HeadControl::path);
+  gantry_targets_.resize(scene_.print_heads.size());
   plan_clocks_.resize(scene_.robots.size());
   for (std::size_t head = 0; head < scene_.print_heads.size(); ++head) {
     head_robots_.push_back(robot_of_print_head(scene_, head));
@@ -101,6 +103,12 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   state.pose.position = sample.position;
   state.pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
   state.velocity = sample.velocity;
+  const HeadControl control = head_control_[head_index];
+  if (const auto& gantry = gantry_targets_[head_index]; gantry && control != HeadControl::path) {
+    state.pose.position = gantry->follower.position().cast<Real>();
+    state.pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), gantry->axis);
+    state.velocity = gantry->follower.velocity().cast<Real>();
+  }
   if (head_tools_[head_index]) {
     // A robot carries it: material leaves where the nozzle really is, along the tool's z axis
     // (the solver emits along its pose's −z: turn the tool frame over its x axis).
@@ -117,12 +125,19 @@ Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
     state.flow_scale *= Real(rate);
     state.extruding = state.extruding && rate > 0;
   }
+  const auto& starts = head_layer_starts_[head_index];
+  state.print_layer = static_cast<std::int32_t>(std::upper_bound(starts.begin(), starts.end(), path_time(head_index)) - starts.begin()) - 1;
+  // Under external control the abandoned path's clock says nothing: off and nominal unless told.
+  if (control != HeadControl::path) {
+    state.extruding = false;
+    state.flow_scale = 1;
+    state.print_layer = -1;
+  }
   const HeadCommand& command = head_commands_[head_index];
   if (command.flow_scale) state.flow_scale = *command.flow_scale;
   if (command.extruding) state.extruding = *command.extruding;
+  if (control == HeadControl::rejoining) state.extruding = false;  // travelling back to its path
   state.volume_rate = state.extruding ? nominal_flow * state.flow_scale : Real(0);
-  const auto& starts = head_layer_starts_[head_index];
-  state.print_layer = static_cast<std::int32_t>(std::upper_bound(starts.begin(), starts.end(), path_time(head_index)) - starts.begin()) - 1;
   return state;
 }
 
@@ -160,8 +175,7 @@ void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::Pat
   change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
               fmt::format("print head '{}'", head.name));
   head_layer_starts_[head_index] = path_layer_starts(head);
-  if (const auto robot = head_robots_[head_index]; robot && head_tools_[head_index])
-    world_.set_external_control(robots_[*robot], false);
+  release_head(head_index);
 }
 
 void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
@@ -179,8 +193,91 @@ void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegm
   world_.set_external_control(robots_[robot], false);
 }
 
+std::string_view Simulation::to_string(HeadControl control) {
+  switch (control) {
+    case HeadControl::path: return "path";
+    case HeadControl::external: return "external";
+    case HeadControl::rejoining: return "rejoining";
+  }
+  return "?";
+}
+
+Real Simulation::rejoin_tolerance(std::size_t head) const {
+  return std::max(Real(5e-4), Real(0.1) * scene_.print_heads.at(head).inner_diameter);
+}
+
+void Simulation::command_head_target(std::size_t head, const world::ToolTarget& target, const world::MotionLimits& limits) {
+  const auto& description = scene_.print_heads.at(head);
+  if (!target.position.allFinite() || !target.axis.allFinite() || target.axis.norm() < Real(1e-6))
+    throw Error(fmt::format("print head '{}': a target needs a finite position (m) and a non-zero axis", description.name));
+  const Vec3& at = target.position;
+  if (const auto& tool = head_tools_[head]) {
+    // An unreachable target is an error now, not a robot straining at its joint limits for ever.
+    const double miss = world_.tool_target_miss(*tool, target);
+    if (miss > 2e-3)
+      throw Error(fmt::format("print head '{}': the target ({:.4g}, {:.4g}, {:.4g}) m is out of reach of robot '{}': its "
+                              "inverse kinematics gets the nozzle no closer than {:.3f} m",
+                              description.name, at.x(), at.y(), at.z(), scene_.robots.at(*head_robots_[head]).name, miss));
+    world_.command_tool_target(*tool, target, limits);
+    head_control_[head] = HeadControl::external;
+    return;
+  }
+  const Aabb& bounds = scene_.solver.bounds;
+  if ((at.array() < bounds.min.array()).any() || (at.array() > bounds.max.array()).any())
+    throw Error(fmt::format("print head '{}': the target ({:.4g}, {:.4g}, {:.4g}) m is outside the scene's <bounds>", description.name,
+                            at.x(), at.y(), at.z()));
+  auto& gantry = gantry_targets_[head];
+  if (!gantry) {
+    gantry.emplace();
+    gantry->follower.reset(nozzle_state(head).pose.position.cast<double>(), solver_.time());
+  }
+  gantry->follower.set_target(at.cast<double>(), limits);
+  gantry->axis = target.axis.normalized();
+  gantry->external = true;
+  head_control_[head] = HeadControl::external;
+}
+
+void Simulation::release_head(std::size_t head) {
+  if (const auto robot = head_robots_.at(head); robot && head_tools_[head]) world_.set_external_control(robots_[*robot], false);
+  if (auto& gantry = gantry_targets_[head]) gantry->external = false;
+}
+
+const world::TargetFollower* Simulation::head_target(std::size_t head) const {
+  if (head_control_.at(head) == HeadControl::path) return nullptr;
+  if (const auto& gantry = gantry_targets_[head]) return &gantry->follower;
+  return head_tools_[head] ? world_.tool_target_follower(*head_tools_[head]) : nullptr;
+}
+
+void Simulation::update_head_control(std::size_t head) {
+  HeadControl& control = head_control_[head];
+  auto& gantry = gantry_targets_[head];
+  const auto& tool = head_tools_[head];
+  const bool external = tool ? world_.external_control(robots_[*head_robots_[head]]) : gantry && gantry->external;
+  if (external) {
+    control = HeadControl::external;
+    if (gantry) gantry->follower.advance(solver_.time());
+    return;
+  }
+  if (control == HeadControl::external) control = HeadControl::rejoining;
+  if (control != HeadControl::rejoining) return;
+  const Vec3 on_path = scene_.print_heads[head].trajectory.sample(path_time(head)).position;
+  Vec3 at = Vec3::Zero();
+  if (gantry) {
+    // A gantry travels back within the default limits, chasing where its path is now.
+    gantry->follower.set_target(on_path.cast<double>(), world::MotionLimits{});
+    at = gantry->follower.advance(solver_.time()).cast<Real>();
+  } else {
+    at = nozzle_state(head).pose.position;
+  }
+  if ((at - on_path).norm() <= rejoin_tolerance(head)) {
+    control = HeadControl::path;
+    gantry.reset();
+  }
+}
+
 void Simulation::update_print_heads() {
   for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
+    update_head_control(i);
     const NozzleState state = nozzle_state(i);
     solver_.set_nozzle(static_cast<Index>(i), state.pose, state.velocity, state.extruding, state.flow_scale, state.print_layer);
   }
@@ -203,7 +300,35 @@ const sph::StepStats& Simulation::step() {
   start = Clock::now();
   world_.step_to(solver_.time());
   last_world_ms_ = milliseconds_since(start);
+  check_material_kept();
   return stats;
+}
+
+void Simulation::check_material_kept() const {
+  // A few particles thrown out is a splash; most of the material is a blow-up (a run where 7,978 of
+  // 7,992 particles left ended "completed" before this check).
+  const auto& state = solver_.state();
+  const double ever = initial_fluid_mass_ + state.mass_emitted_total;
+  if (state.particles_removed_total < 100 || !(state.mass_removed_total > kLostFractionBlowUp * ever)) return;
+  throw SimulationError(fmt::format(
+      "simulation blew up at t = {:.6f} s (step {}): {} particles, {:.0f} % of the material, left the bounds ({} remain). "
+      "If the material should stay, the time step may be too large (max_time_step, cfl_factor); if it leaves the scene "
+      "on purpose, make the <bounds> larger",
+      state.time, state.step, state.particles_removed_total, 100 * state.mass_removed_total / ever, solver_.fluid().size()));
+}
+
+Simulation::VolumeBalance Simulation::volume_balance() const {
+  const auto& state = solver_.state();
+  const double particle_volume = solver_.model().particle_volume;
+  VolumeBalance balance;
+  for (const auto& nozzle : state.nozzles) {
+    balance.commanded += nozzle.volume_commanded;
+    balance.emitted += double(nozzle.particles_emitted) * particle_volume;
+    balance.lost_at_nozzles += nozzle.volume_lost;
+  }
+  balance.removed = double(state.particles_removed_total) * particle_volume;
+  balance.in_particles = double(solver_.fluid().size()) * particle_volume;
+  return balance;
 }
 
 const Simulation::DensityMeasurement& Simulation::measured_density() const {
@@ -238,6 +363,22 @@ void Simulation::save_state(StateWriter& out) const {
   out.put(plan_clocks_);
   out.put(coordination_ != nullptr);
   if (coordination_) coordination_->save(out);
+  // What was commanded from outside and who moves each head.
+  for (std::size_t head = 0; head < head_commands_.size(); ++head) {
+    const HeadCommand& command = head_commands_[head];
+    out.put(command.extruding.has_value());
+    out.put(command.extruding.value_or(false));
+    out.put(command.flow_scale.has_value());
+    out.put(command.flow_scale.value_or(Real(1)));
+    out.put(static_cast<std::uint8_t>(head_control_[head]));
+    const auto& gantry = gantry_targets_[head];
+    out.put(gantry.has_value());
+    if (gantry) {
+      out.put(gantry->external);
+      gantry->follower.save(out);
+      out.put(gantry->axis);
+    }
+  }
 }
 
 void Simulation::load_state(StateReader& in) {
@@ -264,6 +405,26 @@ void Simulation::load_state(StateReader& in) {
   set_coordination(in.get<bool>());
   if (coordination_) coordination_->load(in);
   std::copy(clocks.begin(), clocks.end(), plan_clocks_.begin());  // in place: the world's paths point into it
+  for (std::size_t head = 0; head < head_commands_.size(); ++head) {
+    HeadCommand& command = head_commands_[head];
+    const bool has_extruding = in.get<bool>();
+    const bool extruding = in.get<bool>();
+    command.extruding = has_extruding ? std::optional<bool>(extruding) : std::nullopt;
+    const bool has_flow_scale = in.get<bool>();
+    const Real flow_scale = in.get<Real>();
+    command.flow_scale = has_flow_scale ? std::optional<Real>(flow_scale) : std::nullopt;
+    const auto control = in.get<std::uint8_t>();
+    if (control > static_cast<std::uint8_t>(HeadControl::rejoining)) in.fail("a print head's control that does not exist");
+    head_control_[head] = static_cast<HeadControl>(control);
+    auto& gantry = gantry_targets_[head];
+    gantry.reset();
+    if (in.get<bool>()) {
+      gantry.emplace();
+      in.get(gantry->external);
+      gantry->follower.load(in);
+      in.get(gantry->axis);
+    }
+  }
   density_measurement_.step = -1;
 }
 

@@ -28,7 +28,8 @@ class Simulation {
 
   /// One step: the coordinator (if on) decides the robots' speeds along their paths, print heads follow their paths (robots through their controllers), the links' motion
   /// goes to the fluid, the fluid advances (adaptive dt), its forces go back to the links, and the
-  /// world is stepped to the fluid's clock.
+  /// world is stepped to the fluid's clock. Throws SimulationError when the state blows up: a particle
+  /// past the speed limit, or most of the material gone out of the bounds (kLostFractionBlowUp).
   const sph::StepStats& step();
 
   /// Where a print head's nozzle is and what it does now: its exit frame (material leaves along the
@@ -43,14 +44,34 @@ class Simulation {
   };
   [[nodiscard]] NozzleState nozzle_state(std::size_t head) const;
 
+  /// Who moves a print head: its path; commands from outside (its robot under external control, or a
+  /// target given to a gantry head); or, after them, its way back to where its path is now, which it
+  /// travels without extruding.
+  enum class HeadControl : std::uint8_t { path, external, rejoining };
+  [[nodiscard]] HeadControl head_control(std::size_t head) const { return head_control_.at(head); }
+  [[nodiscard]] static std::string_view to_string(HeadControl control);
+
   /// A print head commanded from outside (the Python API): whether it extrudes and its flow as a
-  /// fraction of its nominal π D²/4 · U; none: as its path says. Held until the next command. Where
-  /// the head goes is its robot's (World::command_tool_target). Not kept in checkpoints.
+  /// fraction of its nominal π D²/4 · U; none: as its path says while the path moves it, and off (at
+  /// the nominal flow) under external control. Held until the next command. Where the head goes is
+  /// command_head_target's, or its robot's (World::command_tool_target).
   struct HeadCommand {
     std::optional<bool> extruding;
     std::optional<Real> flow_scale;
   };
   void command_head(std::size_t head, const HeadCommand& command);
+  /// Where a print head's nozzle exit should go (m, world) and the direction material should leave
+  /// along: the robot carrying it goes there through its IK, a head on an ideal gantry directly,
+  /// along a straight line within `limits`; held until the next command. Throws Error for a target
+  /// out of the robot's reach, or outside the scene's bounds on a gantry.
+  void command_head_target(std::size_t head, const world::ToolTarget& target, const world::MotionLimits& limits);
+  /// Ends external control of a head (and its robot): it goes back to its path, travelling there
+  /// within the default limits on a gantry, without extruding on the way.
+  void release_head(std::size_t head);
+  /// The way a head under a target (or on its way back to its path) goes now; null when its path moves it.
+  [[nodiscard]] const world::TargetFollower* head_target(std::size_t head) const;
+  /// How close (m) a head must come to where its path is before it extrudes again after external control.
+  [[nodiscard]] Real rejoin_tolerance(std::size_t head) const;
   /// A new path for a print head, given while it runs: it replaces the head's path from now on (the
   /// head first travels from where its path has it now to the new path's first point), or with
   /// `append` follows the path's end. `delay` (s) waits that long first. The robot that carries
@@ -108,6 +129,17 @@ class Simulation {
     return density_measurement_.step >= 0 ? &density_measurement_ : nullptr;
   }
 
+  /// Where the printed volume went so far (m³; a particle is d³, at its rest density): what the
+  /// paths or commands asked of the nozzles, what they emitted, what they could not (blocked), what
+  /// left the bounds, and what the particles hold now.
+  struct VolumeBalance {
+    double commanded = 0, emitted = 0, lost_at_nozzles = 0, removed = 0, in_particles = 0;
+  };
+  [[nodiscard]] VolumeBalance volume_balance() const;
+  /// More than this fraction of the material ever present (initial and emitted, by mass) has left
+  /// the bounds: the state blew up (or the bounds are wrong), and step() throws SimulationError.
+  static constexpr double kLostFractionBlowUp = 0.5;
+
   [[nodiscard]] const scene::Scene& scene() const { return scene_; }
   [[nodiscard]] sph::Solver& solver() { return solver_; }
   [[nodiscard]] const sph::Solver& solver() const { return solver_; }
@@ -130,6 +162,8 @@ class Simulation {
  private:
   void add_robots();
   void update_print_heads();
+  void update_head_control(std::size_t head);
+  void check_material_kept() const;
 
   scene::Scene scene_;
   sph::Solver solver_;
@@ -138,6 +172,13 @@ class Simulation {
   std::vector<world::BodyIndex> dynamic_bodies_;
   std::vector<std::optional<world::ToolIndex>> head_tools_;
   std::vector<HeadCommand> head_commands_;  // per print head
+  std::vector<HeadControl> head_control_;   // per print head
+  struct GantryTarget {                     // a print head without a robot, commanded from outside
+    bool external = false;
+    world::TargetFollower follower;         // where it is asked to be (also on its way back to its path)
+    Vec3 axis = Vec3(0, 0, -1);             // the direction material leaves along
+  };
+  std::vector<std::optional<GantryTarget>> gantry_targets_;  // per print head
   std::vector<PlanClock> plan_clocks_;      // per scene robot; sized once (the world's paths point into it)
   std::vector<std::optional<std::size_t>> head_robots_;  // per print head: the scene robot carrying it
   std::vector<std::vector<double>> head_layer_starts_;  // per print head: when its path begins each layer (s, its clock)

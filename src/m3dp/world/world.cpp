@@ -718,12 +718,40 @@ void World::command_joint_targets(RobotIndex robot_index, const std::vector<doub
   robot.external_command->set_joint_targets(Eigen::Map<const Eigen::VectorXd>(positions.data(), static_cast<Eigen::Index>(positions.size())));
 }
 
-void World::command_tool_target(ToolIndex tool, const ToolTarget& target) {
+void World::command_tool_target(ToolIndex tool, const ToolTarget& target, const MotionLimits& limits) {
   const RobotIndex robot_index = impl_->tools.at(tool).robot;
   if (!target.position.allFinite() || !target.axis.allFinite() || target.axis.norm() < Real(1e-6))
     throw Error(fmt::format("robot '{}': a tool target needs a finite position and a non-zero axis", impl_->robots.at(robot_index).name));
   set_external_control(robot_index, true);
-  impl_->robots.at(robot_index).external_command->set_tool_target(tool, target);
+  impl_->robots.at(robot_index).external_command->set_tool_target(tool, target, limits, tool_pose(tool).position.cast<double>(),
+                                                                   impl_->world->getTime());
+}
+
+const TargetFollower* World::tool_target_follower(ToolIndex tool) const {
+  const Impl::Robot& robot = impl_->robots.at(impl_->tools.at(tool).robot);
+  return robot.external && robot.external_command ? robot.external_command->tool_follower(tool) : nullptr;
+}
+
+double World::tool_target_miss(ToolIndex tool_index, const ToolTarget& target) {
+  Impl::Tool& tool = impl_->tools.at(tool_index);
+  const auto saved = impl_->robots.at(tool.robot).skeleton->getPositions();
+  auto ik = tool.end_effector->getIK();
+  double miss = 0;
+  // Rounds of the run's (10-iteration) IK until it stops getting closer: a target across the
+  // workspace takes a few, one out of reach stops short.
+  for (int round = 0; round < 40; ++round) {
+    tool.target->setTransform(tool_target_transform(tool.end_effector->getWorldTransform(), target));
+    ik->findSolution(tool.solution);
+    ik->setPositions(tool.solution);
+    const double now = (tool.end_effector->getWorldTransform().translation() - target.position.cast<double>()).norm();
+    if (now < 1e-4 || (round > 4 && now > 0.99 * miss)) {
+      miss = now;
+      break;
+    }
+    miss = now;
+  }
+  impl_->robots.at(tool.robot).skeleton->setPositions(saved);
+  return miss;
 }
 
 void World::command_base_velocity(RobotIndex robot_index, double speed, double turn_rate) {

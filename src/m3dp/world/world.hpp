@@ -13,6 +13,7 @@
 
 #include "m3dp/core/geometry.hpp"
 #include "m3dp/core/types.hpp"
+#include "m3dp/world/controllers/target_follower.hpp"
 #include "m3dp/world/statistics.hpp"
 
 namespace m3dp {
@@ -148,8 +149,14 @@ class World {
   [[nodiscard]] bool external_control(RobotIndex robot) const;
   /// Joint position targets (rad or m, joint_names() order), held until the next command.
   void command_joint_targets(RobotIndex robot, const std::vector<double>& positions);
-  /// Where a tool should be, reached by the same IK as a tool path; held until the next command.
-  void command_tool_target(ToolIndex tool, const ToolTarget& target);
+  /// Where a tool should be, reached by the same IK as a tool path; held until the next command. The
+  /// tool goes there along a straight line within `limits` (controllers/target_follower.hpp).
+  void command_tool_target(ToolIndex tool, const ToolTarget& target, const MotionLimits& limits = {});
+  /// Where a commanded tool is asked to be on its way to its target now; null unless under a tool target.
+  [[nodiscard]] const TargetFollower* tool_target_follower(ToolIndex tool) const;
+  /// How far (m) the robot's IK gets the tool from `target` (position only), from the configuration
+  /// it is in, the robot left as it was: about 0 for a target in reach.
+  [[nodiscard]] double tool_target_miss(ToolIndex tool, const ToolTarget& target);
   /// A mobile base's forward speed (m/s) and turn rate (rad/s), held until the next command. Throws
   /// Error if the robot has no mobile base.
   void command_base_velocity(RobotIndex robot, double speed, double turn_rate);

@@ -75,13 +75,14 @@ class RunFigures final : public RunObserver {
         report.extrusion_pressure_max = nozzle.extrusion_pressure_max;
       }
       report.longest_blockage = nozzle.longest_blockage;
-      summary.volume.commanded += report.volume_commanded;
-      summary.volume.emitted += report.volume_emitted;
-      summary.volume.lost_at_nozzles += report.volume_lost;
       summary.nozzles.push_back(report);
     }
-    summary.volume.removed = double(state.particles_removed_total) * particle_volume;
-    summary.volume.in_particles = double(solver.fluid().size()) * particle_volume;
+    const Simulation::VolumeBalance balance = simulation.volume_balance();
+    summary.volume.commanded = balance.commanded;
+    summary.volume.emitted = balance.emitted;
+    summary.volume.lost_at_nozzles = balance.lost_at_nozzles;
+    summary.volume.removed = balance.removed;
+    summary.volume.in_particles = balance.in_particles;
     if (!summary.meshes.empty()) {
       summary.volume.last_mesh = summary.meshes.back().volume;
       summary.volume.last_mesh_time = summary.meshes.back().time;

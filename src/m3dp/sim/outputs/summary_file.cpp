@@ -191,7 +191,7 @@ class SummaryFile final : public RunObserver {
   void resume(const Simulation& simulation, StateReader& /*in*/) override { write_running(simulation); }
   void observe(const Simulation& /*simulation*/, const StepReport& /*report*/) override {}
   void finish(const Simulation& simulation, RunSummary& summary) override {
-    io::write_text_atomically(output_directory_ / "summary.json", summary_json(summary, simulation).dump(2) + "\n");
+    io::write_text_atomically(output_directory_ / "summary.json", summary_json_text(summary, simulation));
   }
 
  private:
@@ -215,3 +215,9 @@ std::unique_ptr<RunObserver> make_summary_file(Simulation& simulation, const Run
 }
 
 }  // namespace m3dp::sim::outputs
+
+namespace m3dp::sim {
+std::string summary_json_text(const RunSummary& summary, const Simulation& simulation) {
+  return outputs::summary_json(summary, simulation).dump(2) + "\n";
+}
+}  // namespace m3dp::sim

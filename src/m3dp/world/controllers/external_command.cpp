@@ -7,11 +7,19 @@ void ExternalCommand::set_joint_targets(Eigen::VectorXd targets) {
   mode_ = Mode::joints;
 }
 
-void ExternalCommand::set_tool_target(ToolIndex tool, const ToolTarget& target) {
+void ExternalCommand::set_tool_target(ToolIndex tool, const ToolTarget& target, const MotionLimits& limits,
+                                      const Eigen::Vector3d& tool_now, double now) {
+  // From where the tool is unless it was on its way to a target already (then on from there).
+  if (mode_ != Mode::tool || tool_ != tool) follower_.reset(tool_now, now);
+  follower_.set_target(target.position.cast<double>(), limits);
   tool_target_ = target;
   if (tool_ != tool) {
     tool_ik_ = ToolIk();  // one tool at a time: the IK aims the one last commanded
-    tool_ik_.follow(tool, [this](double) { return tool_target_; });
+    tool_ik_.follow(tool, [this](double time) {
+      ToolTarget on_the_way = tool_target_;
+      on_the_way.position = follower_.advance(time).cast<Real>();
+      return on_the_way;
+    });
     tool_ = tool;
   }
   mode_ = Mode::tool;

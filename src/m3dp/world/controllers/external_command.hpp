@@ -5,6 +5,7 @@
 // the same inverse kinematics as a path (tool_ik.hpp), and a base velocity.
 #include <optional>
 
+#include "m3dp/world/controllers/target_follower.hpp"
 #include "m3dp/world/controllers/tool_ik.hpp"
 
 namespace m3dp::world {
@@ -13,8 +14,14 @@ class ExternalCommand final : public Controller {
  public:
   /// The joints' position targets (rad or m, World::joint_names() order); ends a tool target.
   void set_joint_targets(Eigen::VectorXd targets);
-  /// Where `tool` should be; ends joint targets. Reached through IK over the world's IK period.
-  void set_tool_target(ToolIndex tool, const ToolTarget& target);
+  /// Where `tool` should be; ends joint targets. The tool goes there along a straight line within
+  /// `limits` (target_follower.hpp), from `tool_now` (m, where it is) at `now` (s) unless it was
+  /// already going to a target; its joints follow through IK over the world's IK period.
+  void set_tool_target(ToolIndex tool, const ToolTarget& target, const MotionLimits& limits, const Eigen::Vector3d& tool_now, double now);
+  /// Where the commanded tool is asked to be now on its way, and whether it got there; none without a tool target.
+  [[nodiscard]] const TargetFollower* tool_follower(ToolIndex tool) const {
+    return mode_ == Mode::tool && tool_ == tool ? &follower_ : nullptr;
+  }
   /// A differential-drive base's forward speed (m/s) and turn rate (rad/s), held until changed.
   void set_base_velocity(double speed, double turn_rate);
   /// No command: the joints hold their last targets and the base stands.
@@ -29,7 +36,8 @@ class ExternalCommand final : public Controller {
   Eigen::VectorXd joint_targets_;
   ToolTarget tool_target_;
   std::optional<ToolIndex> tool_;
-  ToolIk tool_ik_;  // follows tool_target_
+  ToolIk tool_ik_;           // follows follower_ with tool_target_'s axis
+  TargetFollower follower_;  // the tool's way to tool_target_
   double base_speed_ = 0, base_turn_rate_ = 0;
 };
 
