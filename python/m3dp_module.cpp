@@ -139,38 +139,94 @@ class PySimulation {
     run_.reset();
   }
 
-  py::dict camera_images(const std::string& name) {
+  /// The rig's index of the camera called `name`.
+  std::size_t camera_index(const std::string& name) {
     auto& rig = simulation_->cameras();
+    std::vector<std::string> names;
     for (std::size_t camera = 0; camera < rig.size(); ++camera) {
-      if (rig.settings(camera).name != name) continue;
-      py::dict result;
-      arena_.execute([&] { (void)rig.image(*simulation_, camera); (void)rig.points(*simulation_, camera); });
-      const sensors::CameraImage& image = rig.image(*simulation_, camera);
-      const auto rows = static_cast<py::ssize_t>(image.height), columns = static_cast<py::ssize_t>(image.width);
-      auto image_view = [&](const char* what, const auto* data, py::ssize_t channels) {
-        py::array array = snapshot(fmt::format("camera {} {}", name, what), data, std::size_t(rows * columns), std::size_t(channels));
-        return channels > 1 ? array.reshape({rows, columns, channels}) : array.reshape({rows, columns});
-      };
-      if (!image.rgb.empty()) result["rgb"] = image_view("rgb", image.rgb.data(), 3);
-      if (!image.depth.empty()) result["depth"] = image_view("depth", image.depth.data(), 1);
-      if (!image.segment.empty()) result["segmentation"] = image_view("segmentation", image.segment.data(), 1);
-      const auto& points = rig.points(*simulation_, camera);
-      py::array_t<float> xyz({static_cast<py::ssize_t>(points.size()), py::ssize_t(3)});
-      py::array_t<std::uint16_t> segments(static_cast<py::ssize_t>(points.size()));
-      auto xyz_values = xyz.mutable_unchecked<2>();
-      auto segment_values = segments.mutable_unchecked<1>();
-      for (std::size_t i = 0; i < points.size(); ++i) {
-        xyz_values(i, 0) = points[i].x;
-        xyz_values(i, 1) = points[i].y;
-        xyz_values(i, 2) = points[i].z;
-        segment_values(i) = points[i].segment;
-      }
-      result["points"] = xyz;
-      result["point_segments"] = segments;
-      result["pose"] = pose_array(rig.pose(*simulation_, camera));
-      return result;
+      if (rig.settings(camera).name == name) return camera;
+      names.push_back(rig.settings(camera).name);
     }
-    throw Error(fmt::format("no camera '{}' in the scene", name));
+    throw Error(fmt::format("no camera '{}' in the scene (cameras: {})", name, fmt::join(names, ", ")));
+  }
+
+  /// The camera's images now; its point cloud in `points_frame` ("optical", "world"; none: the
+  /// scene's <point_cloud> setting).
+  py::dict camera_images(const std::string& name, const std::optional<std::string>& points_frame) {
+    auto& rig = simulation_->cameras();
+    const std::size_t camera = camera_index(name);
+    const sensors::CameraSettings& settings = rig.settings(camera);
+    using Frame = sensors::CameraSettings::PointCloud;
+    Frame frame = settings.point_cloud;
+    if (points_frame) {
+      if (*points_frame == "optical") frame = Frame::optical;
+      else if (*points_frame == "world") frame = Frame::world;
+      else throw Error(fmt::format("camera '{}': points='{}' (expected 'optical', 'world' or None)", name, *points_frame));
+      if (!sensors::has_depth(settings.type))
+        throw Error(fmt::format("camera '{}' is a {}: it has no depth to make points of", name, sensors::camera_type_name(settings.type)));
+    }
+    py::dict result;
+    const sensors::CameraImage* rendered = nullptr;
+    arena_.execute([&] { rendered = &rig.image(*simulation_, camera); });
+    const sensors::CameraImage& image = *rendered;
+    const auto rows = static_cast<py::ssize_t>(image.height), columns = static_cast<py::ssize_t>(image.width);
+    auto image_view = [&](const char* what, const auto* data, py::ssize_t channels) {
+      py::array array = snapshot(fmt::format("camera {} {}", name, what), data, std::size_t(rows * columns), std::size_t(channels));
+      return channels > 1 ? array.reshape({rows, columns, channels}) : array.reshape({rows, columns});
+    };
+    if (!image.rgb.empty()) result["rgb"] = image_view("rgb", image.rgb.data(), 3);
+    if (!image.depth.empty()) result["depth"] = image_view("depth", image.depth.data(), 1);
+    if (!image.segment.empty()) result["segmentation"] = image_view("segmentation", image.segment.data(), 1);
+    const Pose camera_pose = rig.pose(*simulation_, camera);
+    std::vector<sensors::CloudPoint> points;
+    if (frame != Frame::none && !image.depth.empty())
+      sensors::point_cloud(image, sensors::Intrinsics::of(settings), points, frame == Frame::world ? sensors::optical_pose(camera_pose) : Pose{});
+    py::array_t<float> xyz({static_cast<py::ssize_t>(points.size()), py::ssize_t(3)});
+    py::array_t<std::uint16_t> segments(static_cast<py::ssize_t>(points.size()));
+    auto xyz_values = xyz.mutable_unchecked<2>();
+    auto segment_values = segments.mutable_unchecked<1>();
+    for (std::size_t i = 0; i < points.size(); ++i) {
+      xyz_values(i, 0) = points[i].x;
+      xyz_values(i, 1) = points[i].y;
+      xyz_values(i, 2) = points[i].z;
+      segment_values(i) = points[i].segment;
+    }
+    result["points"] = xyz;
+    result["point_segments"] = segments;
+    result["points_frame"] = frame == Frame::world ? "world" : frame == Frame::optical ? "optical" : "none";
+    result["pose"] = pose_array(camera_pose);
+    result["optical_pose"] = pose_array(sensors::optical_pose(camera_pose));
+    return result;
+  }
+
+  /// What a camera is: intrinsics, size, clip, rate, where it is mounted and its pose now in both frames.
+  py::dict camera_info(const std::string& name) {
+    auto& rig = simulation_->cameras();
+    const std::size_t camera = camera_index(name);
+    const sensors::CameraSettings& settings = rig.settings(camera);
+    const sensors::Intrinsics intrinsics = sensors::Intrinsics::of(settings);
+    py::dict info;
+    info["type"] = std::string(sensors::camera_type_name(settings.type));
+    info["width"] = settings.width;
+    info["height"] = settings.height;
+    py::array_t<double> k({py::ssize_t(3), py::ssize_t(3)});
+    auto values = k.mutable_unchecked<2>();
+    const double matrix[3][3] = {{intrinsics.fx, 0, intrinsics.cx}, {0, intrinsics.fy, intrinsics.cy}, {0, 0, 1}};
+    for (int row = 0; row < 3; ++row)
+      for (int column = 0; column < 3; ++column) values(row, column) = matrix[row][column];
+    info["K"] = k;
+    info["horizontal_fov"] = settings.horizontal_fov;
+    info["vertical_fov"] = intrinsics.vertical_fov();
+    info["near"] = settings.near;
+    info["far"] = settings.far;
+    info["update_rate"] = settings.update_rate;
+    info["depth_noise_stddev"] = settings.noise.stddev;
+    info["robot"] = settings.robot;
+    info["link"] = settings.link;
+    const Pose camera_pose = rig.pose(*simulation_, camera);
+    info["pose"] = pose_array(camera_pose);
+    info["optical_pose"] = pose_array(sensors::optical_pose(camera_pose));
+    return info;
   }
 
   py::dict camera_legend() {
@@ -613,9 +669,17 @@ one step belong together (ids tells which particle a row is: the order changes b
         for (const auto& camera : self.simulation().scene().cameras) names.push_back(camera.settings.name);
         return names;
       })
-      .def("camera", [](py::object owner, const std::string& name) { return owner.cast<PySimulation&>().camera_images(name); },
-           py::arg("name"), "The camera's image now (rendered once a step): rgb (h, w, 3) uint8, depth (h, w) float32 m "
-                            "(inf: nothing), segmentation (h, w) uint16 (see camera_legend), points (m, 3) in the camera's "
-                            "point-cloud frame, and the camera's pose. Images are read-only snapshots of this step.")
+      .def("camera", &PySimulation::camera_images, py::arg("name"), py::arg("points") = py::none(),
+           "The camera's image now (rendered once a step): rgb (h, w, 3) uint8, depth (h, w) float32 m along the optical "
+           "axis (inf: nothing), segmentation (h, w) uint16 (see camera_legend); points (m, 3) float32 and point_segments "
+           "of the depth image, in points_frame: points='optical' or 'world' for any depth camera, None as the scene's "
+           "<point_cloud> says (none: empty); pose (the SDF camera frame: x forward, z up) and optical_pose (x right, "
+           "y down, z forward: the frame the images and K are in), [x y z qx qy qz qw] in the world. Images are "
+           "read-only snapshots of this step.")
+      .def("camera_info", &PySimulation::camera_info, py::arg("name"),
+           "What the camera is: type, width, height, K (3×3 pinhole intrinsics, pixels, the optical frame), horizontal and "
+           "vertical fov (rad), near and far clip (m), update_rate (images per simulated s), depth_noise_stddev (m), the "
+           "robot and link it is on (empty: fixed in the world), and its pose now in the SDF camera frame (x forward, "
+           "z up) and the optical frame (z forward, x right, y down).")
       .def("camera_legend", &PySimulation::camera_legend, "What each segmentation id is: kind, name, robot, layer.");
 }

@@ -203,3 +203,46 @@ def test_a_gantry_head_takes_targets_too():
     assert sim.nozzle("even")["control"] == "path"
     with pytest.raises(m3dp.Error, match="no print head 'nowhere'"):
         sim.set_head_target("nowhere", goal)
+
+
+def quaternion_matrix(q):
+    x, y, z, w = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def test_camera_intrinsics_frames_and_points_on_request():
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(2.5)
+    info = sim.camera_info("wrist")
+    assert (info["width"], info["height"]) == (320, 240) and info["robot"] == "ur10"
+    K = info["K"]
+    assert K.shape == (3, 3) and K[0, 2] == pytest.approx(160) and K[1, 2] == pytest.approx(120)
+    assert K[0, 0] == pytest.approx(160 / np.tan(info["horizontal_fov"] / 2))
+    assert 0 < info["near"] < info["far"]
+    # The SDF camera frame looks along its x axis; the optical frame along its z axis, the same way.
+    camera, optical = quaternion_matrix(info["pose"][3:]), quaternion_matrix(info["optical_pose"][3:])
+    np.testing.assert_allclose(camera[:, 0], optical[:, 2], atol=1e-6)
+    np.testing.assert_allclose(camera[:, 1], -optical[:, 0], atol=1e-6)
+    # The scene asks the wrist camera for no point cloud; on request it gives one in either frame.
+    image = sim.camera("wrist")
+    assert image["points"].shape == (0, 3) and image["points_frame"] == "none"
+    in_optical = sim.camera("wrist", points="optical")
+    in_world = sim.camera("wrist", points="world")
+    depth = in_optical["depth"]
+    rows, columns = np.nonzero(np.isfinite(depth))
+    points = in_optical["points"]
+    assert len(points) == len(rows) > 1000
+    # Each optical point projects through K onto its pixel's centre, at its depth.
+    projected = (K @ points.T).T
+    np.testing.assert_allclose(projected[:, 0] / projected[:, 2], columns + 0.5, atol=0.01)
+    np.testing.assert_allclose(projected[:, 1] / projected[:, 2], rows + 0.5, atol=0.01)
+    np.testing.assert_allclose(points[:, 2], depth[rows, columns], rtol=1e-5)
+    # And optical_pose takes them to the world's.
+    world = (optical @ points.T).T + in_optical["optical_pose"][:3]
+    np.testing.assert_allclose(world, in_world["points"], atol=1e-4)
+    with pytest.raises(m3dp.Error, match="points='sideways'"):
+        sim.camera("wrist", points="sideways")
+    with pytest.raises(m3dp.Error, match=r"no camera 'nowhere' in the scene \(cameras: "):
+        sim.camera_info("nowhere")
