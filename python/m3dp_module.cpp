@@ -268,6 +268,9 @@ class PySimulation {
     options.threads = threads_;
     // Commands from Python are not in checkpoints, so a run stepped from Python writes none.
     options.checkpoint_period = 0;
+    // The printed mesh joins the world at the step it was asked for, recorded or not: the physics
+    // does not depend on whether, or how fast, outputs are written.
+    options.wait_for_meshes = true;
     run_ = std::make_unique<sim::Run>(*simulation_, options);
   }
   sim::RunSummary finish_run() {
@@ -474,6 +477,25 @@ one step belong together (ids tells which particle a row is: the order changes b
         return result;
       }, "Where the printed volume went so far (m³), as summary.json's volume_m3: commanded (asked of the nozzles), "
          "emitted, lost_at_nozzles (asked while blocked, never emitted), removed (left the bounds), in_particles (now).")
+      .def_property_readonly("printed_mesh", [](PySimulation& self) -> py::object {
+        const auto& mesh = self.simulation().printed_mesh();
+        if (!mesh) return py::none();
+        py::dict result;
+        py::array_t<float> vertices({static_cast<py::ssize_t>(mesh->vertices.size()), py::ssize_t(3)});
+        auto vertex_values = vertices.mutable_unchecked<2>();
+        for (std::size_t i = 0; i < mesh->vertices.size(); ++i)
+          for (int k = 0; k < 3; ++k) vertex_values(i, k) = float(mesh->vertices[i][k]);
+        py::array_t<std::uint32_t> triangles({static_cast<py::ssize_t>(mesh->triangles.size()), py::ssize_t(3)});
+        auto triangle_values = triangles.mutable_unchecked<2>();
+        for (std::size_t i = 0; i < mesh->triangles.size(); ++i)
+          for (int k = 0; k < 3; ++k) triangle_values(i, k) = std::uint32_t(mesh->triangles[i][k]);
+        result["vertices"] = vertices;
+        result["triangles"] = triangles;
+        result["meshes_made"] = self.simulation().printed_mesh_version();
+        return result;
+      }, "The printed material's surface as the rigid world holds it (the collision body robots meet): vertices "
+         "(n, 3) m and triangles (m, 3), copies, and how many meshes have joined the world so far; None before the first "
+         "or when the scene has no <meshing>. Made at the meshing period whether or not the run is recorded.")
       .def_property_readonly("material_names", [](PySimulation& self) {
         std::vector<std::string> names;
         for (const auto& entry : self.simulation().scene().materials) names.push_back(entry.material.name);

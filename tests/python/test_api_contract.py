@@ -246,3 +246,23 @@ def test_camera_intrinsics_frames_and_points_on_request():
         sim.camera("wrist", points="sideways")
     with pytest.raises(m3dp.Error, match=r"no camera 'nowhere' in the scene \(cameras: "):
         sim.camera_info("nowhere")
+
+
+def test_the_print_joins_the_world_whether_or_not_it_is_recorded(tmp_path):
+    # The demo meshes every 4 s: at 4.0 s its printed wall becomes the world's collision body, the
+    # same for a simulation that records nothing and one that records from 1 s on.
+    quiet, recorded = m3dp.Simulation(DEMO, threads=2), m3dp.Simulation(DEMO, threads=2)
+    assert quiet.printed_mesh is None
+    recorded.step_to(1.0)
+    recorded.record(tmp_path / "run")
+    for sim in (quiet, recorded):
+        sim.step_to(4.2)
+    mesh, mesh_recorded = quiet.printed_mesh, recorded.printed_mesh
+    assert mesh is not None and mesh["meshes_made"] == 1 and len(mesh["triangles"]) > 1000
+    # On the printed wall's square (0.58..0.82 m, −0.12..0.12 m), up to its first layers.
+    assert 0.5 < mesh["vertices"][:, 0].mean() < 0.9 and mesh["vertices"][:, 2].max() < 0.05
+    np.testing.assert_array_equal(mesh["vertices"], mesh_recorded["vertices"])
+    np.testing.assert_array_equal(quiet.positions, recorded.positions)
+    summary = recorded.close()
+    assert summary["meshes_inserted"] == 1 and len(summary["meshes"]) == 2  # at 4 s, and the final state's
+    assert (tmp_path / "run" / summary["meshes"][0]["file"]).exists()

@@ -12,7 +12,7 @@ namespace m3dp::sim {
 
 MeshingWorker::MeshingWorker(surface::SurfaceSettings settings, std::filesystem::path folder, std::string format)
     : settings_(settings.resolved()), folder_(std::move(folder)), format_(std::move(format)), surface_(std::make_unique<surface::IncrementalSurface>(settings_)) {
-  std::filesystem::create_directories(folder_);
+  if (!folder_.empty()) std::filesystem::create_directories(folder_);
   thread_ = std::thread([this] { run(); });
 }
 
@@ -102,7 +102,7 @@ void MeshingWorker::run() {
     Mesh mesh;
     mesh.time = time;
     mesh.particles = moving.size() + resting.size();
-    mesh.file = folder_ / fmt::format("mesh_{:06}.{}", index, format_);
+    if (!folder_.empty()) mesh.file = folder_ / fmt::format("mesh_{:06}.{}", index, format_);
     std::shared_ptr<TriangleMesh> surface;
     std::string failure;
     try {
@@ -111,7 +111,7 @@ void MeshingWorker::run() {
       mesh.reused_particles = stats.reused_particles;
       mesh.tiles = stats.mesh_tiles;
       mesh.remeshed_tiles = stats.remeshed_tiles;
-      io::write_triangle_mesh(mesh.file, *surface);
+      if (!mesh.file.empty()) io::write_triangle_mesh(mesh.file, *surface);
       mesh.triangles = surface->triangles.size();
       mesh.volume = surface::signed_volume(*surface);
     } catch (const std::exception& error) {

@@ -31,7 +31,8 @@ class MeshingWorker {
     double seconds = 0;              // wall time to reconstruct and write
   };
 
-  /// `settings` must have the particle radius; `format` is obj, ply or stl.
+  /// `settings` must have the particle radius; `format` is obj, ply or stl; an empty `folder`: the
+  /// meshes are made, not written.
   MeshingWorker(surface::SurfaceSettings settings, std::filesystem::path folder, std::string format);
   ~MeshingWorker();
   MeshingWorker(const MeshingWorker&) = delete;

@@ -38,8 +38,9 @@ namespace {
 /// save their part, then the simulation's state, then the caches are dropped, as a resumed run will
 /// start without them.
 void write_checkpoint(Simulation& simulation, ObserverSchedule& schedule, CheckpointRun run, const RunOptions& options) {
+  simulation.prepare_checkpoint();  // first: the printed mesh in flight joins the world
   StateWriter observers;
-  schedule.save(observers);  // first: the printed mesh in flight joins the world
+  schedule.save(observers);
   run.time = simulation.time();
   run.step = simulation.solver().state().step;
   StateWriter out;

@@ -9,6 +9,7 @@
 #include <cmath>
 
 #include "m3dp/sim/camera_rig.hpp"
+#include "m3dp/sim/printed_body.hpp"
 #include "m3dp/sim/robots.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 
@@ -64,6 +65,7 @@ Simulation::Simulation(const scene::Scene& scene)
   const double particle_volume = std::pow(static_cast<double>(spacing), 3);
   solver_.reserve(initial_particles + static_cast<std::size_t>(1.1 * emitted_volume / particle_volume) + 1024);
   initial_fluid_mass_ = solver_.total_fluid_mass();
+  if (scene_.meshing.enabled) printed_body_ = std::make_unique<PrintedBody>(*this);
   update_print_heads();
 }
 
@@ -300,6 +302,8 @@ const sph::StepStats& Simulation::step() {
   start = Clock::now();
   world_.step_to(solver_.time());
   last_world_ms_ = milliseconds_since(start);
+  if (printed_body_)
+    if (auto mesh = printed_body_->after_step(*this)) set_printed_mesh(std::move(mesh));
   check_material_kept();
   return stats;
 }
@@ -358,6 +362,7 @@ void Simulation::save_state(StateWriter& out) const {
     out.put(printed_mesh_->vertices);
     out.put(printed_mesh_->triangles);
   }
+  if (printed_body_) printed_body_->save(out);
   out.put(cameras_ != nullptr);
   if (cameras_) cameras_->save_totals(out);
   out.put(plan_clocks_);
@@ -398,6 +403,7 @@ void Simulation::load_state(StateReader& in) {
     set_printed_mesh(std::move(mesh));
   }
   printed_mesh_version_ = mesh_version;
+  if (printed_body_) printed_body_->load(in, printed_mesh_);
   if (in.get<bool>()) cameras().load_totals(in);
   std::vector<PlanClock> clocks;
   in.get(clocks);
@@ -429,6 +435,11 @@ void Simulation::load_state(StateReader& in) {
 }
 
 void Simulation::drop_caches() { solver_.drop_caches(); }
+
+void Simulation::prepare_checkpoint() {
+  if (!printed_body_) return;
+  if (auto mesh = printed_body_->settle()) set_printed_mesh(std::move(mesh));
+}
 
 void Simulation::set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh) {
   world_.set_static_mesh("printed_material", *mesh);

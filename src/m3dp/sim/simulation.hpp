@@ -18,6 +18,7 @@
 namespace m3dp::sim {
 
 class CameraRig;
+class PrintedBody;
 
 class Simulation {
  public:
@@ -99,6 +100,13 @@ class Simulation {
   /// Puts `mesh` (e.g. the newest surface of the printed material) into the world as the static
   /// collision body "printed_material", replacing the previous one.
   void set_printed_mesh(std::shared_ptr<const TriangleMesh> mesh);
+  /// The printed material's surface, remade at the scene's <meshing> period and put into the world
+  /// after the step it was asked at (printed_body.hpp), whether or not a run writes it; null when
+  /// the scene does not mesh. Outputs tell it where to write its meshes.
+  [[nodiscard]] PrintedBody* printed_body() const { return printed_body_.get(); }
+  /// Before a checkpoint: the mesh in progress joins the world and the kept meshing field is dropped,
+  /// so that the run goes on as one resumed from the checkpoint will.
+  void prepare_checkpoint();
 
   /// The scene's cameras (camera_rig.hpp), made on first use: each renders the simulation as it is,
   /// once a step, when asked. Observers share it, as they share the measured density.
@@ -189,6 +197,7 @@ class Simulation {
   std::size_t printed_mesh_version_ = 0;
   double last_coupling_ms_ = 0, last_world_ms_ = 0;
   mutable DensityMeasurement density_measurement_;
+  std::unique_ptr<PrintedBody> printed_body_;
   mutable std::unique_ptr<CameraRig> cameras_;  // a cache of what the state is: observers share it
 };
 
