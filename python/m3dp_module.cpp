@@ -266,7 +266,8 @@ class PySimulation {
   void start_run(sim::RunOptions options) {
     options.show_progress = false;
     options.threads = threads_;
-    // Commands from Python are not in checkpoints, so a run stepped from Python writes none.
+    // A robot's commands from outside (ExternalCommand) are not in checkpoints, so a run stepped from
+    // Python writes none.
     options.checkpoint_period = 0;
     // The printed mesh joins the world at the step it was asked for, recorded or not: the physics
     // does not depend on whether, or how fast, outputs are written.

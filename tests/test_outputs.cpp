@@ -375,6 +375,58 @@ TEST(Checkpoint, ASimulationLoadedFromItsStateStepsOnBitForBit) {
   EXPECT_EQ(original.time(), resumed.time());
 }
 
+TEST(Checkpoint, PathsTargetsAndCommandsGivenAtRunTimeAreInTheCheckpoint) {
+  // A gantry head given a new path (a circle) and then a target with extrusion commanded: a
+  // simulation loaded from its state follows the same new plans bit for bit, where one made from
+  // the scene alone would follow the scene's path.
+  sim::WallPrintSetup setup;
+  setup.layers = 2;
+  setup.particle_radius = Real(0.002);
+  const scene::Scene scene = sim::wall_print_scene(setup);
+  sim::Simulation original(scene);
+  while (original.solver().fluid().size() < 200) original.step();
+  const Vec3 here = original.nozzle_state(0).pose.position;
+  toolpath::PathSegment circle;
+  circle.curve = toolpath::CircleCurve{here + Vec3(0, Real(0.02), Real(0.004)), Real(0.02), Real(-kPi / 2), Real(0.5)};
+  circle.speed = Real(0.05);
+  original.set_head_path(0, {circle}, 0.05, false);
+  for (int step = 0; step < 40; ++step) original.step();
+  original.command_head_target(0, world::ToolTarget{original.nozzle_state(0).pose.position + Vec3(0, 0, Real(0.01)), Vec3(0, 0, -1)},
+                               world::MotionLimits{0.05, 0.5});
+  original.command_head(0, sim::Simulation::HeadCommand{true, Real(0.5)});
+  for (int step = 0; step < 10; ++step) original.step();
+  StateWriter saved;
+  original.prepare_checkpoint();
+  original.save_state(saved);
+  original.drop_caches();
+  sim::Simulation resumed(scene);
+  StateReader reader(saved.bytes(), "test checkpoint");
+  resumed.load_state(reader);
+  EXPECT_EQ(reader.remaining(), 0u);
+  EXPECT_EQ(resumed.head_control(0), sim::Simulation::HeadControl::external);
+  EXPECT_EQ(resumed.head_command(0).flow_scale, Real(0.5));
+  EXPECT_EQ(resumed.head_path(0).end_time(), original.head_path(0).end_time());
+  EXPECT_NE(resumed.head_path(0).end_time(), scene.print_heads[0].trajectory.end_time());  // the scene keeps its own
+  for (int step = 0; step < 100; ++step) {
+    original.step();
+    resumed.step();
+  }
+  EXPECT_EQ(original.nozzle_state(0).pose.position, resumed.nozzle_state(0).pose.position);
+  const auto& a = original.solver().fluid();
+  const auto& b = resumed.solver().fluid();
+  ASSERT_EQ(a.size(), b.size());
+  EXPECT_EQ(std::memcmp(a.position.data(), b.position.data(), a.size() * sizeof(Vec3)), 0);
+  // Released, the head goes back to its (new) path in both.
+  original.release_head(0);
+  resumed.release_head(0);
+  for (int step = 0; step < 300; ++step) {
+    original.step();
+    resumed.step();
+  }
+  EXPECT_EQ(original.head_control(0), resumed.head_control(0));
+  EXPECT_EQ(original.nozzle_state(0).pose.position, resumed.nozzle_state(0).pose.position);
+}
+
 TEST(Checkpoint, DamagedOrForeignCheckpointsAreErrorsThatNameTheFile) {
   sim::HydrostaticSetup setup;
   setup.particle_radius = Real(0.01);

@@ -72,8 +72,10 @@ int validate_command(const std::filesystem::path& scene_file) {
   // mobile base or a mount may name what the robot does not have.
   m3dp::world::World world;
   const std::vector<m3dp::sim::PlanClock> clocks(scene.robots.size());
-  const auto robots = m3dp::sim::add_scene_robots(scene, world, clocks);
-  m3dp::sim::add_print_head_tools(scene, world, robots, 2 * scene.solver.particle_radius, clocks);
+  const auto head_paths = m3dp::sim::scene_head_paths(scene);
+  const auto base_paths = m3dp::sim::scene_base_paths(scene);
+  const auto robots = m3dp::sim::add_scene_robots(scene, world, clocks, base_paths);
+  m3dp::sim::add_print_head_tools(scene, world, robots, 2 * scene.solver.particle_radius, clocks, head_paths);
   std::size_t collisions = 0;
   for (const auto& body : scene.bodies) collisions += body.collisions.size();
   fmt::print("{}: OK — world '{}', {} static bodies ({} collision shapes), {} dynamic bodies, {} robots, {} materials, {} fluid "

@@ -36,8 +36,8 @@ void PrioritizedCoordination::place(Simulation& simulation, std::size_t robot, d
   world::World& world = simulation.world();
   const world::RobotIndex index = simulation.robots()[robot];
   std::optional<Vec3> base;
-  if (const auto& mobile = scene.robots[robot].mobile_base; mobile && mobile->path) {
-    const auto sample = mobile->path->sample(plan_time);
+  if (const auto& base_path = simulation.base_path(robot)) {
+    const auto sample = base_path->sample(plan_time);
     // The base faces the way its path goes; where the path stands still, the way it faces now.
     double heading = world.base_x_y_heading(index).z();
     if (sample.velocity.head<2>().norm() > 1e-9) heading = std::atan2(sample.velocity.y(), sample.velocity.x());
@@ -48,7 +48,7 @@ void PrioritizedCoordination::place(Simulation& simulation, std::size_t robot, d
     if (simulation.robot_of_head(h) != robot || !simulation.print_head_tool(h)) continue;
     const auto& head = scene.print_heads[h];
     tool_targets_.emplace_back(*simulation.print_head_tool(h),
-                               world::ToolTarget{head.trajectory.sample(plan_time).position, head.direction.normalized()});
+                               world::ToolTarget{simulation.head_path(h).sample(plan_time).position, head.direction.normalized()});
   }
   world.place_robot(index, base, tool_targets_);
 }
@@ -118,9 +118,9 @@ void PrioritizedCoordination::update(Simulation& simulation, std::vector<PlanClo
     const double elapsed = now - last_decision_;
     for (std::size_t r = 0; r < count; ++r) {
       double path_end = -1;
-      if (const auto& mobile = scene.robots[r].mobile_base; mobile && mobile->path) path_end = mobile->path->end_time();
+      if (const auto& base_path = simulation.base_path(r)) path_end = base_path->end_time();
       for (std::size_t h = 0; h < scene.print_heads.size(); ++h)
-        if (simulation.robot_of_head(h) == r) path_end = std::max(path_end, scene.print_heads[h].trajectory.end_time());
+        if (simulation.robot_of_head(h) == r) path_end = std::max(path_end, simulation.head_path(h).end_time());
       if (clocks[r].rate <= 0 && clocks[r].at(now) < path_end) reports_[r].waiting_time += elapsed;
       if (clocks[r].rate > 0 && clocks[r].rate < 1) reports_[r].slowed_time += elapsed;
     }

@@ -6,8 +6,21 @@
 
 namespace m3dp::sim {
 
+std::vector<toolpath::Trajectory> scene_head_paths(const scene::Scene& scene) {
+  std::vector<toolpath::Trajectory> paths;
+  for (const auto& head : scene.print_heads) paths.push_back(head.trajectory);
+  return paths;
+}
+
+std::vector<std::optional<toolpath::Trajectory>> scene_base_paths(const scene::Scene& scene) {
+  std::vector<std::optional<toolpath::Trajectory>> paths;
+  for (const auto& robot : scene.robots) paths.push_back(robot.mobile_base ? robot.mobile_base->path : std::nullopt);
+  return paths;
+}
+
 std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world,
-                                                const std::vector<PlanClock>& clocks) {
+                                                const std::vector<PlanClock>& clocks,
+                                                const std::vector<std::optional<toolpath::Trajectory>>& base_paths) {
   std::vector<world::RobotIndex> robots;
   for (std::size_t r = 0; r < scene.robots.size(); ++r) {
     const auto& robot = scene.robots[r];
@@ -28,7 +41,7 @@ std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world
       const auto& base = *robot.mobile_base;
       world.make_diff_drive(index, world::DiffDriveDescription{base.left_wheel_joint, base.right_wheel_joint,
                                                                 base.wheel_radius, base.wheel_separation, 0});
-      if (base.path) world.set_base_trajectory(index, clocked_base_path(*base.path, clocks.at(r)));
+      if (const auto& path = base_paths.at(r)) world.set_base_trajectory(index, clocked_base_path(*path, clocks.at(r)));
     }
     if (!robot.initial_joint_positions.empty()) {
       const auto names = world.joint_names(index);
@@ -45,7 +58,8 @@ std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world
 
 std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::Scene& scene, world::World& world,
                                                                   const std::vector<world::RobotIndex>& robots,
-                                                                  Real particle_diameter, const std::vector<PlanClock>& clocks) {
+                                                                  Real particle_diameter, const std::vector<PlanClock>& clocks,
+                                                                  const std::vector<toolpath::Trajectory>& head_paths) {
   std::vector<std::optional<world::ToolIndex>> head_tools;
   for (std::size_t h = 0; h < scene.print_heads.size(); ++h) {
     const auto& head = scene.print_heads[h];
@@ -63,7 +77,7 @@ std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::S
     // or above a bore, whose walls the engine carries (sph::NozzleSettings::bore_length).
     tool.body_clearance = particle_diameter + head.bore_length;
     const world::ToolIndex index = world.add_tool(robots[robot], tool);
-    const toolpath::Trajectory* trajectory = &head.trajectory;
+    const toolpath::Trajectory* trajectory = &head_paths.at(h);
     const Vec3 axis = head.direction.normalized();
     const PlanClock* clock = &clocks.at(robot);
     world.set_tool_trajectory(index, [trajectory, axis, clock](double time) {

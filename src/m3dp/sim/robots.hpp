@@ -24,19 +24,27 @@ struct PlanClock {
   }
 };
 
+/// The scene's plans as a run starts them: each print head's path, and each robot's base path (none
+/// without a mobile base or a path).
+std::vector<toolpath::Trajectory> scene_head_paths(const scene::Scene& scene);
+std::vector<std::optional<toolpath::Trajectory>> scene_base_paths(const scene::Scene& scene);
+
 /// Loads every robot of the scene: its URDF (an error names the scene line that included it as
 /// well as the URDF's), its mobile base as a differential drive following its base path, its initial
-/// joint positions. Returns the world's robot for each, in scene order. Paths are sampled at
-/// `clocks[robot]` (one per scene robot; they must outlive the world's use of them).
+/// joint positions. Returns the world's robot for each, in scene order. Bases follow `base_paths`
+/// (one per scene robot), sampled at `clocks[robot]`; both must outlive the world's use of them.
 std::vector<world::RobotIndex> add_scene_robots(const scene::Scene& scene, world::World& world,
-                                                const std::vector<PlanClock>& clocks);
+                                                const std::vector<PlanClock>& clocks,
+                                                const std::vector<std::optional<toolpath::Trajectory>>& base_paths);
 
 /// Every print head a robot carries, as a tool on its link that follows the head's path by IK (with
 /// its barrel `particle_diameter` short of the exit, so the first layer is never blocked by it). One
-/// entry per print head: none for a head on an ideal gantry.
+/// entry per print head: none for a head on an ideal gantry. `head_paths` (one per head) must outlive
+/// the world's use of them.
 std::vector<std::optional<world::ToolIndex>> add_print_head_tools(const scene::Scene& scene, world::World& world,
                                                                   const std::vector<world::RobotIndex>& robots,
-                                                                  Real particle_diameter, const std::vector<PlanClock>& clocks);
+                                                                  Real particle_diameter, const std::vector<PlanClock>& clocks,
+                                                                  const std::vector<toolpath::Trajectory>& head_paths);
 /// A base path as the world follows it: sampled at the robot's plan clock (both must outlive it).
 world::BaseTrajectory clocked_base_path(const toolpath::Trajectory& path, const PlanClock& clock);
 /// The scene robot (scene order) that carries a print head; none for a head on an ideal gantry.

@@ -18,8 +18,8 @@ namespace m3dp::sim {
 namespace {
 /// When a print head's path begins each layer (s, on its clock): a layer is a height more than a
 /// quarter of the nozzle's bore from the last.
-std::vector<double> path_layer_starts(const scene::PrintHead& head) {
-  return toolpath::layer_start_times(head.trajectory.polyline(head.inner_diameter), Real(0.25) * head.inner_diameter);
+std::vector<double> path_layer_starts(const toolpath::Trajectory& path, const scene::PrintHead& head) {
+  return toolpath::layer_start_times(path.polyline(head.inner_diameter), Real(0.25) * head.inner_diameter);
 }
 }  // namespace
 
@@ -70,16 +70,18 @@ Simulation::Simulation(const scene::Scene& scene)
 }
 
 void Simulation::add_robots() {
+  head_paths_ = scene_head_paths(scene_);
+  base_paths_ = scene_base_paths(scene_);
   head_commands_.resize(scene_.print_heads.size());
   head_control_.assign(scene_.print_heads.size(), HeadControl::path);
   gantry_targets_.resize(scene_.print_heads.size());
   plan_clocks_.resize(scene_.robots.size());
   for (std::size_t head = 0; head < scene_.print_heads.size(); ++head) {
     head_robots_.push_back(robot_of_print_head(scene_, head));
-    head_layer_starts_.push_back(path_layer_starts(scene_.print_heads[head]));
+    head_layer_starts_.push_back(path_layer_starts(head_paths_[head], scene_.print_heads[head]));
   }
-  robots_ = add_scene_robots(scene_, world_, plan_clocks_);
-  head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter(), plan_clocks_);
+  robots_ = add_scene_robots(scene_, world_, plan_clocks_, base_paths_);
+  head_tools_ = add_print_head_tools(scene_, world_, robots_, solver_.particle_diameter(), plan_clocks_, head_paths_);
   if (scene_.coordinator.enabled) coordination_ = std::make_unique<PrioritizedCoordination>(scene_.coordinator, scene_);
 }
 
@@ -100,7 +102,7 @@ double Simulation::path_time(std::size_t head) const {
 
 Simulation::NozzleState Simulation::nozzle_state(std::size_t head_index) const {
   const auto& head = scene_.print_heads.at(head_index);
-  const auto sample = head.trajectory.sample(path_time(head_index));
+  const auto sample = head_paths_[head_index].sample(path_time(head_index));
   NozzleState state;
   state.pose.position = sample.position;
   state.pose.orientation = Quat::FromTwoVectors(Vec3(0, 0, -1), head.direction.normalized());
@@ -172,27 +174,35 @@ void change_path(toolpath::Trajectory& path, const Vec3& here, std::vector<toolp
 }  // namespace
 
 void Simulation::set_head_path(std::size_t head_index, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
-  auto& head = scene_.print_heads.at(head_index);
+  const auto& head = scene_.print_heads.at(head_index);
+  auto& path = head_paths_.at(head_index);
   const double now = path_time(head_index);
-  change_path(head.trajectory, head.trajectory.sample(now).position, std::move(segments), now, delay, append,
-              fmt::format("print head '{}'", head.name));
-  head_layer_starts_[head_index] = path_layer_starts(head);
+  change_path(path, path.sample(now).position, std::move(segments), now, delay, append, fmt::format("print head '{}'", head.name));
+  head_layer_starts_[head_index] = path_layer_starts(path, head);
   release_head(head_index);
 }
 
 void Simulation::set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append) {
-  auto& description = scene_.robots.at(robot);
+  const auto& description = scene_.robots.at(robot);
   if (!description.mobile_base) throw Error(fmt::format("robot '{}' has no mobile base", description.name));
-  auto& base = *description.mobile_base;
+  auto& path = base_paths_.at(robot);
   const double now = plan_clocks_[robot].at(solver_.time());
-  const bool had_path = base.path.has_value();
+  const bool had_path = path.has_value();
   // A base without a path starts its new one where it stands.
   Vec3 here = world_.base_pose(robots_[robot]).position;
-  if (!had_path) base.path = toolpath::Trajectory({}, now);
-  else here = base.path->sample(now).position;
-  change_path(*base.path, here, std::move(segments), now, delay, append && had_path, fmt::format("robot '{}'", description.name));
-  if (!had_path) world_.set_base_trajectory(robots_[robot], clocked_base_path(*base.path, plan_clocks_[robot]));
+  if (!had_path) path = toolpath::Trajectory({}, now);
+  else here = path->sample(now).position;
+  change_path(*path, here, std::move(segments), now, delay, append && had_path, fmt::format("robot '{}'", description.name));
+  if (!had_path) world_.set_base_trajectory(robots_[robot], clocked_base_path(*path, plan_clocks_[robot]));
   world_.set_external_control(robots_[robot], false);
+}
+
+void Simulation::update_print_heads() {
+  for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
+    update_head_control(i);
+    const NozzleState state = nozzle_state(i);
+    solver_.set_nozzle(static_cast<Index>(i), state.pose, state.velocity, state.extruding, state.flow_scale, state.print_layer);
+  }
 }
 
 std::string_view Simulation::to_string(HeadControl control) {
@@ -262,7 +272,7 @@ void Simulation::update_head_control(std::size_t head) {
   }
   if (control == HeadControl::external) control = HeadControl::rejoining;
   if (control != HeadControl::rejoining) return;
-  const Vec3 on_path = scene_.print_heads[head].trajectory.sample(path_time(head)).position;
+  const Vec3 on_path = head_paths_[head].sample(path_time(head)).position;
   Vec3 at = Vec3::Zero();
   if (gantry) {
     // A gantry travels back within the default limits, chasing where its path is now.
@@ -277,13 +287,7 @@ void Simulation::update_head_control(std::size_t head) {
   }
 }
 
-void Simulation::update_print_heads() {
-  for (std::size_t i = 0; i < scene_.print_heads.size(); ++i) {
-    update_head_control(i);
-    const NozzleState state = nozzle_state(i);
-    solver_.set_nozzle(static_cast<Index>(i), state.pose, state.velocity, state.extruding, state.flow_scale, state.print_layer);
-  }
-}
+
 
 const sph::StepStats& Simulation::step() {
   using Clock = std::chrono::steady_clock;
@@ -368,7 +372,13 @@ void Simulation::save_state(StateWriter& out) const {
   out.put(plan_clocks_);
   out.put(coordination_ != nullptr);
   if (coordination_) coordination_->save(out);
-  // What was commanded from outside and who moves each head.
+  // The paths as they are now (given at run time included), what was commanded from outside and who
+  // moves each head.
+  for (const auto& path : head_paths_) path.save(out);
+  for (const auto& path : base_paths_) {
+    out.put(path.has_value());
+    if (path) path->save(out);
+  }
   for (std::size_t head = 0; head < head_commands_.size(); ++head) {
     const HeadCommand& command = head_commands_[head];
     out.put(command.extruding.has_value());
@@ -411,6 +421,22 @@ void Simulation::load_state(StateReader& in) {
   set_coordination(in.get<bool>());
   if (coordination_) coordination_->load(in);
   std::copy(clocks.begin(), clocks.end(), plan_clocks_.begin());  // in place: the world's paths point into it
+  // In place: the world's controllers point into them.
+  for (std::size_t head = 0; head < head_paths_.size(); ++head) {
+    head_paths_[head].load(in);
+    head_layer_starts_[head] = path_layer_starts(head_paths_[head], scene_.print_heads[head]);
+  }
+  for (std::size_t robot = 0; robot < base_paths_.size(); ++robot) {
+    auto& path = base_paths_[robot];
+    const bool had_path = path.has_value();
+    if (!in.get<bool>()) {
+      if (had_path) in.fail("a checkpoint without a base path the scene has");
+      continue;
+    }
+    if (!path) path.emplace();
+    path->load(in);
+    if (!had_path) world_.set_base_trajectory(robots_[robot], clocked_base_path(*path, plan_clocks_[robot]));
+  }
   for (std::size_t head = 0; head < head_commands_.size(); ++head) {
     HeadCommand& command = head_commands_[head];
     const bool has_extruding = in.get<bool>();

@@ -73,11 +73,15 @@ class Simulation {
   [[nodiscard]] const world::TargetFollower* head_target(std::size_t head) const;
   /// How close (m) a head must come to where its path is before it extrudes again after external control.
   [[nodiscard]] Real rejoin_tolerance(std::size_t head) const;
+  /// The path a print head follows now (the scene's, or one given at run time), on path_time's clock.
+  [[nodiscard]] const toolpath::Trajectory& head_path(std::size_t head) const { return head_paths_.at(head); }
+  /// The path a scene robot's mobile base follows now; none: it has none (or no base).
+  [[nodiscard]] const std::optional<toolpath::Trajectory>& base_path(std::size_t robot) const { return base_paths_.at(robot); }
   /// A new path for a print head, given while it runs: it replaces the head's path from now on (the
   /// head first travels from where its path has it now to the new path's first point), or with
   /// `append` follows the path's end. `delay` (s) waits that long first. The robot that carries
-  /// the head goes back to following its path. Outputs that draw paths keep drawing the path the
-  /// run started with.
+  /// the head goes back to following its path. The scene keeps the path the run started with, which
+  /// outputs that draw paths keep drawing; checkpoints hold the paths as they are.
   void set_head_path(std::size_t head, std::vector<toolpath::PathSegment> segments, double delay, bool append);
   /// The same for a mobile base's path (z ignored): the scene's robot `robot` (scene order) follows it.
   void set_base_path(std::size_t robot, std::vector<toolpath::PathSegment> segments, double delay, bool append);
@@ -173,7 +177,7 @@ class Simulation {
   void update_head_control(std::size_t head);
   void check_material_kept() const;
 
-  scene::Scene scene_;
+  const scene::Scene scene_;  // as read: the plans it started with
   sph::Solver solver_;
   world::World world_;
   std::vector<world::RobotIndex> robots_;
@@ -188,6 +192,10 @@ class Simulation {
   };
   std::vector<std::optional<GantryTarget>> gantry_targets_;  // per print head
   std::vector<PlanClock> plan_clocks_;      // per scene robot; sized once (the world's paths point into it)
+  // The paths followed now, per print head and per scene robot's base: the scene's, changed at run
+  // time. Sized once and changed in place: the world's controllers point into them.
+  std::vector<toolpath::Trajectory> head_paths_;
+  std::vector<std::optional<toolpath::Trajectory>> base_paths_;
   std::vector<std::optional<std::size_t>> head_robots_;  // per print head: the scene robot carrying it
   std::vector<std::vector<double>> head_layer_starts_;  // per print head: when its path begins each layer (s, its clock)
   std::unique_ptr<PrioritizedCoordination> coordination_;

@@ -171,4 +171,54 @@ std::vector<double> layer_start_times(std::span<const PathVertex> vertices, Real
   return starts;
 }
 
+void Trajectory::save(StateWriter& out) const {
+  out.put(start_time_);
+  out.put(static_cast<std::uint64_t>(pieces_.size()));
+  for (const Piece& piece : pieces_) {
+    out.put(static_cast<std::uint8_t>(piece.curve.index()));
+    std::visit(
+        [&](const auto& curve) {
+          using C = std::decay_t<decltype(curve)>;
+          if constexpr (std::is_same_v<C, PolylineCurve>) out.put(curve.points);
+          else out.put(curve);
+        },
+        piece.curve);
+    out.put(piece.length);
+    out.put(piece.speed);
+    out.put(piece.extrude);
+    out.put(piece.begin_time);
+    out.put(piece.duration);
+    out.put(piece.volume_rate);
+  }
+}
+
+void Trajectory::load(StateReader& in) {
+  in.get(start_time_);
+  const auto count = in.get<std::uint64_t>();
+  if (count > in.remaining()) in.fail("a path with more pieces than the file holds");
+  pieces_.clear();
+  for (std::uint64_t p = 0; p < count; ++p) {
+    Piece piece{LineCurve{}, 0, 0, false, 0, 0};
+    switch (in.get<std::uint8_t>()) {
+      case 0: piece.curve = in.get<LineCurve>(); break;
+      case 1: {
+        PolylineCurve polyline;
+        in.get(polyline.points);
+        piece.curve = std::move(polyline);
+        break;
+      }
+      case 2: piece.curve = in.get<CircleCurve>(); break;
+      case 3: piece.curve = in.get<HelixCurve>(); break;
+      default: in.fail("a path piece of a kind that does not exist");
+    }
+    in.get(piece.length);
+    in.get(piece.speed);
+    in.get(piece.extrude);
+    in.get(piece.begin_time);
+    in.get(piece.duration);
+    in.get(piece.volume_rate);
+    pieces_.push_back(std::move(piece));
+  }
+}
+
 }  // namespace m3dp::toolpath

@@ -6,6 +6,7 @@
 #include <variant>
 #include <vector>
 
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/core/types.hpp"
 
 namespace m3dp::toolpath {
@@ -82,6 +83,10 @@ class Trajectory {
   /// The whole path as a polyline: lines as their end points, arcs in chords no longer than
   /// `max_chord` (m); pauses leave no vertex. Viewers draw it, outputs write it.
   [[nodiscard]] std::vector<PathVertex> polyline(Real max_chord) const;
+
+  /// A checkpoint of the path as it is (paths given at run time included), and back.
+  void save(StateWriter& out) const;
+  void load(StateReader& in);
 
  private:
   struct Piece {

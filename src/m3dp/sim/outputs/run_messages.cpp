@@ -396,7 +396,7 @@ class RunMessages final : public RunObserver {
       run.world_ms = simulation.last_world_ms();
     }
     for (std::size_t n = 0; n < layout_.nozzles.size(); ++n) {
-      const Vec3 wanted = simulation.scene().print_heads[n].trajectory.sample(simulation.path_time(n)).position;
+      const Vec3 wanted = simulation.head_path(n).sample(simulation.path_time(n)).position;
       run.nozzles.push_back({layout_.nozzles[n].name, poses.nozzles[n].extruding, poses.nozzles[n].volume_rate, poses.nozzles[n].pose.position,
                              double((poses.nozzles[n].pose.position - wanted).norm())});
     }
