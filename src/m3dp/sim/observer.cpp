@@ -9,12 +9,8 @@
 
 namespace m3dp::sim {
 
-namespace {
-constexpr double kTimeSlack = 1e-12;  // s: a step that lands a rounding short of a multiple is at it
-}
-
 RunObserver& ObserverSchedule::add(std::unique_ptr<RunObserver> observer) {
-  entries_.push_back(Entry{std::move(observer)});
+  entries_.push_back(Entry{std::move(observer), {}});
   return *entries_.back().observer;
 }
 
@@ -23,8 +19,7 @@ void ObserverSchedule::start(const Simulation& simulation) {
   for (Entry& entry : entries_) {
     entry.observer->start(simulation);
     // The first multiple of the period after the start.
-    const double period = entry.observer->period();
-    if (period > 0) entry.next_time = period * (std::floor((time + kTimeSlack) / period) + 1);
+    entry.due.start(time, entry.observer->period());
   }
 }
 
@@ -37,10 +32,7 @@ void ObserverSchedule::after_step(const Simulation& simulation, const sph::StepS
   std::exception_ptr first_failure;
   for (Entry& entry : entries_) {
     const double period = entry.observer->period();
-    if (period > 0) {
-      if (time + kTimeSlack < entry.next_time) continue;
-      while (entry.next_time <= time + kTimeSlack) entry.next_time += period;
-    }
+    if (period > 0 && !entry.due.take(time, period)) continue;
     const auto begin = Clock::now();
     try {
       entry.observer->observe(simulation, report);
@@ -59,7 +51,7 @@ void ObserverSchedule::save(StateWriter& out) {
     StateWriter part;
     entry.observer->save(part);
     out.put(std::string(typeid(*entry.observer).name()));
-    out.put(entry.next_time);
+    out.put(entry.due.next_time);
     out.put(part.bytes());
   }
 }
@@ -71,7 +63,7 @@ void ObserverSchedule::resume(const Simulation& simulation, StateReader& in) {
     std::string name, bytes;
     in.get(name);
     if (name != typeid(*entry.observer).name()) in.fail("another set of outputs than the checkpoint's run had");
-    in.get(entry.next_time);
+    in.get(entry.due.next_time);
     in.get(bytes);
     StateReader part(bytes, in.source());
     entry.observer->resume(simulation, part);

@@ -4,6 +4,8 @@
 // printed-material meshes; cameras, recordings and live streams the same way). Observers read the
 // simulation; only its step changes it.
 #include <memory>
+
+#include "m3dp/core/periodic.hpp"
 #include <vector>
 
 #include "m3dp/core/state_io.hpp"
@@ -56,7 +58,7 @@ class ObserverSchedule {
  private:
   struct Entry {
     std::unique_ptr<RunObserver> observer;
-    double next_time = 0;  // s: when a periodic observer is next due
+    Periodic due;  // a periodic observer's next time
   };
   std::vector<Entry> entries_;
 };

@@ -14,7 +14,7 @@ PrintedBody::PrintedBody(const Simulation& simulation) : settings_(simulation.sc
   for (std::size_t m = 0; m < simulation.scene().materials.size(); ++m)
     if (simulation.scene().materials[m].material.name == settings_.material) phase_ = static_cast<std::uint16_t>(m);
   worker_ = std::make_unique<MeshingWorker>(surface_, std::filesystem::path(), settings_.format);
-  next_time_ = settings_.period * (std::floor((simulation.time() + 1e-12) / settings_.period) + 1);
+  due_.start(simulation.time(), settings_.period);
 }
 
 void PrintedBody::set_output(const std::filesystem::path& folder, bool wait) {
@@ -32,11 +32,10 @@ std::shared_ptr<const TriangleMesh> PrintedBody::take_newest() {
 
 std::shared_ptr<const TriangleMesh> PrintedBody::after_step(const Simulation& simulation) {
   const double time = simulation.time();
-  if (time + 1e-12 >= next_time_) {
+  if (due_.take(time, settings_.period)) {
     if (wait_) worker_->wait_idle();
     if (submit(simulation)) last_meshed_time_ = time;
     if (wait_) worker_->wait_idle();
-    while (next_time_ <= time + 1e-12) next_time_ += settings_.period;
   }
   return take_newest();
 }
@@ -77,7 +76,7 @@ bool PrintedBody::submit(const Simulation& simulation) {
 }
 
 void PrintedBody::save(StateWriter& out) const {
-  out.put(next_time_);
+  out.put(due_.next_time);
   out.put(last_meshed_time_);
   out.put(static_cast<std::uint64_t>(worker_->skipped()));
   const auto meshes = worker_->meshes();
@@ -90,7 +89,7 @@ void PrintedBody::save(StateWriter& out) const {
 }
 
 void PrintedBody::load(StateReader& in, std::shared_ptr<const TriangleMesh> inserted) {
-  in.get(next_time_);
+  in.get(due_.next_time);
   in.get(last_meshed_time_);
   const auto skipped = in.get<std::uint64_t>();
   const auto count = in.get<std::uint64_t>();

@@ -9,6 +9,7 @@
 #include <optional>
 #include <vector>
 
+#include "m3dp/core/periodic.hpp"
 #include "m3dp/core/state_io.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/meshing_worker.hpp"
@@ -54,7 +55,8 @@ class PrintedBody {
   std::optional<std::uint16_t> phase_;  // the material meshed; none: all
   bool wait_ = true;
   std::unique_ptr<MeshingWorker> worker_;
-  double next_time_ = 0, last_meshed_time_ = -1;  // s
+  Periodic due_;                  // the next mesh
+  double last_meshed_time_ = -1;  // s
   std::shared_ptr<const TriangleMesh> inserted_;
   std::shared_ptr<const TriangleMesh> written_only_;  // mesh_now's: not for the world
   std::vector<Vec3> moving_, resting_;

@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "m3dp/core/periodic.hpp"
 #include "m3dp/core/error.hpp"
 #include "m3dp/io/atomic_file.hpp"
 #include "m3dp/sim/checkpoint.hpp"
@@ -61,11 +62,11 @@ struct Run::Impl {
   RunSummary summary;
   ObserverSchedule schedule;
   CheckpointRun checkpoint;
-  double next_checkpoint = 0;  // s
+  Periodic next_checkpoint;
   bool finished = false;
 };
 
-Run::Run(Simulation& simulation, const RunOptions& options) : impl_(std::make_unique<Impl>(Impl{simulation, options, {}, {}, {}})) {
+Run::Run(Simulation& simulation, const RunOptions& options) : impl_(std::make_unique<Impl>(Impl{simulation, options, {}, {}, {}, {}})) {
   RunSummary& summary = impl_->summary;
   ObserverSchedule& schedule = impl_->schedule;
   CheckpointRun& checkpoint = impl_->checkpoint;
@@ -109,8 +110,7 @@ Run::Run(Simulation& simulation, const RunOptions& options) : impl_(std::make_un
     if (checkpoint.checkpoint_period > 0 && !simulation.scene().file.empty()) checkpoint.scene_hash = file_hash(simulation.scene().file);
     schedule.start(simulation);
   }
-  impl_->next_checkpoint =
-      checkpoint.checkpoint_period > 0 ? checkpoint.checkpoint_period * (std::floor(simulation.time() / checkpoint.checkpoint_period + 1e-9) + 1) : 0;
+  impl_->next_checkpoint.start(simulation.time(), checkpoint.checkpoint_period);
 }
 
 Run::~Run() {
@@ -128,10 +128,8 @@ void Run::step() {
   try {
     run.schedule.after_step(simulation, simulation.step());
     const double period = run.checkpoint.checkpoint_period;
-    if (period > 0 && simulation.time() + 1e-12 >= run.next_checkpoint && simulation.time() < run.summary.end_time - 1e-12) {
+    if (simulation.time() < run.summary.end_time - kTimeSlack && run.next_checkpoint.take(simulation.time(), period))
       write_checkpoint(simulation, run.schedule, run.checkpoint, run.options);
-      while (run.next_checkpoint <= simulation.time() + 1e-12) run.next_checkpoint += period;
-    }
   } catch (const std::exception& error) {
     // The state blew up (SimulationError), or an output could not be written (a full disk, a file in
     // the way): the run is failed, and finish() still completes what every output has.

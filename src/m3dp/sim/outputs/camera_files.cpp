@@ -23,7 +23,6 @@ namespace m3dp::sim::outputs {
 
 namespace {
 
-constexpr double kTimeSlack = 1e-9;  // s: a frame due at t is taken by a step that ends within this of it
 
 nlohmann::json pose_json(const Pose& pose) {
   const Quat& q = pose.orientation;
@@ -59,7 +58,7 @@ class CameraFiles final : public RunObserver {
   void save(StateWriter& out) override {
     writer_.finish();
     for (const CameraOutput& output : cameras_) {
-      out.put(output.next_time);
+      out.put(output.due.next_time);
       out.put(static_cast<std::uint64_t>(output.frames));
       out.put(output.frames_csv);
     }
@@ -67,7 +66,7 @@ class CameraFiles final : public RunObserver {
   void resume(const Simulation& simulation, StateReader& in) override {
     describe(simulation);
     for (CameraOutput& output : cameras_) {
-      in.get(output.next_time);
+      in.get(output.due.next_time);
       output.frames = in.get<std::uint64_t>();
       in.get(output.frames_csv);
       io::write_text_atomically(output.folder / "frames.csv", output.frames_csv);
@@ -86,7 +85,7 @@ class CameraFiles final : public RunObserver {
  private:
   struct CameraOutput {
     std::filesystem::path folder;
-    double next_time = 0;
+    Periodic due;  // its next image
     std::size_t frames = 0;
     std::string frames_csv;
   };
@@ -144,9 +143,7 @@ class CameraFiles final : public RunObserver {
     const double time = simulation.time();
     for (std::size_t c = 0; c < cameras_.size(); ++c) {
       CameraOutput& output = cameras_[c];
-      if (time + kTimeSlack < output.next_time) continue;
-      const double period = 1 / rig.settings(c).update_rate;
-      while (output.next_time <= time + kTimeSlack) output.next_time += period;
+      if (!output.due.take(time, 1 / rig.settings(c).update_rate)) continue;
       write_frame(simulation, rig, c, output);
     }
   }

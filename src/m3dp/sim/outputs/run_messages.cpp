@@ -63,7 +63,6 @@ constexpr std::size_t kNoTopic = ~std::size_t(0);
 struct CameraTopics {
   std::size_t image = kNoTopic, depth = kNoTopic, segmentation = kNoTopic, points = kNoTopic, calibration = kNoTopic;
 };
-constexpr double kTimeSlack = 1e-9;  // s
 
 std::vector<record::PointField> camera_point_fields() {
   using Type = record::PointField::Type;
@@ -129,10 +128,10 @@ class RunMessages final : public RunObserver {
     prepare(simulation);
     const Sinks sinks{mcap_.has_value(), live_ != nullptr};
     send_scene(simulation, sinks);
-    next_frame_time_ = next_multiple(simulation.time(), period_);
+    next_frame_.start(simulation.time(), period_);
     write_frame(simulation, nullptr, sinks);
     for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
-      next_camera_time_.push_back(next_multiple(simulation.time(), 1 / simulation.cameras().settings(c).update_rate));
+      next_camera_.emplace_back().start(simulation.time(), 1 / simulation.cameras().settings(c).update_rate);
       write_camera(simulation, c, sinks);
     }
     encode_seconds_ += seconds_since(began);
@@ -143,8 +142,8 @@ class RunMessages final : public RunObserver {
     out.put(mcap_.has_value());
     if (mcap_) mcap_->save(out);
     out.put(mcap_channels_);
-    out.put(next_frame_time_);
-    out.put(next_camera_time_);
+    out.put(next_frame_.next_time);
+    out.put(next_camera_);
     out.put(nozzle_extruding_);
     out.put(static_cast<std::uint64_t>(mesh_version_));
     out.put(last_time_);
@@ -155,10 +154,10 @@ class RunMessages final : public RunObserver {
     if (!mcap_file_.empty()) mcap_.emplace(mcap_file_, in);
     in.get(mcap_channels_);
     prepare(simulation);
-    in.get(next_frame_time_);
-    in.get(next_camera_time_);
+    in.get(next_frame_.next_time);
+    in.get(next_camera_);
     in.get(nozzle_extruding_);
-    if (next_camera_time_.size() != camera_topics_.size() || nozzle_extruding_.size() != layout_.nozzles.size())
+    if (next_camera_.size() != camera_topics_.size() || nozzle_extruding_.size() != layout_.nozzles.size())
       in.fail("another set of cameras or nozzles than the scene has");
     mesh_version_ = in.get<std::uint64_t>();
     in.get(last_time_);
@@ -199,15 +198,12 @@ class RunMessages final : public RunObserver {
   void observe(const Simulation& simulation, const StepReport& report) override {
     const auto began = Clock::now();
     const double time = simulation.time();
-    if (time + kTimeSlack >= next_frame_time_) {
-      while (next_frame_time_ <= time + kTimeSlack) next_frame_time_ += period_;
+    if (next_frame_.take(time, period_)) {
       const Sinks sinks{mcap_.has_value(), live_due(began, last_live_frame_)};
       if (sinks.file || sinks.live) write_frame(simulation, &report.stats, sinks);
     }
     for (std::size_t c = 0; c < camera_topics_.size(); ++c) {
-      if (time + kTimeSlack < next_camera_time_[c]) continue;
-      const double camera_period = 1 / simulation.cameras().settings(c).update_rate;
-      while (next_camera_time_[c] <= time + kTimeSlack) next_camera_time_[c] += camera_period;
+      if (!next_camera_[c].take(time, 1 / simulation.cameras().settings(c).update_rate)) continue;
       const Sinks sinks{mcap_.has_value(), live_due(began, last_camera_live_[c])};
       if (sinks.file || sinks.live) write_camera(simulation, c, sinks);
     }
@@ -233,8 +229,6 @@ class RunMessages final : public RunObserver {
  private:
 
   static double seconds_since(Clock::time_point began) { return std::chrono::duration<double>(Clock::now() - began).count(); }
-  /// The first multiple of `period` after `time`.
-  static double next_multiple(double time, double period) { return period * (std::floor((time + kTimeSlack) / period) + 1); }
   /// Whether the live stream may have another frame now (at most live_rate a wall second); marks it sent.
   bool live_due(Clock::time_point now, Clock::time_point& last) const {
     if (!live_ || now - last < std::chrono::duration<double>(live_interval_)) return false;
@@ -410,8 +404,8 @@ class RunMessages final : public RunObserver {
   std::vector<TopicInfo> topics_;
   std::vector<CameraTopics> camera_topics_;  // per camera of the scene
   std::vector<record::PointField> camera_fields_ = camera_point_fields();
-  double next_frame_time_ = 0;
-  std::vector<double> next_camera_time_;
+  Periodic next_frame_;
+  std::vector<Periodic> next_camera_;
   std::vector<Clock::time_point> last_camera_live_;
   std::filesystem::path mcap_file_;
   std::optional<record::McapWriter> mcap_;
