@@ -6,7 +6,6 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 #include <pybind11/stl/filesystem.h>
-#include <tbb/task_arena.h>
 
 #include <fmt/format.h>
 
@@ -25,6 +24,7 @@
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/run.hpp"
+#include "m3dp/sim/session.hpp"
 #include "m3dp/sim/simulation.hpp"
 
 namespace py = pybind11;
@@ -66,95 +66,42 @@ py::array read_only_copy(const T* data, std::size_t count, std::size_t columns) 
 
 }  // namespace
 
-/// One simulation and its run: m3dp.Simulation.
+/// One simulation and its run (sim::Session) with its arrays as numpy: m3dp.Simulation.
 class PySimulation {
  public:
-  PySimulation(const scene::Scene& scene, int threads)
-      : arena_(checked_threads(threads) > 0 ? threads : tbb::task_arena::automatic), threads_(threads) {
-    arena_.execute([&] {
-      simulation_ = std::make_unique<sim::Simulation>(scene);
-      start_run({});
-    });
-    for (std::size_t robot = 0; robot < scene.robots.size(); ++robot) robot_names_.push_back(scene.robots[robot].name);
-  }
-  ~PySimulation() {
-    try {
-      finish();
-    } catch (...) {
-      // A destructor must not throw; close() was the place to hear of it.
-    }
-  }
+  PySimulation(const scene::Scene& scene, int threads) : session_(scene, threads) {}
 
-  sim::Simulation& simulation() { return *simulation_; }
-  /// The simulation, for a command (`what`): refused once the run is closed, since nothing would
-  /// step it again and a command silently dropped is worse than an error.
-  sim::Simulation& open_simulation(const char* what) {
-    if (!run_) throw Error(fmt::format("{}: the simulation is closed", what));
-    return *simulation_;
-  }
-  const std::vector<std::string>& robot_names() const { return robot_names_; }
+  sim::Session& session() { return session_; }
+  sim::Simulation& simulation() { return session_.simulation(); }
+  /// The simulation, for a command (`what`): refused once closed.
+  sim::Simulation& open_simulation(const char* what) { return session_.command(what); }
+  const std::vector<std::string>& robot_names() const { return session_.robot_names(); }
 
-  void step() {
-    if (!run_) throw Error("step: the simulation is closed");
-    arena_.execute([&] { run_->step(); });
-  }
+  void step() { session_.step(); }
   void step_to(double time) {
     if (!std::isfinite(time)) throw Error("step_to: the time must be a number (s)");
     (void)open_simulation("step_to");
     // Without the GIL for a tenth of a second of steps at a time: taking it back every step would
     // wait out Python's switch interval (5 ms) whenever another thread runs Python.
-    while (simulation_->time() < time - 1e-12) {
+    while (simulation().time() < time - 1e-12) {
       {
         py::gil_scoped_release released;
         const auto batch_end = std::chrono::steady_clock::now() + std::chrono::milliseconds(100);
-        do step();
-        while (simulation_->time() < time - 1e-12 && std::chrono::steady_clock::now() < batch_end);
+        do session_.step();
+        while (simulation().time() < time - 1e-12 && std::chrono::steady_clock::now() < batch_end);
       }
       if (PyErr_CheckSignals() != 0) throw py::error_already_set();
     }
   }
-
-  /// From now on the run folder's outputs (frames, meshes, cameras, run.mcap if `mcap`, summary)
-  /// go to `directory`, starting at the present; the outputs started before finish first.
-  void record(const fs::path& directory, bool mcap) {
-    (void)open_simulation("record");
-    if (directory.empty()) throw Error("record: an output folder is needed");
-    sim::RunOptions options;
-    options.output_directory = directory;
-    options.record = mcap;
-    finish_run();
-    arena_.execute([&] { start_run(options); });
-  }
-
-  /// Ends the run: its outputs complete their files. The summary as summary.json holds it (the same
-  /// keys, one serialiser), as a dict; again on later calls.
-  py::object close() {
-    finish();
-    return py::module_::import("json").attr("loads")(closed_summary_);
-  }
-  void finish() {
-    if (!run_) return;
-    const sim::RunSummary result = finish_run();
-    closed_summary_ = sim::summary_json_text(result, *simulation_);
-    run_.reset();
-  }
-
-  /// The rig's index of the camera called `name`.
-  std::size_t camera_index(const std::string& name) {
-    auto& rig = simulation_->cameras();
-    std::vector<std::string> names;
-    for (std::size_t camera = 0; camera < rig.size(); ++camera) {
-      if (rig.settings(camera).name == name) return camera;
-      names.push_back(rig.settings(camera).name);
-    }
-    throw Error(fmt::format("no camera '{}' in the scene (cameras: {})", name, fmt::join(names, ", ")));
-  }
+  void record(const fs::path& directory, bool mcap) { session_.record(directory, mcap); }
+  /// The summary as summary.json holds it (one serialiser), as a dict; again on later calls.
+  py::object close() { return py::module_::import("json").attr("loads")(session_.close()); }
 
   /// The camera's images now; its point cloud in `points_frame` ("optical", "world"; none: the
   /// scene's <point_cloud> setting).
   py::dict camera_images(const std::string& name, const std::optional<std::string>& points_frame) {
-    auto& rig = simulation_->cameras();
-    const std::size_t camera = camera_index(name);
+    auto& rig = simulation().cameras();
+    const std::size_t camera = session_.camera(name);
     const sensors::CameraSettings& settings = rig.settings(camera);
     using Frame = sensors::CameraSettings::PointCloud;
     Frame frame = settings.point_cloud;
@@ -167,7 +114,7 @@ class PySimulation {
     }
     py::dict result;
     const sensors::CameraImage* rendered = nullptr;
-    arena_.execute([&] { rendered = &rig.image(*simulation_, camera); });
+    session_.in_arena([&] { rendered = &rig.image(simulation(), camera); });
     const sensors::CameraImage& image = *rendered;
     const auto rows = static_cast<py::ssize_t>(image.height), columns = static_cast<py::ssize_t>(image.width);
     auto image_view = [&](const char* what, const auto* data, py::ssize_t channels) {
@@ -177,7 +124,7 @@ class PySimulation {
     if (!image.rgb.empty()) result["rgb"] = image_view("rgb", image.rgb.data(), 3);
     if (!image.depth.empty()) result["depth"] = image_view("depth", image.depth.data(), 1);
     if (!image.segment.empty()) result["segmentation"] = image_view("segmentation", image.segment.data(), 1);
-    const Pose camera_pose = rig.pose(*simulation_, camera);
+    const Pose camera_pose = rig.pose(simulation(), camera);
     std::vector<sensors::CloudPoint> points;
     if (frame != Frame::none && !image.depth.empty())
       sensors::point_cloud(image, sensors::Intrinsics::of(settings), points, frame == Frame::world ? sensors::optical_pose(camera_pose) : Pose{});
@@ -201,8 +148,8 @@ class PySimulation {
 
   /// What a camera is: intrinsics, size, clip, rate, where it is mounted and its pose now in both frames.
   py::dict camera_info(const std::string& name) {
-    auto& rig = simulation_->cameras();
-    const std::size_t camera = camera_index(name);
+    auto& rig = simulation().cameras();
+    const std::size_t camera = session_.camera(name);
     const sensors::CameraSettings& settings = rig.settings(camera);
     const sensors::Intrinsics intrinsics = sensors::Intrinsics::of(settings);
     py::dict info;
@@ -223,7 +170,7 @@ class PySimulation {
     info["depth_noise_stddev"] = settings.noise.stddev;
     info["robot"] = settings.robot;
     info["link"] = settings.link;
-    const Pose camera_pose = rig.pose(*simulation_, camera);
+    const Pose camera_pose = rig.pose(simulation(), camera);
     info["pose"] = pose_array(camera_pose);
     info["optical_pose"] = pose_array(sensors::optical_pose(camera_pose));
     return info;
@@ -231,7 +178,7 @@ class PySimulation {
 
   py::dict camera_legend() {
     py::dict legend;
-    for (const sim::Segment& segment : simulation_->cameras().legend()) {
+    for (const sim::Segment& segment : simulation().cameras().legend()) {
       py::dict entry;
       entry["kind"] = segment.kind;
       entry["name"] = segment.name;
@@ -247,7 +194,7 @@ class PySimulation {
   /// grown by the next step, and an array kept across it must not silently show other particles.
   template <class T>
   py::array snapshot(const std::string& key, const T* data, std::size_t count, std::size_t columns) {
-    const std::int64_t step = simulation_->solver().state().step;
+    const std::int64_t step = simulation().solver().state().step;
     if (step != snapshot_step_) {
       snapshots_.clear();
       snapshot_step_ = step;
@@ -259,71 +206,21 @@ class PySimulation {
 
   template <class Call>
   auto in_arena(Call&& call) {
-    return arena_.execute(std::forward<Call>(call));
+    return session_.in_arena(std::forward<Call>(call));
   }
 
  private:
-  void start_run(sim::RunOptions options) {
-    options.show_progress = false;
-    options.threads = threads_;
-    // A robot's commands from outside (ExternalCommand) are not in checkpoints, so a run stepped from
-    // Python writes none.
-    options.checkpoint_period = 0;
-    // The printed mesh joins the world at the step it was asked for, recorded or not: the physics
-    // does not depend on whether, or how fast, outputs are written.
-    options.wait_for_meshes = true;
-    run_ = std::make_unique<sim::Run>(*simulation_, options);
-  }
-  sim::RunSummary finish_run() {
-    sim::RunSummary summary;
-    arena_.execute([&] { summary = run_->finish(sim::RunStatus::completed); });
-    return summary;
-  }
-
-  static int checked_threads(int threads) {
-    if (threads < 0) throw Error(fmt::format("threads = {}: expected 0 (every core) or a number of threads ≥ 1", threads));
-    return threads;
-  }
-
-  tbb::task_arena arena_;
-  int threads_ = 0;
-  std::string closed_summary_;  // summary.json's text, once closed
+  sim::Session session_;
   std::int64_t snapshot_step_ = -1;             // the step the snapshots are of
   std::map<std::string, py::array> snapshots_;  // arrays read in this step, by what they are
-  std::unique_ptr<sim::Simulation> simulation_;
-  std::unique_ptr<sim::Run> run_;
-  std::vector<std::string> robot_names_;
 };
 
 namespace {
 
-std::size_t robot_index(PySimulation& self, const std::string& name) {
-  const auto& names = self.robot_names();
-  for (std::size_t i = 0; i < names.size(); ++i)
-    if (names[i] == name) return i;
-  throw Error(fmt::format("no robot '{}' in the scene (robots: {})", name, fmt::join(names, ", ")));
-}
-
-std::size_t head_index(PySimulation& self, const std::string& name) {
-  const auto& heads = self.simulation().scene().print_heads;
-  for (std::size_t i = 0; i < heads.size(); ++i)
-    if (heads[i].name == name) return i;
-  std::vector<std::string> names;
-  for (const auto& head : heads) names.push_back(head.name);
-  throw Error(fmt::format("no print head '{}' in the scene (print heads: {})", name, fmt::join(names, ", ")));
-}
-
-/// The print head the robot carries (the one named, or its only one).
+std::size_t robot_index(PySimulation& self, const std::string& name) { return self.session().robot(name); }
+std::size_t head_index(PySimulation& self, const std::string& name) { return self.session().head(name); }
 std::size_t robot_head(PySimulation& self, std::size_t robot, const std::optional<std::string>& head_name) {
-  sim::Simulation& simulation = self.simulation();
-  const std::string& robot_name = self.robot_names()[robot];
-  for (std::size_t head = 0; head < simulation.scene().print_heads.size(); ++head) {
-    const auto& description = simulation.scene().print_heads[head];
-    if (!description.mount || description.mount->robot != robot_name) continue;
-    if (head_name && description.name != *head_name) continue;
-    if (simulation.print_head_tool(head)) return head;
-  }
-  throw Error(fmt::format("robot '{}' carries no print head{}", robot_name, head_name ? fmt::format(" '{}'", *head_name) : ""));
+  return self.session().robot_head(robot, head_name);
 }
 
 /// A target for a print head (Simulation::command_head_target) from Python's arguments.
@@ -335,7 +232,7 @@ void command_target(PySimulation& self, std::size_t head, const std::vector<doub
   world::MotionLimits limits;
   if (max_speed) limits.max_speed = *max_speed;
   if (max_acceleration) limits.max_acceleration = *max_acceleration;
-  self.simulation().command_head_target(head, target, limits);
+  self.session().set_head_target(head, target, limits);
 }
 
 /// A <path> element given at run time; `name` (default: path.xml beside the scene) names it in
@@ -542,18 +439,7 @@ one step belong together (ids tells which particle a row is: the order changes b
         return python::pose_array(self.simulation().world().base_pose(self.simulation().robots()[python::robot_index(self, robot)]));
       }, py::arg("robot"))
       .def("set_external_control", [](PySimulation& self, const std::string& name, bool external) {
-        sim::Simulation& simulation = self.open_simulation("set_external_control");
-        const auto& robots = self.robot_names();
-        if (std::find(robots.begin(), robots.end(), name) == robots.end()) {
-          // A print head on an ideal gantry: held where it is, or back to its path.
-          const std::size_t head = python::head_index(self, name);
-          if (simulation.robot_of_head(head)) throw Error(fmt::format("print head '{}' is on robot '{}': switch the robot", name, robots[*simulation.robot_of_head(head)]));
-          if (!external) return simulation.release_head(head);
-          const auto state = simulation.nozzle_state(head);
-          simulation.command_head_target(head, world::ToolTarget{state.pose.position, state.pose.orientation * Vec3(0, 0, -1)}, {});
-          return;
-        }
-        simulation.world().set_external_control(simulation.robots()[python::robot_index(self, name)], external);
+        self.session().set_external_control(name, external);
       }, py::arg("robot"), py::arg("external") = true,
          "True: the robot (or a print head on an ideal gantry) leaves its scene paths and holds still until commanded, "
          "not extruding unless set_extrusion says so; False: back to its scene paths (where they are at the present time), "

@@ -272,11 +272,12 @@ void Simulation::update_head_control(std::size_t head) {
   }
   if (control == HeadControl::external) control = HeadControl::rejoining;
   if (control != HeadControl::rejoining) return;
-  const Vec3 on_path = head_paths_[head].sample(path_time(head)).position;
+  const auto path_now = head_paths_[head].sample(path_time(head));
+  const Vec3 on_path = path_now.position;
   Vec3 at = Vec3::Zero();
   if (gantry) {
-    // A gantry travels back within the default limits, chasing where its path is now.
-    gantry->follower.set_target(on_path.cast<double>(), world::MotionLimits{});
+    // A gantry travels back within the default limits, catching up with where its path is now.
+    gantry->follower.set_target(on_path.cast<double>(), world::MotionLimits{}, path_now.velocity.cast<double>());
     at = gantry->follower.advance(solver_.time()).cast<Real>();
   } else {
     at = nozzle_state(head).pose.position;

@@ -19,21 +19,24 @@ class TargetFollower {
  public:
   /// At rest at `position` (m) at `time` (s), with that as its target.
   void reset(const Eigen::Vector3d& position, double time);
-  /// Goes to `target` (m) from where it is now, within `limits` (each > 0: Error otherwise).
-  void set_target(const Eigen::Vector3d& target, const MotionLimits& limits);
+  /// Goes to `target` (m) from where it is now, within `limits` (each > 0: Error otherwise). A target
+  /// that moves on at `target_velocity` (m/s; a path it returns to) is caught up with, not trailed.
+  void set_target(const Eigen::Vector3d& target, const MotionLimits& limits,
+                  const Eigen::Vector3d& target_velocity = Eigen::Vector3d::Zero());
   /// Moves on to `time` (s; earlier times leave it where it is) and returns where it is.
   const Eigen::Vector3d& advance(double time);
 
   [[nodiscard]] const Eigen::Vector3d& position() const { return position_; }
   [[nodiscard]] const Eigen::Vector3d& velocity() const { return velocity_; }
   [[nodiscard]] const Eigen::Vector3d& target() const { return target_; }
-  [[nodiscard]] bool arrived() const { return position_ == target_ && velocity_.isZero(); }
+  [[nodiscard]] bool arrived() const { return position_ == target_ && velocity_ == target_velocity_; }
 
   void save(StateWriter& out) const;
   void load(StateReader& in);
 
  private:
   Eigen::Vector3d position_ = Eigen::Vector3d::Zero(), velocity_ = Eigen::Vector3d::Zero(), target_ = Eigen::Vector3d::Zero();
+  Eigen::Vector3d target_velocity_ = Eigen::Vector3d::Zero();
   MotionLimits limits_;
   double time_ = 0;
 };
