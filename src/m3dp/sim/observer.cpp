@@ -71,10 +71,18 @@ void ObserverSchedule::resume(const Simulation& simulation, StateReader& in) {
 }
 
 void ObserverSchedule::finish(const Simulation& simulation, RunSummary& summary) {
-  // Every observer finishes even when one before it fails: the summary file, last, says it failed.
+  // Every observer finishes even when one before it fails, each filling its own section of the
+  // summary; then the summary, whole (a failure included), is reported.
   for (Entry& entry : entries_) {
     try {
       entry.observer->finish(simulation, summary);
+    } catch (const std::exception& error) {
+      summary.fail(error.what());
+    }
+  }
+  for (Entry& entry : entries_) {
+    try {
+      entry.observer->report(simulation, summary);
     } catch (const std::exception& error) {
       summary.fail(error.what());
     }

@@ -31,8 +31,11 @@ class RunObserver {
   virtual void start(const Simulation& /*simulation*/) {}
   /// After a step at which it is due.
   virtual void observe(const Simulation& simulation, const StepReport& report) = 0;
-  /// The run has ended (summary.status says how): complete its files, add its figures to the summary.
+  /// The run has ended (summary.status says how): complete its files and fill its own section of the
+  /// summary (never reading another's: observers finish in any order).
   virtual void finish(const Simulation& /*simulation*/, RunSummary& /*summary*/) {}
+  /// After every observer finished, the summary whole: report it (summary.json). A failure fails the run.
+  virtual void report(const Simulation& /*simulation*/, RunSummary& /*summary*/) {}
 
   /// A checkpoint is written after this step: finish what is in flight (queued files, a mesh being
   /// made), then save what it needs to go on: its counters, and how far its files got. Files are

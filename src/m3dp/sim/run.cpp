@@ -15,9 +15,10 @@
 namespace m3dp::sim {
 
 namespace {
-/// The run's outputs, in the order they observe and finish: the density check first (the progress
-/// line shows it), the printed mesh after the frames (as the step's files), the figures after the
-/// meshes they count, the summary file last.
+/// The run's outputs, in the order they observe: the density check first (the progress line shows
+/// its measurement), the printed mesh after the frames (as the step's files), the timing table after
+/// the outputs it times, pace last. They finish in any order, each filling its own section of the
+/// summary, which summary.json then reports whole.
 constexpr outputs::MakeOutput kOutputs[] = {
     outputs::make_density_check, outputs::make_particle_frames, outputs::make_world_frames, outputs::make_printed_mesh,
     outputs::make_camera_files,  outputs::make_run_messages,    outputs::make_timing_table, outputs::make_state_hash, outputs::make_run_figures,
@@ -194,9 +195,11 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
     constexpr double kCm3 = 1e6;  // cm³ per m³
     text += fmt::format("  volume      {:.4g} cm3 commanded, {:.4g} emitted, {:.4g} lost at blocked nozzles, {:.4g} left the bounds",
                         kCm3 * volume.commanded, kCm3 * volume.emitted, kCm3 * volume.lost_at_nozzles, kCm3 * volume.removed);
-    if (volume.last_mesh >= 0 && volume.emitted > 0)
-      text += fmt::format("; last mesh ({:.3f} s) {:.4g} cm3, {:.1f} % of the emitted", volume.last_mesh_time,
-                          kCm3 * volume.last_mesh, 100 * volume.last_mesh / volume.emitted);
+    if (!summary.meshes.empty() && volume.emitted > 0) {
+      const auto& last_mesh = summary.meshes.back();
+      text += fmt::format("; last mesh ({:.3f} s) {:.4g} cm3, {:.1f} % of the emitted", last_mesh.time, kCm3 * last_mesh.volume,
+                          100 * last_mesh.volume / volume.emitted);
+    }
     text += "\n";
   }
   for (const auto& nozzle : summary.nozzles)

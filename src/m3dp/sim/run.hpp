@@ -95,9 +95,7 @@ struct RunSummary {
     double lost_at_nozzles = 0;  // asked for while a nozzle was blocked, never emitted
     double removed = 0;          // particles that left the bounds
     double in_particles = 0;     // particles at the end, at their rest density
-    double last_mesh = -1;       // the last surface mesh's enclosed volume; < 0: no mesh
-    double last_mesh_time = 0;   // s
-  } volume;
+  } volume;                      // the last mesh's enclosed volume is meshes.back()'s
 
   struct Nozzle {
     std::string name;

@@ -20,8 +20,9 @@ class Progress final : public RunObserver {
     bar_.update(sample(simulation, static_cast<long long>(simulation.solver().fluid().size()),
                        std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count()));
   }
-  void finish(const Simulation& simulation, RunSummary& summary) override {
-    bar_.finish(sample(simulation, static_cast<long long>(summary.particles), summary.wall_time));
+  void finish(const Simulation& simulation, RunSummary& /*summary*/) override {
+    bar_.finish(sample(simulation, static_cast<long long>(simulation.solver().fluid().size()),
+                       std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start_).count()));
   }
 
  private:

@@ -1,6 +1,6 @@
 // The summary's figures: sums over the steps (iterations, particle-steps, the solver's largest density
 // error estimate) and, when the run ends, the state's totals, the volume balance, the nozzles' and the
-// robots' reports. After the printed mesh's observer, whose meshes it reads.
+// robots' reports.
 #include <algorithm>
 #include <array>
 #include <chrono>
@@ -83,10 +83,6 @@ class RunFigures final : public RunObserver {
     summary.volume.lost_at_nozzles = balance.lost_at_nozzles;
     summary.volume.removed = balance.removed;
     summary.volume.in_particles = balance.in_particles;
-    if (!summary.meshes.empty()) {
-      summary.volume.last_mesh = summary.meshes.back().volume;
-      summary.volume.last_mesh_time = summary.meshes.back().time;
-    }
     const auto& world = simulation.world();
     for (std::size_t r = 0; r < simulation.robots().size(); ++r) {
       const world::RobotIndex index = simulation.robots()[r];

@@ -147,8 +147,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
         {"lost_at_nozzles", summary.volume.lost_at_nozzles},
         {"removed", summary.volume.removed},
         {"in_particles", summary.volume.in_particles},
-        {"last_mesh", summary.volume.last_mesh >= 0 ? nlohmann::json(summary.volume.last_mesh) : nlohmann::json()},
-        {"last_mesh_time_s", summary.volume.last_mesh >= 0 ? nlohmann::json(summary.volume.last_mesh_time) : nlohmann::json()}}},
+        {"last_mesh", summary.meshes.empty() ? nlohmann::json() : nlohmann::json(summary.meshes.back().volume)},
+        {"last_mesh_time_s", summary.meshes.empty() ? nlohmann::json() : nlohmann::json(summary.meshes.back().time)}}},
       {"solver_density_error_estimate", summary.solver_density_error},
       {"mean_density_iterations", summary.mean_density_iterations},
       {"mean_divergence_iterations", summary.mean_divergence_iterations},
@@ -190,7 +190,7 @@ class SummaryFile final : public RunObserver {
   void save(StateWriter& /*out*/) override { write_running(*simulation_); }
   void resume(const Simulation& simulation, StateReader& /*in*/) override { write_running(simulation); }
   void observe(const Simulation& /*simulation*/, const StepReport& /*report*/) override {}
-  void finish(const Simulation& simulation, RunSummary& summary) override {
+  void report(const Simulation& simulation, RunSummary& summary) override {
     io::write_text_atomically(output_directory_ / "summary.json", summary_json_text(summary, simulation));
   }
 
