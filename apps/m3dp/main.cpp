@@ -19,6 +19,7 @@
 #include "render_command.hpp"
 #include "view_command.hpp"
 #include "viewer_files.hpp"
+#include "m3dp/quality/design.hpp"
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
@@ -82,6 +83,18 @@ int validate_command(const std::filesystem::path& scene_file) {
              "blocks, {} print heads, {} s\n",
              scene_file.string(), scene.world_name, scene.bodies.size(), collisions, scene.dynamic_bodies.size(),
              scene.robots.size(), scene.materials.size(), scene.fluid_blocks.size(), scene.print_heads.size(), scene.end_time);
+  // What each head's path asks for (the designed print: quality/design.hpp), before anything runs.
+  for (const auto& head : scene.print_heads) {
+    const auto summary = m3dp::quality::summarize(head.trajectory, m3dp::quality::Nozzle{head.inner_diameter, head.exit_speed, 0});
+    fmt::print("  print head '{}': {:.2f} s from {:.2f} s, {:.3f} m extruding and {:.3f} m travelling, {} layer{}, {:.2f} cm3 "
+               "commanded",
+               head.name, summary.duration, head.trajectory.start_time(), summary.extruding_length, summary.travel_length,
+               summary.layers, summary.layers == 1 ? "" : "s", 1e6 * summary.commanded_volume);
+    if (summary.commanded_volume > 0)
+      fmt::print("; designed bead {:.2f}-{:.2f} mm wide, {:.2f}-{:.2f} mm high", 1e3 * summary.width_min, 1e3 * summary.width_max,
+                 1e3 * summary.height_min, 1e3 * summary.height_max);
+    fmt::print("\n");
+  }
   return 0;
 }
 

@@ -1,0 +1,130 @@
+#include "m3dp/quality/sections.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+namespace m3dp::quality {
+
+namespace {
+/// A bead's frame: along its path, across it (horizontal, to the left of travel), up.
+struct BeadFrame {
+  Vec3d tangent, across;
+  bool valid = false;
+};
+BeadFrame frame_of(const Bead& bead) {
+  BeadFrame frame;
+  const Vec3d along = bead.end - bead.start;
+  if (along.norm() <= 0) return frame;
+  frame.tangent = along.normalized();
+  frame.across = Vec3d::UnitZ().cross(frame.tangent);
+  frame.valid = frame.across.norm() > 1e-9;
+  if (frame.valid) frame.across.normalize();
+  return frame;
+}
+}  // namespace
+
+std::vector<Section> measure_sections(const Design& design, const Printed& printed, double spacing) {
+  std::vector<Section> sections;
+  const double d = printed.particle_diameter;
+  for (std::size_t b = 0; b < design.beads.size(); ++b) {
+    const Bead& bead = design.beads[b];
+    const BeadFrame frame = frame_of(bead);
+    const double length = bead.length();
+    if (!frame.valid || length <= bead.width) continue;
+    // The particles that may belong to this bead: its layer, within a bead width across and a layer
+    // height above or below it.
+    std::vector<Vec3d> local;  // (along, across, z)
+    for (std::size_t i = 0; i < printed.positions.size(); ++i) {
+      if (!printed.layers.empty() && printed.layers[i] != bead.layer) continue;
+      const Vec3d p = printed.positions[i].cast<double>() - bead.start;
+      const double s = p.dot(frame.tangent), y = p.dot(frame.across);
+      if (s < -d || s > length + d || std::abs(y) > bead.width) continue;
+      const double z = printed.positions[i].z();
+      const double top = bead.start.z() + s / length * (bead.end.z() - bead.start.z());
+      if (z < top - 2 * bead.height || z > top + bead.height) continue;
+      local.emplace_back(s, y, z);
+    }
+    for (double s = bead.width / 2; s <= length - bead.width / 2 + 1e-12; s += spacing) {
+      Section section;
+      section.bead = b;
+      section.layer = bead.layer;
+      section.at = bead.start + s * frame.tangent;
+      double y_min = std::numeric_limits<double>::infinity(), y_max = -y_min, z_min = y_min, z_max = -y_min;
+      for (const Vec3d& p : local) {
+        if (std::abs(p.x() - s) >= d) continue;  // a slab two diameters thick
+        ++section.particles;
+        y_min = std::min(y_min, p.y());
+        y_max = std::max(y_max, p.y());
+        z_min = std::min(z_min, p.z());
+        z_max = std::max(z_max, p.z());
+      }
+      if (section.particles > 0) {
+        section.width = y_max - y_min + d;
+        section.height = z_max - z_min + d;
+        section.area = double(section.particles) * d * d * d / (2 * d);
+        section.offset_across = (y_max + y_min) / 2;
+        section.offset_up = z_max + d / 2 - section.at.z();
+      }
+      sections.push_back(section);
+    }
+  }
+  return sections;
+}
+
+Fill measure_fill(const Design& design, const Printed& printed) {
+  Fill fill;
+  const double d = printed.particle_diameter;
+  const double voxel = d / 2;
+  // The grid spans the design's beads and the printed material.
+  Vec3d low = Vec3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
+  for (const Bead& bead : design.beads) {
+    const Vec3d reach(bead.width, bead.width, bead.height);
+    for (const Vec3d& end : {bead.start, bead.end}) {
+      low = low.cwiseMin(end - reach);
+      high = high.cwiseMax(end + reach);
+    }
+  }
+  for (const Vec3& p : printed.positions) {
+    low = low.cwiseMin(p.cast<double>() - Vec3d::Constant(d));
+    high = high.cwiseMax(p.cast<double>() + Vec3d::Constant(d));
+  }
+  if (!(low.array() < high.array()).all()) return fill;
+  const Eigen::Array3d cells = ((high - low) / voxel).array().ceil();
+  const auto nx = static_cast<std::size_t>(cells.x()), ny = static_cast<std::size_t>(cells.y()), nz = static_cast<std::size_t>(cells.z());
+  auto index = [&](std::size_t i, std::size_t j, std::size_t k) { return (k * ny + j) * nx + i; };
+  auto centre = [&](std::size_t i, std::size_t j, std::size_t k) {
+    return Vec3d(low.x() + (double(i) + 0.5) * voxel, low.y() + (double(j) + 0.5) * voxel, low.z() + (double(k) + 0.5) * voxel);
+  };
+  std::vector<std::uint8_t> cell(nx * ny * nz, 0);  // bit 0: designed, bit 1: printed
+  for (const Bead& bead : design.beads) {
+    const Vec3d reach(bead.width, bead.width, bead.height);
+    const Vec3d box_low = bead.start.cwiseMin(bead.end) - reach, box_high = bead.start.cwiseMax(bead.end) + reach;
+    const auto first = ((box_low - low) / voxel).array().floor().max(0).cast<std::size_t>();
+    const Eigen::Array3d last_cell = ((box_high - low) / voxel).array().ceil();
+    const std::size_t last_i = std::min(nx, std::size_t(last_cell.x())), last_j = std::min(ny, std::size_t(last_cell.y())),
+                      last_k = std::min(nz, std::size_t(last_cell.z()));
+    for (std::size_t k = first.z(); k < last_k; ++k)
+      for (std::size_t j = first.y(); j < last_j; ++j)
+        for (std::size_t i = first.x(); i < last_i; ++i)
+          if (inside(bead, centre(i, j, k))) cell[index(i, j, k)] |= 1;
+  }
+  // A particle's cube covers the eight voxels of the points a quarter diameter from its centre.
+  for (const Vec3& p : printed.positions)
+    for (int corner = 0; corner < 8; ++corner) {
+      const Vec3d point = p.cast<double>() + Vec3d(corner & 1 ? d / 4 : -d / 4, corner & 2 ? d / 4 : -d / 4, corner & 4 ? d / 4 : -d / 4);
+      const Eigen::Array3d at = ((point - low) / voxel).array().floor();
+      if ((at < 0).any() || at.x() >= double(nx) || at.y() >= double(ny) || at.z() >= double(nz)) continue;
+      cell[index(std::size_t(at.x()), std::size_t(at.y()), std::size_t(at.z()))] |= 2;
+    }
+  const double voxel_volume = voxel * voxel * voxel;
+  for (const std::uint8_t value : cell) {
+    if (value & 1) fill.designed += voxel_volume;
+    if (value & 2) fill.printed += voxel_volume;
+    if (value == 2) fill.over += voxel_volume;
+    if (value == 1) fill.under += voxel_volume;
+  }
+  return fill;
+}
+
+}  // namespace m3dp::quality

@@ -1,0 +1,160 @@
+// The quality module on synthetic prints with known answers (issue 39): the design of a path, and
+// beads of particles on a lattice measured against it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "m3dp/quality/design.hpp"
+#include "m3dp/quality/sections.hpp"
+
+using namespace m3dp;
+
+namespace {
+// A 10 mm nozzle at U = 50 mm/s laying a rounded box 16 mm wide and 5 mm high: A = 11·5 + π·5²/4 mm².
+constexpr double kBore = 0.01, kExitSpeed = 0.05, kWidth = 0.016, kHeight = 0.005;
+const double kArea = (kWidth - kHeight) * kHeight + kPi * kHeight * kHeight / 4;
+const double kTravelSpeed = kPi * kBore * kBore / 4 * kExitSpeed / kArea;  // V = Q/A
+constexpr double kLength = 0.1;  // m, the bead along x from the origin
+
+quality::Design line_design(double length = kLength) {
+  toolpath::PathSegment line;
+  line.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(length), 0, Real(kHeight))};
+  line.speed = Real(kTravelSpeed);
+  return quality::design_of(toolpath::Trajectory({line}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+}
+
+/// Particles on a lattice of spacing `d` filling `bead` (its rounded box widened to `width`,
+/// moved `shift` across) over [from, to] of its length.
+std::vector<Vec3> lattice_bead(quality::Bead bead, double d, double width, double shift, double from, double to) {
+  bead.width = width;
+  std::vector<Vec3> points;
+  for (double x = from + d / 2; x < to; x += d)
+    for (double y = -width / 2 + d / 2; y < width / 2; y += d)
+      for (double z = bead.start.z() - bead.height + d / 2; z < bead.start.z(); z += d)
+        if (quality::inside(bead, Vec3d(x, y, z))) points.emplace_back(Real(x), Real(y + shift), Real(z));
+  return points;
+}
+}  // namespace
+
+TEST(Quality, ALineIsABeadOfTheFlowOverTheSpeed) {
+  const quality::Design design = line_design();
+  ASSERT_EQ(design.beads.size(), 1u);
+  const quality::Bead& bead = design.beads[0];
+  EXPECT_NEAR(bead.area, kArea, 1e-9);
+  EXPECT_NEAR(bead.height, kHeight, 1e-9);
+  EXPECT_NEAR(bead.width, kWidth, 1e-9);
+  EXPECT_EQ(bead.layer, 0);
+  EXPECT_TRUE(quality::inside(bead, Vec3d(0.05, kWidth / 2 - 1e-4, kHeight / 2)));
+  EXPECT_FALSE(quality::inside(bead, Vec3d(0.05, kWidth / 2 - 1e-4, kHeight - 1e-4)));  // the rounded corner
+  EXPECT_FALSE(quality::inside(bead, Vec3d(0.05, 0, kHeight + 1e-4)));
+}
+
+TEST(Quality, APathSummarySaysWhatWasAsked) {
+  // Two layers of a 0.1 m line, there and back 5 mm higher, with a travel up between them.
+  toolpath::PathSegment first, second;
+  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
+  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
+  first.speed = second.speed = Real(kTravelSpeed);
+  const toolpath::Trajectory path({first, second}, 0);
+  const quality::PathSummary summary = quality::summarize(path, quality::Nozzle{kBore, kExitSpeed, 0});
+  EXPECT_EQ(summary.layers, 2u);
+  EXPECT_NEAR(summary.extruding_length, 2 * kLength, 1e-6);
+  EXPECT_NEAR(summary.travel_length, kHeight, 1e-6);
+  EXPECT_NEAR(summary.commanded_volume, 2 * kArea * kLength, 1e-9);
+  EXPECT_NEAR(summary.duration, 2 * kLength / kTravelSpeed + kHeight / kTravelSpeed, 1e-6);
+  EXPECT_NEAR(summary.height_min, kHeight, 1e-6);
+  EXPECT_NEAR(summary.height_max, kHeight, 1e-6);
+  EXPECT_NEAR(summary.width_max, kWidth, 1e-6);
+}
+
+TEST(Quality, APerfectBeadMeasuresAsDesigned) {
+  const quality::Design design = line_design();
+  const double d = 0.0005;
+  const std::vector<Vec3> points = lattice_bead(design.beads[0], d, kWidth, 0, 0, kLength);
+  const quality::Printed printed{points, {}, d};
+  const auto sections = quality::measure_sections(design, printed, 0.01);
+  ASSERT_GE(sections.size(), 8u);
+  for (const auto& section : sections) {
+    EXPECT_NEAR(section.width, kWidth, 0.02 * kWidth);
+    EXPECT_NEAR(section.height, kHeight, 0.02 * kHeight);
+    EXPECT_NEAR(section.area, kArea, 0.02 * kArea);
+    EXPECT_NEAR(section.offset_across, 0, 1e-6);
+    EXPECT_NEAR(section.offset_up, 0, 1e-6);
+  }
+  const quality::Fill fill = quality::measure_fill(design, printed);
+  const double volume = kArea * kLength;
+  EXPECT_NEAR(fill.designed, volume, 0.02 * volume);
+  EXPECT_NEAR(fill.printed, volume, 0.02 * volume);
+  EXPECT_LT(fill.over, 0.02 * volume);
+  EXPECT_LT(fill.under, 0.02 * volume);
+}
+
+TEST(Quality, ABeadShiftedThreeMillimetresSitsThreeMillimetresOff) {
+  const quality::Design design = line_design();
+  const double d = 0.0005;
+  const std::vector<Vec3> points = lattice_bead(design.beads[0], d, kWidth, 0.003, 0, kLength);
+  const auto sections = quality::measure_sections(design, quality::Printed{points, {}, d}, 0.01);
+  ASSERT_FALSE(sections.empty());
+  for (const auto& section : sections) EXPECT_NEAR(section.offset_across, 0.003, 1e-6);
+  // Left of travel (+y for a path along +x) is positive.
+  const std::vector<Vec3> right = lattice_bead(design.beads[0], d, kWidth, -0.003, 0, kLength);
+  EXPECT_NEAR(quality::measure_sections(design, quality::Printed{right, {}, d}, 0.01)[0].offset_across, -0.003, 1e-6);
+}
+
+TEST(Quality, AMissingSegmentIsUnderFillOfItsVolume) {
+  const quality::Design design = line_design();
+  const double d = 0.0005;
+  const std::vector<Vec3> half = lattice_bead(design.beads[0], d, kWidth, 0, 0, kLength / 2);
+  const quality::Printed printed{half, {}, d};
+  const quality::Fill fill = quality::measure_fill(design, printed);
+  const double missing = kArea * kLength / 2;
+  EXPECT_NEAR(fill.under, missing, 0.03 * missing);
+  EXPECT_LT(fill.over, 0.02 * missing);
+  // Its sections say where: nothing printed past the middle.
+  for (const auto& section : quality::measure_sections(design, printed, 0.01))
+    EXPECT_EQ(section.particles == 0, section.at.x() > kLength / 2 + d) << section.at.x();
+}
+
+TEST(Quality, ABeadTenPercentTooWideIsOverFillOfThatMuch) {
+  const quality::Design design = line_design();
+  const double d = 0.0005;
+  const std::vector<Vec3> wide = lattice_bead(design.beads[0], d, 1.1 * kWidth, 0, 0, kLength);
+  const quality::Fill fill = quality::measure_fill(design, quality::Printed{wide, {}, d});
+  const double extra = 0.1 * kWidth * kHeight * kLength;  // the rounded box 1.6 mm wider, as high
+  EXPECT_NEAR(fill.over, extra, 0.05 * extra);
+  EXPECT_LT(fill.under, 0.02 * kArea * kLength);
+  for (const auto& section : quality::measure_sections(design, quality::Printed{wide, {}, d}, 0.01))
+    EXPECT_NEAR(section.width, 1.1 * kWidth, 0.02 * kWidth);
+}
+
+TEST(Quality, SectionsTakeTheirOwnLayer) {
+  // Two layers of the same line; a section of the first sees only the first's particles.
+  toolpath::PathSegment first, second;
+  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
+  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
+  first.speed = second.speed = Real(kTravelSpeed);
+  const quality::Design design = quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+  ASSERT_EQ(design.beads.size(), 2u);
+  ASSERT_EQ(design.layer_z.size(), 2u);
+  EXPECT_EQ(design.beads[1].layer, 1);
+  EXPECT_NEAR(design.beads[1].height, kHeight, 1e-6);
+  const double d = 0.0005;
+  std::vector<Vec3> points = lattice_bead(design.beads[0], d, kWidth, 0, 0, kLength);
+  std::vector<std::int32_t> layers(points.size(), 0);
+  // The second layer 20 % too thin: its particles up to 4 mm above the first's top.
+  quality::Bead thin = design.beads[1];
+  thin.height = 0.8 * kHeight;
+  thin.start.z() = thin.end.z() = kHeight + thin.height;
+  std::swap(thin.start, thin.end);
+  thin.area = (kWidth - thin.height) * thin.height + kPi * thin.height * thin.height / 4;
+  for (const Vec3& p : lattice_bead(thin, d, kWidth, 0, 0, kLength)) {
+    points.push_back(p);
+    layers.push_back(1);
+  }
+  const auto sections = quality::measure_sections(design, quality::Printed{points, layers, d}, 0.01);
+  for (const auto& section : sections) {
+    const double expected = section.layer == 0 ? kHeight : 0.8 * kHeight;
+    EXPECT_NEAR(section.height, expected, 0.02 * kHeight) << "layer " << section.layer;
+    EXPECT_NEAR(section.offset_up, section.layer == 0 ? 0 : -0.2 * kHeight, 1e-6);
+  }
+}
