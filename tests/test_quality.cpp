@@ -158,3 +158,25 @@ TEST(Quality, SectionsTakeTheirOwnLayer) {
     EXPECT_NEAR(section.offset_up, section.layer == 0 ? 0 : -0.2 * kHeight, 1e-6);
   }
 }
+
+TEST(Quality, AJitteredPackingKeepsItsVolume) {
+  // Particles a fifth of a diameter off a lattice, as material at rest sits: the fill's printed
+  // volume is still the particles' (d³ each), and the sections' widths and heights within 5 %.
+  const quality::Design design = line_design();
+  const double d = 0.0005;
+  std::vector<Vec3> points = lattice_bead(design.beads[0], d, kWidth, 0, 0, kLength);
+  std::uint64_t state = 12345;
+  auto jitter = [&] {
+    state = state * 6364136223846793005ULL + 1442695040888963407ULL;
+    return (double(state >> 11) / double(1ULL << 53) - 0.5) * 0.4 * d;
+  };
+  for (Vec3& p : points) p += Vec3(Real(jitter()), Real(jitter()), Real(jitter()));
+  const quality::Printed printed{points, {}, d};
+  const quality::Fill fill = quality::measure_fill(design, printed);
+  const double volume = double(points.size()) * d * d * d;
+  EXPECT_NEAR(fill.printed, volume, 0.03 * volume);
+  for (const auto& section : quality::measure_sections(design, printed, 0.01)) {
+    EXPECT_NEAR(section.width, kWidth, 0.05 * kWidth);
+    EXPECT_NEAR(section.height, kHeight, 0.05 * kHeight);
+  }
+}

@@ -6,6 +6,7 @@
 //   m3dp mesh INPUT -o OUT [--method M] ...
 //   m3dp render RUN_DIR [--time T] [--camera NAME | --eye X Y Z --target X Y Z] -o image.png
 //   m3dp view RUN_DIR [--port N]
+//   m3dp quality RUN_DIR [--spacing M]
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
@@ -16,6 +17,7 @@
 
 #include "bench_command.hpp"
 #include "mesh_command.hpp"
+#include "quality_command.hpp"
 #include "render_command.hpp"
 #include "view_command.hpp"
 #include "viewer_files.hpp"
@@ -161,6 +163,10 @@ int main(int argc, char** argv) {
   auto* render = app.add_subcommand("render", "A picture of a saved run at a time, from one of its cameras or any eye point");
   m3dp::app::add_render_options(*render, render_options);
 
+  m3dp::app::QualityOptions quality_options;
+  auto* quality = app.add_subcommand("quality", "Measure a finished run's print against its design: quality.json, quality.csv");
+  m3dp::app::add_quality_options(*quality, quality_options);
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run->parsed()) {
@@ -198,6 +204,7 @@ int main(int argc, char** argv) {
     if (validate->parsed()) return validate_command(validate_file);
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);
     if (mesh->parsed()) return m3dp::app::mesh_command(mesh_options);
+    if (quality->parsed()) return m3dp::app::quality_command(quality_options);
     if (render->parsed()) return m3dp::app::render_command(render_options);
     if (view->parsed()) {
       std::signal(SIGINT, request_stop);

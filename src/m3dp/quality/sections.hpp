@@ -40,7 +40,8 @@ struct Fill {
   double designed = 0, printed = 0;    // m³
   double over = 0, under = 0;          // m³: printed outside the design, designed and not printed
 };
-/// Over- and under-fill on a grid of half the particle diameter.
+/// Over- and under-fill on a grid of half the particle diameter: printed where the particles' volume
+/// fraction is at least a half (each particle's volume spread by a tent of half-width d).
 [[nodiscard]] Fill measure_fill(const Design& design, const Printed& printed);
 
 }  // namespace m3dp::quality

@@ -1,0 +1,87 @@
+#include "quality_command.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "m3dp/core/error.hpp"
+#include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/particle_reader.hpp"
+#include "m3dp/scene/scene.hpp"
+#include "m3dp/sim/print_quality.hpp"
+
+namespace m3dp::app {
+
+namespace fs = std::filesystem;
+
+void add_quality_options(CLI::App& command, QualityOptions& options) {
+  command.add_option("run", options.run_folder, "A run folder (m3dp run -o, or sim.record)")->required();
+  command.add_option("--spacing", options.spacing, "Metres between sections along each bead (default 0.01)")->check(CLI::PositiveNumber);
+}
+
+namespace {
+/// The scene the run was made from: the one summary.json names (paths in it resolve from there), else
+/// the run folder's copy.
+fs::path run_scene(const fs::path& folder) {
+  const fs::path summary_file = folder / "summary.json";
+  if (fs::exists(summary_file)) {
+    std::ifstream stream(summary_file);
+    std::stringstream text;
+    text << stream.rdbuf();
+    const auto summary = nlohmann::json::parse(text.str(), nullptr, false);
+    if (!summary.is_discarded() && summary.contains("scene") && summary["scene"].is_string()) {
+      const fs::path original = summary["scene"].get<std::string>();
+      if (!original.empty() && fs::exists(original)) return original;
+    }
+  }
+  if (fs::exists(folder / "scene.sdf")) return folder / "scene.sdf";
+  throw InputError({folder.string(), 0}, "not a run folder: no summary.json naming its scene and no scene.sdf (m3dp run -o writes them)");
+}
+}  // namespace
+
+int quality_command(const QualityOptions& options) {
+  const fs::path& folder = options.run_folder;
+  if (!fs::is_directory(folder)) throw InputError({folder.string(), 0}, "no such run folder");
+  const scene::Scene scene = scene::load_scene(run_scene(folder));
+  if (scene.print_heads.empty())
+    throw InputError({scene.file.string(), 0}, "the scene has no print heads: no path was designed to measure the print against");
+  const fs::path frames = folder / "particles.pvd";
+  if (!fs::exists(frames))
+    throw InputError({folder.string(), 0}, "no particle frames (particles.pvd): the run wrote none; give the scene an "
+                                           "<output><particles_period>");
+  const auto entries = io::read_pvd(frames);
+  if (entries.empty()) throw InputError({frames.string(), 0}, "the collection lists no particle frames");
+  const io::ParticleFrame frame = io::read_particle_frame(entries.back().file);
+  if (frame.layer.size() != frame.positions.size())
+    throw InputError({entries.back().file.string(), 0}, "the particle frame has no \"layer\" array (each particle's print layer)");
+  if (std::none_of(frame.layer.begin(), frame.layer.end(), [](std::int32_t layer) { return layer >= 0; }))
+    throw InputError({entries.back().file.string(), 0}, "no particle in the last frame was printed by a head's path: nothing to measure");
+
+  std::vector<toolpath::Trajectory> paths;
+  for (const auto& head : scene.print_heads) paths.push_back(head.trajectory);
+  const quality::Printed printed{frame.positions, frame.layer, 2 * double(scene.solver.particle_radius)};
+  const quality::Report report = quality::measure(sim::head_designs(scene, paths), printed, options.spacing, entries.back().time);
+  io::write_text_atomically(folder / "quality.json", quality::report_json(report));
+  io::write_text_atomically(folder / "quality.csv", quality::report_csv(report));
+
+  fmt::print("{}: the print at {:.3f} s ({} particles) against its design, a section every {:.1f} mm\n", folder.string(), report.time,
+             report.particles, 1e3 * report.spacing);
+  for (const auto& head : report.heads) {
+    fmt::print("  print head '{}': {} sections\n", head.name, head.sections.size());
+    fmt::print("    layer  width mm (design)    height mm (design)   off-path mm  top off mm  empty\n");
+    for (const auto& layer : head.layers)
+      fmt::print("    {:5}  {:6.2f} ({:6.2f})     {:6.2f} ({:6.2f})      {:+6.2f}      {:+6.2f}     {}/{}\n", layer.layer, 1e3 * layer.width,
+                 1e3 * layer.design_width, 1e3 * layer.height, 1e3 * layer.design_height, 1e3 * layer.offset_across,
+                 1e3 * layer.offset_up, layer.empty, layer.stations);
+  }
+  const auto& fill = report.fill;
+  fmt::print("  fill: {:.2f} cm3 designed, {:.2f} cm3 printed; over-fill {:.2f} cm3, under-fill {:.2f} cm3\n", 1e6 * fill.designed,
+             1e6 * fill.printed, 1e6 * fill.over, 1e6 * fill.under);
+  fmt::print("  wrote quality.json and quality.csv\n");
+  return 0;
+}
+
+}  // namespace m3dp::app

@@ -1,0 +1,134 @@
+#include "m3dp/quality/report.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <nlohmann/json.hpp>
+
+namespace m3dp::quality {
+
+namespace {
+std::vector<LayerFigures> layer_figures(const Design& design, const std::vector<Section>& sections) {
+  std::map<std::int32_t, LayerFigures> layers;
+  std::map<std::int32_t, std::size_t> beads;
+  for (const Bead& bead : design.beads) {
+    LayerFigures& figures = layers[bead.layer];
+    figures.layer = bead.layer;
+    figures.design_width += bead.width;
+    figures.design_height += bead.height;
+    figures.design_area += bead.area;
+    ++beads[bead.layer];
+  }
+  for (auto& [layer, figures] : layers) {
+    const double count = double(beads[layer]);
+    figures.design_width /= count;
+    figures.design_height /= count;
+    figures.design_area /= count;
+    figures.width_min = figures.height_min = std::numeric_limits<double>::infinity();
+    figures.width_max = figures.height_max = -std::numeric_limits<double>::infinity();
+  }
+  for (const Section& section : sections) {
+    LayerFigures& figures = layers[section.layer];
+    ++figures.stations;
+    if (section.particles == 0) {
+      ++figures.empty;
+      continue;
+    }
+    figures.width += section.width;
+    figures.height += section.height;
+    figures.area += section.area;
+    figures.offset_across += section.offset_across;
+    figures.offset_up += section.offset_up;
+    figures.width_min = std::min(figures.width_min, section.width);
+    figures.width_max = std::max(figures.width_max, section.width);
+    figures.height_min = std::min(figures.height_min, section.height);
+    figures.height_max = std::max(figures.height_max, section.height);
+    if (std::abs(section.offset_across) > std::abs(figures.offset_across_max)) figures.offset_across_max = section.offset_across;
+  }
+  std::vector<LayerFigures> result;
+  for (auto& [layer, figures] : layers) {
+    const double measured = double(figures.stations - figures.empty);
+    if (measured > 0) {
+      figures.width /= measured;
+      figures.height /= measured;
+      figures.area /= measured;
+      figures.offset_across /= measured;
+      figures.offset_up /= measured;
+    } else {
+      figures.width_min = figures.width_max = figures.height_min = figures.height_max = 0;
+    }
+    result.push_back(figures);
+  }
+  return result;
+}
+}  // namespace
+
+Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, double spacing, double time) {
+  Report report;
+  report.time = time;
+  report.particle_diameter = printed.particle_diameter;
+  report.particles = printed.positions.size();
+  report.spacing = spacing;
+  Design all;
+  for (const HeadDesign& head : designs) {
+    HeadReport entry;
+    entry.name = head.name;
+    entry.sections = measure_sections(head.design, printed, spacing);
+    entry.layers = layer_figures(head.design, entry.sections);
+    report.heads.push_back(std::move(entry));
+    all.beads.insert(all.beads.end(), head.design.beads.begin(), head.design.beads.end());
+  }
+  report.fill = measure_fill(all, Printed{printed.positions, {}, printed.particle_diameter});
+  return report;
+}
+
+std::string report_json(const Report& report) {
+  nlohmann::json heads = nlohmann::json::array();
+  for (const HeadReport& head : report.heads) {
+    nlohmann::json layers = nlohmann::json::array();
+    for (const LayerFigures& layer : head.layers)
+      layers.push_back({{"layer", layer.layer},
+                        {"stations", layer.stations},
+                        {"stations_empty", layer.empty},
+                        {"design_width_m", layer.design_width},
+                        {"design_height_m", layer.design_height},
+                        {"design_area_m2", layer.design_area},
+                        {"width_m", layer.width},
+                        {"width_min_m", layer.width_min},
+                        {"width_max_m", layer.width_max},
+                        {"height_m", layer.height},
+                        {"height_min_m", layer.height_min},
+                        {"height_max_m", layer.height_max},
+                        {"area_m2", layer.area},
+                        {"offset_across_m", layer.offset_across},
+                        {"offset_across_largest_m", layer.offset_across_max},
+                        {"offset_up_m", layer.offset_up}});
+    heads.push_back({{"name", head.name}, {"sections", head.sections.size()}, {"layers", layers}});
+  }
+  const nlohmann::json json = {
+      {"definition", "sections across each designed bead (a slicer's rounded box of the commanded flow over the speed and the "
+                     "layer's height) every spacing along it, of the particles printed in its layer, each a cube of the particle "
+                     "diameter; fill on a grid of half the particle diameter"},
+      {"time_s", report.time},
+      {"particles", report.particles},
+      {"particle_diameter_m", report.particle_diameter},
+      {"spacing_m", report.spacing},
+      {"fill_m3",
+       {{"designed", report.fill.designed}, {"printed", report.fill.printed}, {"over", report.fill.over}, {"under", report.fill.under}}},
+      {"heads", heads}};
+  return json.dump(2) + "\n";
+}
+
+std::string report_csv(const Report& report) {
+  std::string csv = "head,layer,x_m,y_m,z_m,particles,width_m,height_m,area_m2,offset_across_m,offset_up_m\n";
+  for (const HeadReport& head : report.heads)
+    for (const Section& section : head.sections)
+      csv += fmt::format("{},{},{:.6g},{:.6g},{:.6g},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g}\n", head.name, section.layer, section.at.x(),
+                         section.at.y(), section.at.z(), section.particles, section.width, section.height, section.area,
+                         section.offset_across, section.offset_up);
+  return csv;
+}
+
+}  // namespace m3dp::quality

@@ -1,0 +1,51 @@
+#pragma once
+// A print's quality report (issue 39): each head's sections and their figures per layer against the
+// design, and the whole print's over- and under-fill; as quality.json and quality.csv.
+#include <string>
+#include <vector>
+
+#include "m3dp/quality/sections.hpp"
+
+namespace m3dp::quality {
+
+/// A head's design, by name.
+struct HeadDesign {
+  std::string name;
+  Design design;
+};
+
+/// One layer of one head: its sections' figures against the design's.
+struct LayerFigures {
+  std::int32_t layer = 0;
+  std::size_t stations = 0, empty = 0;         // sections, and those with nothing printed
+  double design_width = 0, design_height = 0, design_area = 0;  // m, m, m² (the layer's beads, mean)
+  double width = 0, width_min = 0, width_max = 0;               // m, over the sections with material
+  double height = 0, height_min = 0, height_max = 0;            // m
+  double area = 0;                                              // m², mean
+  double offset_across = 0, offset_across_max = 0;  // m: mean, and the largest by magnitude (signed)
+  double offset_up = 0;                             // m, mean: its top off the designed top
+};
+
+struct HeadReport {
+  std::string name;
+  std::vector<Section> sections;
+  std::vector<LayerFigures> layers;
+};
+
+struct Report {
+  double time = 0;               // s of simulated time the particles are of
+  double particle_diameter = 0;  // m
+  std::size_t particles = 0;
+  double spacing = 0;            // m between stations
+  std::vector<HeadReport> heads;
+  Fill fill;                     // every head's design against all the printed material
+};
+
+/// Measures `printed` against the heads' designs, a section every `spacing` (m) along each bead.
+[[nodiscard]] Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, double spacing, double time);
+
+/// quality.json's text (SI units in the keys) and quality.csv's (a row per section).
+[[nodiscard]] std::string report_json(const Report& report);
+[[nodiscard]] std::string report_csv(const Report& report);
+
+}  // namespace m3dp::quality

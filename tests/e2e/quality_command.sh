@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# `m3dp quality RUN_DIR`: the demo printed for a few seconds measured against its path (quality.json
+# read back by Python's json, quality.csv by its csv), and each missing input a clear error, exit 2.
+set -euo pipefail
+m3dp=$1 scenes=$2 work=$3
+rm -rf "$work" && mkdir -p "$work"
+"$m3dp" run "$scenes/ur10_wall.sdf" -o "$work/run" --until 4 --quiet > /dev/null
+"$m3dp" quality "$work/run"
+/usr/bin/python3 - "$work/run" <<'PY'
+import csv, json, pathlib, sys
+folder = pathlib.Path(sys.argv[1])
+report = json.loads((folder / "quality.json").read_text())
+head = report["heads"][0]
+assert head["name"] == "nozzle", head["name"]
+layer = head["layers"][0]
+# The first side is printed by 4 s: its sections have material, the rest of the square does not yet.
+assert layer["layer"] == 0 and layer["stations"] > 50, layer
+printed = layer["stations"] - layer["stations_empty"]
+assert 10 <= printed <= 30, layer
+assert abs(layer["design_width_m"] - 0.01373) < 1e-4 and abs(layer["design_height_m"] - 0.008) < 1e-6, layer
+assert 0.8 * 0.01373 < layer["width_m"] < 1.4 * 0.01373, layer
+assert 0.006 < layer["height_m"] < 0.012, layer
+fill = report["fill_m3"]
+assert fill["under"] > 0.5 * fill["designed"], fill  # most of the wall is not printed yet
+rows = list(csv.DictReader((folder / "quality.csv").open()))
+assert sum(row["layer"] == "0" for row in rows) == layer["stations"], len(rows)
+assert {"width_m", "height_m", "offset_across_m", "offset_up_m"} <= set(rows[0]), rows[0]
+print("quality.json and quality.csv read back")
+PY
+expect_error() {  # expected message, then the command's arguments
+  local expected=$1; shift
+  set +e
+  output=$("$m3dp" quality "$@" 2>&1)
+  status=$?
+  set -e
+  echo "$output"
+  [ $status -eq 2 ] || { echo "FAIL: exit status $status, expected 2"; exit 1; }
+  grep -qF -- "$expected" <<<"$output" || { echo "FAIL: missing '$expected'"; exit 1; }
+}
+expect_error "no such run folder" "$work/nowhere"
+mkdir -p "$work/empty"
+expect_error "not a run folder: no summary.json naming its scene and no scene.sdf" "$work/empty"
+"$m3dp" run "$scenes/hydrostatic.sdf" -o "$work/no_heads" --until 0.01 --quiet > /dev/null
+expect_error "the scene has no print heads" "$work/no_heads"
+cp "$work/run/summary.json" "$work/empty/"
+expect_error "no particle frames (particles.pvd)" "$work/empty"
+# A run that ended before the nozzle reached the wall (it extrudes from 1.76 s).
+"$m3dp" run "$scenes/ur10_wall.sdf" -o "$work/early" --until 0.5 --quiet > /dev/null
+expect_error "no particle in the last frame was printed by a head's path" "$work/early"
+echo "PASS"
