@@ -23,6 +23,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/camera_rig.hpp"
+#include "m3dp/sim/print_quality.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sim/session.hpp"
 #include "m3dp/sim/simulation.hpp"
@@ -394,6 +395,45 @@ one step belong together (ids tells which particle a row is: the order changes b
       }, "The printed material's surface as the rigid world holds it (the collision body robots meet): vertices "
          "(n, 3) m and triangles (m, 3), copies, and how many meshes have joined the world so far; None before the first "
          "or when the scene has no <meshing>. Made at the meshing period whether or not the run is recorded.")
+      .def("quality", [](PySimulation& self, double spacing) {
+        if (!(spacing > 0)) throw Error(fmt::format("quality: spacing = {} m (expected > 0)", spacing));
+        const quality::Report report = self.in_arena([&] { return sim::print_quality(self.simulation(), spacing); });
+        py::dict result = py::module_::import("json").attr("loads")(quality::report_json(report));
+        py::list heads = result["heads"];
+        for (std::size_t h = 0; h < report.heads.size(); ++h) {
+          const auto& sections = report.heads[h].sections;
+          const auto count = static_cast<py::ssize_t>(sections.size());
+          py::array_t<std::int32_t> layer(count);
+          py::array_t<double> at({count, py::ssize_t(3)}), width(count), height(count), area(count), across(count), up(count);
+          py::array_t<std::int64_t> particles(count);
+          for (py::ssize_t i = 0; i < count; ++i) {
+            const auto& section = sections[std::size_t(i)];
+            layer.mutable_at(i) = section.layer;
+            for (py::ssize_t k = 0; k < 3; ++k) at.mutable_at(i, k) = section.at[k];
+            width.mutable_at(i) = section.width;
+            height.mutable_at(i) = section.height;
+            area.mutable_at(i) = section.area;
+            across.mutable_at(i) = section.offset_across;
+            up.mutable_at(i) = section.offset_up;
+            particles.mutable_at(i) = std::int64_t(section.particles);
+          }
+          py::dict arrays;
+          arrays["layer"] = layer;
+          arrays["at_m"] = at;
+          arrays["width_m"] = width;
+          arrays["height_m"] = height;
+          arrays["area_m2"] = area;
+          arrays["offset_across_m"] = across;
+          arrays["offset_up_m"] = up;
+          arrays["particles"] = particles;
+          heads[h].attr("__setitem__")("section_arrays", arrays);
+        }
+        return result;
+      }, py::arg("spacing") = 0.01,
+         "The print now against each head's path as it is (paths given at run time included): quality.json's figures "
+         "(per head and layer: designed and measured width, height, area, offsets; the fill's designed, printed, over "
+         "and under volumes, m³), and per head section_arrays, numpy arrays of every section every `spacing` m along the "
+         "beads (layer, at_m, width_m, height_m, area_m2, offset_across_m, offset_up_m, particles: 0 where nothing is).")
       .def_property_readonly("material_names", [](PySimulation& self) {
         std::vector<std::string> names;
         for (const auto& entry : self.simulation().scene().materials) names.push_back(entry.material.name);

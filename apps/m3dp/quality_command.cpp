@@ -2,6 +2,9 @@
 
 #include <fmt/format.h>
 
+#include <spawn.h>
+#include <sys/wait.h>
+
 #include <algorithm>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -39,6 +42,21 @@ fs::path run_scene(const fs::path& folder) {
   }
   if (fs::exists(folder / "scene.sdf")) return folder / "scene.sdf";
   throw InputError({folder.string(), 0}, "not a run folder: no summary.json naming its scene and no scene.sdf (m3dp run -o writes them)");
+}
+/// Runs `python3 scripts/plot_quality.py` (Debian's matplotlib) on the report: quality.png. Returns
+/// what went wrong, empty if nothing.
+std::string plot_report(const fs::path& folder) {
+  const fs::path script = fs::path(M3DP_PROJECT_ROOT) / "scripts" / "plot_quality.py";
+  if (!fs::exists(script)) return fmt::format("{} is not here", script.string());
+  const std::string python = "/usr/bin/python3", json = (folder / "quality.json").string(), csv = (folder / "quality.csv").string(),
+                    png = (folder / "quality.png").string(), script_path = script.string();
+  std::vector<char*> arguments{const_cast<char*>(python.c_str()), const_cast<char*>(script_path.c_str()), const_cast<char*>(json.c_str()),
+                               const_cast<char*>(csv.c_str()), const_cast<char*>(png.c_str()), nullptr};
+  pid_t child = 0;
+  if (posix_spawn(&child, python.c_str(), nullptr, nullptr, arguments.data(), environ) != 0) return "python3 could not be started";
+  int status = 0;
+  if (waitpid(child, &status, 0) < 0 || !WIFEXITED(status) || WEXITSTATUS(status) != 0) return "the plotting script failed (see above)";
+  return "";
 }
 }  // namespace
 
@@ -80,7 +98,12 @@ int quality_command(const QualityOptions& options) {
   const auto& fill = report.fill;
   fmt::print("  fill: {:.2f} cm3 designed, {:.2f} cm3 printed; over-fill {:.2f} cm3, under-fill {:.2f} cm3\n", 1e6 * fill.designed,
              1e6 * fill.printed, 1e6 * fill.over, 1e6 * fill.under);
-  fmt::print("  wrote quality.json and quality.csv\n");
+  std::fflush(stdout);
+  if (const std::string failure = plot_report(folder); !failure.empty()) {
+    fmt::print(stderr, "m3dp: error: quality.png not drawn: {}\n", failure);
+    return 1;
+  }
+  fmt::print("  wrote quality.json, quality.csv and quality.png\n");
   return 0;
 }
 

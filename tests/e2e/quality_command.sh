@@ -25,7 +25,10 @@ assert fill["under"] > 0.5 * fill["designed"], fill  # most of the wall is not p
 rows = list(csv.DictReader((folder / "quality.csv").open()))
 assert sum(row["layer"] == "0" for row in rows) == layer["stations"], len(rows)
 assert {"width_m", "height_m", "offset_across_m", "offset_up_m"} <= set(rows[0]), rows[0]
-print("quality.json and quality.csv read back")
+from PIL import Image
+with Image.open(folder / "quality.png") as image:
+    assert image.size[0] > 1000 and image.size[1] > 300, image.size
+print("quality.json, quality.csv and quality.png read back")
 PY
 expect_error() {  # expected message, then the command's arguments
   local expected=$1; shift

@@ -266,3 +266,23 @@ def test_the_print_joins_the_world_whether_or_not_it_is_recorded(tmp_path):
     summary = recorded.close()
     assert summary["meshes_inserted"] == 1 and len(summary["meshes"]) == 2  # at 4 s, and the final state's
     assert (tmp_path / "run" / summary["meshes"][0]["file"]).exists()
+
+
+def test_quality_of_the_print_so_far():
+    # The demo's first side, printed by 4 s, against the path: the same figures as m3dp quality.
+    sim = m3dp.Simulation(DEMO, threads=2)
+    sim.step_to(4.0)
+    report = sim.quality(spacing=0.01)
+    head = report["heads"][0]
+    assert head["name"] == "nozzle"
+    layer = head["layers"][0]
+    assert layer["design_width_m"] == pytest.approx(0.01373, abs=1e-4)
+    arrays = head["section_arrays"]
+    printed = arrays["particles"] > 0
+    assert 10 <= printed.sum() <= 30 and len(arrays["width_m"]) == head["sections"]
+    assert layer["width_m"] == pytest.approx(arrays["width_m"][printed & (arrays["layer"] == 0)].mean())
+    # Sections with material lie on the first side (y = -0.12 m, x from 0.58 m on).
+    np.testing.assert_allclose(arrays["at_m"][printed][:, 1], -0.12, atol=1e-6)
+    assert report["fill_m3"]["printed"] == pytest.approx(sim.particle_count * sim.particle_volume, rel=0.1)
+    with pytest.raises(m3dp.Error, match="spacing"):
+        sim.quality(spacing=0)
