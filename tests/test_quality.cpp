@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "m3dp/quality/design.hpp"
+#include "m3dp/quality/deviation.hpp"
 #include "m3dp/quality/sections.hpp"
 
 using namespace m3dp;
@@ -179,4 +180,24 @@ TEST(Quality, AJitteredPackingKeepsItsVolume) {
     EXPECT_NEAR(section.width, kWidth, 0.05 * kWidth);
     EXPECT_NEAR(section.height, kHeight, 0.05 * kHeight);
   }
+}
+
+TEST(Quality, TheDesignsSignedDistanceIsThatOfItsRoundedBoxes) {
+  const quality::Design design = line_design();
+  const quality::DesignDistance distance(design);
+  const double middle = kHeight / 2;  // the section's centre height
+  EXPECT_NEAR(distance(Vec3d(0.05, 0, kHeight)), 0, 1e-7);                       // on its top
+  EXPECT_NEAR(distance(Vec3d(0.05, 0, middle)), -kHeight / 2, 1e-7);             // inside: half a height from top and bottom
+  EXPECT_NEAR(distance(Vec3d(0.05, kWidth / 2 + 0.003, middle)), 0.003, 1e-7);   // 3 mm off its side
+  EXPECT_NEAR(distance(Vec3d(0.05, -kWidth / 2 - 0.003, middle)), 0.003, 1e-7);
+  EXPECT_NEAR(distance(Vec3d(0.05, 0.002, kHeight + 0.001)), 0.001, 1e-7);       // 1 mm above its flat top
+  EXPECT_NEAR(distance(Vec3d(kLength + 0.004, 0, middle)), 0.004, 1e-7);         // past its end
+  EXPECT_NEAR(distance(Vec3d(0.05, 1.0, middle)), 0.05, 1e-12);                 // beyond reach
+  // The rounded side: from the half-disc's centre, its radius away.
+  const double corner_centre = kWidth / 2 - kHeight / 2;
+  EXPECT_NEAR(distance(Vec3d(0.05, corner_centre + 0.004, kHeight + 0.003)), std::hypot(0.004, 0.003 + kHeight / 2) - kHeight / 2, 1e-7);
+  const std::vector<float> deviation{0.003f, -0.003f, 0.0f, 0.001f};
+  const auto stats = quality::statistics(deviation);
+  EXPECT_NEAR(stats.mean, 0.00025, 1e-7);
+  EXPECT_NEAR(stats.max, 0.003, 1e-7);
 }

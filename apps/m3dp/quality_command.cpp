@@ -12,7 +12,10 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/particle_reader.hpp"
+#include "m3dp/io/vtk_writer.hpp"
+#include "m3dp/surface/surface.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/print_quality.hpp"
 
@@ -81,7 +84,21 @@ int quality_command(const QualityOptions& options) {
   std::vector<toolpath::Trajectory> paths;
   for (const auto& head : scene.print_heads) paths.push_back(head.trajectory);
   const quality::Printed printed{frame.positions, frame.layer, 2 * double(scene.solver.particle_radius)};
-  const quality::Report report = quality::measure(sim::head_designs(scene, paths), printed, options.spacing, entries.back().time);
+  const std::vector<quality::HeadDesign> designs = sim::head_designs(scene, paths);
+  quality::Report report = quality::measure(designs, printed, options.spacing, entries.back().time);
+  // The printed surface (the scene's meshing method) with its distance to the design at each vertex.
+  surface::SurfaceSettings surface_settings = scene.meshing.surface;
+  surface_settings.particle_radius = scene.solver.particle_radius;
+  const TriangleMesh mesh = surface::reconstruct_surface(frame.positions, surface_settings);
+  quality::Design all;
+  for (const auto& head : designs) all.beads.insert(all.beads.end(), head.design.beads.begin(), head.design.beads.end());
+  const std::vector<float> deviation = quality::deviation_at(quality::DesignDistance(all), mesh.vertices);
+  report.deviation = quality::statistics(deviation);
+  io::write_ply_with_quality(folder / "quality_mesh.ply", mesh, deviation,
+                             "quality: the signed distance (m) to the designed print, > 0 outside it");
+  const std::vector<Real> deviation_field(deviation.begin(), deviation.end());
+  io::write_vtp(folder / "quality_mesh.vtp",
+                io::PolyData{mesh.vertices, mesh.triangles, {}, {}, {io::PointArray::of("deviation_m", std::span<const Real>(deviation_field))}, {}});
   io::write_text_atomically(folder / "quality.json", quality::report_json(report));
   io::write_text_atomically(folder / "quality.csv", quality::report_csv(report));
 
@@ -98,6 +115,9 @@ int quality_command(const QualityOptions& options) {
   const auto& fill = report.fill;
   fmt::print("  fill: {:.2f} cm3 designed, {:.2f} cm3 printed; over-fill {:.2f} cm3, under-fill {:.2f} cm3\n", 1e6 * fill.designed,
              1e6 * fill.printed, 1e6 * fill.over, 1e6 * fill.under);
+  fmt::print("  surface off the design: mean {:+.2f} mm, 95th percentile {:.2f} mm, max {:.2f} mm over {} vertices "
+             "(quality_mesh.ply, quality_mesh.vtp)\n",
+             1e3 * report.deviation->mean, 1e3 * report.deviation->p95, 1e3 * report.deviation->max, report.deviation->points);
   std::fflush(stdout);
   if (const std::string failure = plot_report(folder); !failure.empty()) {
     fmt::print(stderr, "m3dp: error: quality.png not drawn: {}\n", failure);

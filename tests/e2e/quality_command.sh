@@ -30,6 +30,31 @@ with Image.open(folder / "quality.png") as image:
     assert image.size[0] > 1000 and image.size[1] > 300, image.size
 print("quality.json, quality.csv and quality.png read back")
 PY
+# The surface's deviation field: ParaView reads quality_mesh.vtp's deviation_m; quality_mesh.ply (for
+# MeshLab, whose vertex quality it is) has the same values, its geometry read by ParaView too.
+pvpython --force-offscreen-rendering - "$work/run" > "$work/pvpython.out" 2>"$work/pvpython.err" <<'PY' || { cat "$work/pvpython.err"; exit 1; }
+import json, pathlib, struct, sys
+from paraview.simple import OpenDataFile, UpdatePipeline, servermanager
+folder = pathlib.Path(sys.argv[1])
+def fetch(name):
+    reader = OpenDataFile(str(folder / name))
+    UpdatePipeline(proxy=reader)
+    return servermanager.Fetch(reader)
+surface, ply = fetch("quality_mesh.vtp"), fetch("quality_mesh.ply")
+deviation = surface.GetPointData().GetArray("deviation_m")
+report = json.loads((folder / "quality.json").read_text())["surface_deviation_m"]
+assert surface.GetNumberOfPoints() == ply.GetNumberOfPoints() == report["vertices"] > 1000, report
+low, high = deviation.GetRange()
+assert abs(max(-low, high) - report["max"]) < 1e-6, (low, high, report)
+data = (folder / "quality_mesh.ply").read_bytes()
+header_end = data.index(b"end_header\n") + len(b"end_header\n")
+assert b"property float quality" in data[:header_end]
+first = struct.unpack_from("<4f", data, header_end)  # x, y, z, quality of the first vertex
+assert abs(first[3] - deviation.GetValue(0)) < 1e-6, (first, deviation.GetValue(0))
+print("OK", report["vertices"], low, high)
+PY
+tail -n 1 "$work/pvpython.out"
+grep -q "^OK" "$work/pvpython.out" || { echo "FAIL: pvpython did not read the deviation field"; exit 1; }
 expect_error() {  # expected message, then the command's arguments
   local expected=$1; shift
   set +e

@@ -463,17 +463,25 @@ void write_obj(std::ostream& stream, const TriangleMesh& mesh) {
   for (const auto& t : mesh.triangles) stream << fmt::format("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
 }
 
-void write_ply(std::ostream& stream, const TriangleMesh& mesh) {
-  stream << "ply\nformat binary_little_endian 1.0\ncomment M3DP surface mesh, metres\n"
-         << "element vertex " << mesh.vertices.size() << "\nproperty float x\nproperty float y\nproperty float z\n"
-         << "element face " << mesh.triangles.size() << "\nproperty list uchar int vertex_indices\nend_header\n";
-  for (const Vec3& v : mesh.vertices)
-    for (int k = 0; k < 3; ++k) write_le(stream, static_cast<float>(v[k]));
+/// Binary PLY; with `quality` (one value a vertex), a float vertex property "quality", which MeshLab
+/// takes as the vertex quality it colours by.
+void write_ply_with(std::ostream& stream, const TriangleMesh& mesh, std::span<const float> quality, std::string_view comment) {
+  stream << "ply\nformat binary_little_endian 1.0\ncomment M3DP surface mesh, metres\n";
+  if (!comment.empty()) stream << "comment " << comment << "\n";
+  stream << "element vertex " << mesh.vertices.size() << "\nproperty float x\nproperty float y\nproperty float z\n"
+         << (quality.empty() ? "" : "property float quality\n") << "element face " << mesh.triangles.size()
+         << "\nproperty list uchar int vertex_indices\nend_header\n";
+  for (std::size_t i = 0; i < mesh.vertices.size(); ++i) {
+    for (int k = 0; k < 3; ++k) write_le(stream, static_cast<float>(mesh.vertices[i][k]));
+    if (!quality.empty()) write_le(stream, quality[i]);
+  }
   for (const auto& t : mesh.triangles) {
     write_le(stream, std::uint8_t(3));
     for (const Index index : t) write_le(stream, static_cast<std::int32_t>(index));
   }
 }
+
+void write_ply(std::ostream& stream, const TriangleMesh& mesh) { write_ply_with(stream, mesh, {}, ""); }
 
 void write_binary_stl(std::ostream& stream, const TriangleMesh& mesh) {
   std::string header = "M3DP surface mesh, metres";
@@ -565,6 +573,12 @@ void write_sdf_model(const std::filesystem::path& folder, const std::string& mod
   </model>
 </sdf>
 )", model_name, uri));
+}
+
+void write_ply_with_quality(const std::filesystem::path& file, const TriangleMesh& mesh, std::span<const float> quality,
+                            std::string_view comment) {
+  if (quality.size() != mesh.vertices.size()) throw Error(fmt::format("{}: {} quality values for {} vertices", file.string(), quality.size(), mesh.vertices.size()));
+  write_file_atomically(file, [&](std::ostream& stream) { write_ply_with(stream, mesh, quality, comment); }, true);
 }
 
 }  // namespace m3dp::io

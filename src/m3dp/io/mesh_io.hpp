@@ -38,6 +38,11 @@ TriangleMesh read_triangle_mesh(const std::filesystem::path& file);
 /// extension, to a temporary name and renames it. Coordinates in metres; no paths inside.
 void write_triangle_mesh(const std::filesystem::path& file, const TriangleMesh& mesh);
 
+/// A binary PLY with a float per-vertex property "quality" (MeshLab colours by it: Render → Color
+/// → Per Vertex Quality), atomically; `comment` (one line) says what it is.
+void write_ply_with_quality(const std::filesystem::path& file, const TriangleMesh& mesh, std::span<const float> quality,
+                            std::string_view comment);
+
 /// A Gazebo model folder a world can <include>: model.config, model.sdf (one static link whose
 /// visual and collision are the mesh) and meshes/<model_name>.stl, referenced as
 /// model://<model_name>/meshes/<model_name>.stl (no absolute path).

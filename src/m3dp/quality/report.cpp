@@ -118,7 +118,15 @@ std::string report_json(const Report& report) {
       {"fill_m3",
        {{"designed", report.fill.designed}, {"printed", report.fill.printed}, {"over", report.fill.over}, {"under", report.fill.under}}},
       {"heads", heads}};
-  return json.dump(2) + "\n";
+  nlohmann::json result = json;
+  if (report.deviation)
+    result["surface_deviation_m"] = {{"definition", "the printed surface's signed distance to the designed one at its mesh's vertices "
+                                                    "(> 0 outside the design), mean signed, 95th percentile and max of its magnitude"},
+                                     {"vertices", report.deviation->points},
+                                     {"mean", report.deviation->mean},
+                                     {"p95", report.deviation->p95},
+                                     {"max", report.deviation->max}};
+  return result.dump(2) + "\n";
 }
 
 std::string report_csv(const Report& report) {

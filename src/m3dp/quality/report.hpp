@@ -4,6 +4,9 @@
 #include <string>
 #include <vector>
 
+#include <optional>
+
+#include "m3dp/quality/deviation.hpp"
 #include "m3dp/quality/sections.hpp"
 
 namespace m3dp::quality {
@@ -39,6 +42,8 @@ struct Report {
   double spacing = 0;            // m between stations
   std::vector<HeadReport> heads;
   Fill fill;                     // every head's design against all the printed material
+  /// The printed surface's signed distance to the design at its mesh's vertices, when measured.
+  std::optional<DeviationStatistics> deviation;
 };
 
 /// Measures `printed` against the heads' designs, a section every `spacing` (m) along each bead.
