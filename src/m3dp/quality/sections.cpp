@@ -24,9 +24,59 @@ BeadFrame frame_of(const Bead& bead) {
 }
 }  // namespace
 
+/// The printed particles in cells of a uniform grid, so that a bead visits only those near it.
+class ParticleCells {
+ public:
+  ParticleCells(std::span<const Vec3> positions, double cell) : cell_(cell) {
+    if (positions.empty()) return;
+    Vec3d low = Vec3d::Constant(std::numeric_limits<double>::infinity()), high = -low;
+    for (const Vec3& p : positions) {
+      low = low.cwiseMin(p.cast<double>());
+      high = high.cwiseMax(p.cast<double>());
+    }
+    origin_ = low;
+    cells_ = (((high - low) / cell_).array().floor() + 1).cast<long>().max(1);
+    starts_.assign(std::size_t(cells_.prod()) + 1, 0);
+    std::vector<std::size_t> cell_of(positions.size());
+    for (std::size_t i = 0; i < positions.size(); ++i) {
+      cell_of[i] = index(((positions[i].cast<double>() - origin_) / cell_).array().floor().cast<long>().min(cells_ - 1));
+      ++starts_[cell_of[i] + 1];
+    }
+    for (std::size_t c = 1; c < starts_.size(); ++c) starts_[c] += starts_[c - 1];
+    order_.resize(positions.size());
+    std::vector<std::size_t> next(starts_.begin(), starts_.end() - 1);
+    for (std::size_t i = 0; i < positions.size(); ++i) order_[next[cell_of[i]]++] = i;
+  }
+  /// Calls `visit(i)` for every particle in the cells that meet the box [low, high].
+  template <class Visit>
+  void each_in(const Vec3d& low, const Vec3d& high, Visit&& visit) const {
+    if (order_.empty()) return;
+    const Eigen::Array<long, 3, 1> first = ((low - origin_) / cell_).array().floor().cast<long>().max(0);
+    const Eigen::Array<long, 3, 1> last = ((high - origin_) / cell_).array().floor().cast<long>().min(cells_ - 1);
+    for (long k = first.z(); k <= last.z(); ++k)
+      for (long j = first.y(); j <= last.y(); ++j)
+        for (long i = first.x(); i <= last.x(); ++i) {
+          const std::size_t c = index({i, j, k});
+          for (std::size_t n = starts_[c]; n < starts_[c + 1]; ++n) visit(order_[n]);
+        }
+  }
+
+ private:
+  [[nodiscard]] std::size_t index(const Eigen::Array<long, 3, 1>& at) const {
+    return std::size_t((at.z() * cells_.y() + at.y()) * cells_.x() + at.x());
+  }
+  double cell_;
+  Vec3d origin_ = Vec3d::Zero();
+  Eigen::Array<long, 3, 1> cells_ = Eigen::Array<long, 3, 1>::Zero();
+  std::vector<std::size_t> starts_, order_;
+};
+
 std::vector<Section> measure_sections(const Design& design, const Printed& printed, double spacing) {
   std::vector<Section> sections;
   const double d = printed.particle_diameter;
+  double widest = d;
+  for (const Bead& bead : design.beads) widest = std::max({widest, bead.width, 3 * bead.height});
+  const ParticleCells cells(printed.positions, widest);
   for (std::size_t b = 0; b < design.beads.size(); ++b) {
     const Bead& bead = design.beads[b];
     const BeadFrame frame = frame_of(bead);
@@ -35,16 +85,17 @@ std::vector<Section> measure_sections(const Design& design, const Printed& print
     // The particles that may belong to this bead: its layer, within a bead width across and a layer
     // height above or below it.
     std::vector<Vec3d> local;  // (along, across, z)
-    for (std::size_t i = 0; i < printed.positions.size(); ++i) {
-      if (!printed.layers.empty() && printed.layers[i] != bead.layer) continue;
+    const Vec3d reach(bead.width + d, bead.width + d, 2 * bead.height);
+    cells.each_in(bead.start.cwiseMin(bead.end) - reach, bead.start.cwiseMax(bead.end) + reach, [&](std::size_t i) {
+      if (!printed.layers.empty() && printed.layers[i] != bead.layer) return;
       const Vec3d p = printed.positions[i].cast<double>() - bead.start;
       const double s = p.dot(frame.tangent), y = p.dot(frame.across);
-      if (s < -d || s > length + d || std::abs(y) > bead.width) continue;
+      if (s < -d || s > length + d || std::abs(y) > bead.width) return;
       const double z = printed.positions[i].z();
       const double top = bead.start.z() + s / length * (bead.end.z() - bead.start.z());
-      if (z < top - 2 * bead.height || z > top + bead.height) continue;
+      if (z < top - 2 * bead.height || z > top + bead.height) return;
       local.emplace_back(s, y, z);
-    }
+    });
     for (double s = bead.width / 2; s <= length - bead.width / 2 + 1e-12; s += spacing) {
       Section section;
       section.bead = b;
