@@ -3,6 +3,8 @@
 // Each test prints measured against reference.
 #include <gtest/gtest.h>
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -10,6 +12,7 @@
 #include <cstdio>
 #include <vector>
 
+#include "m3dp/quality/buildability.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/presets.hpp"
@@ -687,7 +690,7 @@ namespace {
 /// width: slender ones (20 mm wide, 50–80 mm high) tip over as a whole whatever their build-up, which is
 /// buckling, not the plastic collapse Roussel's bound is about. With rest detection, layers at rest
 /// are woken when the weight put on them passes Roussel's bound (wake_on_load).
-double stacked_column_height(double structuration_rate, bool rest_detection) {
+double stacked_column_height(double structuration_rate, bool rest_detection, quality::Buildability* tracker = nullptr) {
   const Real d = Real(0.0025);
   const double density = 2300;
   sph::Parameters parameters;
@@ -713,11 +716,36 @@ double stacked_column_height(double structuration_rate, bool rest_detection) {
     const Real half = kAcross * d / 2, bottom = Real(layer * kLayerParticles) * d;
     solver.add_particles(sph::lattice_in_box(Aabb{Vec3(-half, -half, bottom), Vec3(half, half, bottom + kLayerParticles * d)}, d),
                          Vec3::Zero(), 0);
-    while (solver.time() < (layer + 1) * layer_period) solver.step();
+    while (solver.time() < (layer + 1) * layer_period) {
+      solver.step();
+      // The quality module's own verdict, from the particles alone, every 0.05 s.
+      if (tracker && std::floor(solver.time() / 0.05) > std::floor((solver.time() - solver.state().time_step) / 0.05))
+        tracker->observe(solver.time(), solver.fluid().position);
+    }
   }
   Real top = 0;
   for (const Vec3& p : solver.fluid().position) top = std::max(top, p.z());
   return double(top + d / 2);
+}
+
+/// The column as the quality module sees its design: eight 5 mm layers 30 mm square, one every 0.25 s
+/// (each a bead as wide as the column, laid at once).
+quality::Design column_design() {
+  quality::Design design;
+  for (int layer = 0; layer < 8; ++layer) {
+    quality::Bead bead;
+    bead.start = Vec3d(-0.015, 0, 0.005 * (layer + 1));
+    bead.end = Vec3d(0.015, 0, 0.005 * (layer + 1));
+    bead.start_time = 0.25 * layer;
+    bead.end_time = 0.25 * layer + 0.001;
+    bead.layer = layer;
+    bead.height = 0.005;
+    bead.width = 0.03;
+    bead.area = bead.width * bead.height;
+    design.beads.push_back(bead);
+    design.layer_z.push_back(bead.start.z());
+  }
+  return design;
 }
 
 void expect_buildability(double factor_on_bound, bool stands) {
@@ -727,13 +755,30 @@ void expect_buildability(double factor_on_bound, bool stands) {
   // third layer on, and a Pashias slump with the base's final τ0 (230 Pa) would take about 20 % off.
   const double density = 2300, g = 9.81, build_rate = 0.02;
   const double bound = density * g * build_rate / std::sqrt(3.0);
-  const double height = stacked_column_height(factor_on_bound * bound, true);
+  quality::Buildability tracker(column_design(), 0.0025);
+  const double height = stacked_column_height(factor_on_bound * bound, true, &tracker);
   const double stacked = 0.04;
   std::printf("A_thix = %.2f x rho g R / sqrt 3 = %.0f Pa/s: column of 8 layers %.1f mm high (stacked %.0f mm): %s\n",
               factor_on_bound, factor_on_bound * bound, height * 1e3, stacked * 1e3,
               height > 0.97 * stacked ? "stands" : "sank");
-  if (stands) EXPECT_GT(height, 0.97 * stacked);
-  else EXPECT_LT(height, 0.9 * stacked);
+  if (stands) {
+    EXPECT_GT(height, 0.97 * stacked);
+  } else {
+    EXPECT_LT(height, 0.9 * stacked);
+  }
+  // The quality module's verdict from the particles alone: it stood, or it fell 10 % short at a layer.
+  const auto& shortfall = tracker.shortfall();
+  const auto& last = tracker.history().back();
+  std::printf("quality: designed %.1f mm, printed %.1f mm at %.2f s; %s\n", last.designed * 1e3, last.printed * 1e3, last.time,
+              shortfall ? fmt::format("fell short at layer {} ({:.2f} s: {:.1f} of {:.1f} mm)", shortfall->layer, shortfall->time,
+                                      shortfall->printed * 1e3, shortfall->designed * 1e3).c_str()
+                        : "stood");
+  EXPECT_EQ(shortfall.has_value(), !stands);
+  EXPECT_NEAR(last.designed, stacked, 1e-9);
+  EXPECT_NEAR(last.printed, height, 0.1 * stacked);
+  if (shortfall) {
+    EXPECT_GE(shortfall->layer, 2) << "the first layers stand on their yield stress";
+  }
 }
 
 }  // namespace

@@ -1,0 +1,47 @@
+#pragma once
+// Whether a print stood (issue 39): its printed height against the design's over time, and the time
+// and layer at which it fell short by more than a tolerance (a slump or a collapse). The printed
+// height is the median, over the design's footprint in cells two particles wide, of each cell's
+// highest material: a splash or a strand hanging from the nozzle moves it little, a wall that sinks
+// or spreads moves it all.
+#include <optional>
+#include <span>
+#include <vector>
+
+#include "m3dp/quality/design.hpp"
+
+namespace m3dp::quality {
+
+struct HeightSample {
+  double time = 0;          // s
+  std::int32_t layer = -1;  // the last layer the design has laid by then (-1: none)
+  double designed = 0;      // m, the design's height above the plate then
+  double printed = 0;       // m, the printed height over its footprint
+};
+
+struct Shortfall {
+  double time = 0;          // s, when the printed height first fell short
+  std::int32_t layer = -1;  // the layer the design had laid then
+  double designed = 0, printed = 0;  // m
+};
+
+class Buildability {
+ public:
+  /// `tolerance`: the fraction of the designed height the print may fall short of before it counts
+  /// as slumped (default 10 %).
+  Buildability(const Design& design, double particle_diameter, double plate_z = 0, double tolerance = 0.1);
+  /// The printed material at `time` (s).
+  void observe(double time, std::span<const Vec3> positions);
+  [[nodiscard]] const std::vector<HeightSample>& history() const { return history_; }
+  /// The first time the print fell short of its design by more than the tolerance; none: it stood.
+  [[nodiscard]] const std::optional<Shortfall>& shortfall() const { return shortfall_; }
+
+ private:
+  Design design_;
+  double cell_, plate_z_, tolerance_;
+  std::vector<Eigen::Vector2d> footprint_;  // the cells' centres (m) inside the design's beads
+  std::vector<HeightSample> history_;
+  std::optional<Shortfall> shortfall_;
+};
+
+}  // namespace m3dp::quality
