@@ -4,6 +4,7 @@
 
 #include <cmath>
 
+#include "m3dp/quality/buildability.hpp"
 #include "m3dp/quality/design.hpp"
 #include "m3dp/quality/deviation.hpp"
 #include "m3dp/quality/sections.hpp"
@@ -200,4 +201,27 @@ TEST(Quality, TheDesignsSignedDistanceIsThatOfItsRoundedBoxes) {
   const auto stats = quality::statistics(deviation);
   EXPECT_NEAR(stats.mean, 0.00025, 1e-7);
   EXPECT_NEAR(stats.max, 0.003, 1e-7);
+}
+
+TEST(Quality, ABeadThatStandsAndOneThatSlumped) {
+  // The line laid in 0.1 m / V ≈ 1.9 s; observed after it: as designed it stood, flattened to 60 %
+  // of its height (and wider) it fell short, at layer 0.
+  const quality::Design design = line_design();
+  const double d = 0.0005, done = design.beads[0].end_time + 0.5;
+  const std::vector<Vec3> standing = lattice_bead(design.beads[0], d, kWidth, 0, 0, kLength);
+  quality::Buildability stood(design, d);
+  stood.observe(0.0, {});
+  stood.observe(done, standing);
+  EXPECT_FALSE(stood.shortfall().has_value());
+  EXPECT_NEAR(stood.history().back().designed, kHeight, 1e-6);
+  EXPECT_NEAR(stood.history().back().printed, kHeight, d);
+  quality::Bead flat = design.beads[0];
+  flat.height = 0.6 * kHeight;
+  flat.start.z() = flat.end.z() = flat.height;
+  const std::vector<Vec3> slumped = lattice_bead(flat, d, 1.5 * kWidth, 0, 0, kLength);
+  quality::Buildability fell(design, d);
+  fell.observe(done, slumped);
+  ASSERT_TRUE(fell.shortfall().has_value());
+  EXPECT_EQ(fell.shortfall()->layer, 0);
+  EXPECT_NEAR(fell.shortfall()->printed, 0.6 * kHeight, d);
 }

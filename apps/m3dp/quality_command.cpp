@@ -90,8 +90,7 @@ int quality_command(const QualityOptions& options) {
   surface::SurfaceSettings surface_settings = scene.meshing.surface;
   surface_settings.particle_radius = scene.solver.particle_radius;
   const TriangleMesh mesh = surface::reconstruct_surface(frame.positions, surface_settings);
-  quality::Design all;
-  for (const auto& head : designs) all.beads.insert(all.beads.end(), head.design.beads.begin(), head.design.beads.end());
+  const quality::Design all = quality::combined(designs);
   const std::vector<float> deviation = quality::deviation_at(quality::DesignDistance(all), mesh.vertices);
   report.deviation = quality::statistics(deviation);
   io::write_ply_with_quality(folder / "quality_mesh.ply", mesh, deviation,
@@ -99,6 +98,11 @@ int quality_command(const QualityOptions& options) {
   const std::vector<Real> deviation_field(deviation.begin(), deviation.end());
   io::write_vtp(folder / "quality_mesh.vtp",
                 io::PolyData{mesh.vertices, mesh.triangles, {}, {}, {io::PointArray::of("deviation_m", std::span<const Real>(deviation_field))}, {}});
+  // The printed height against the design's, frame by frame: did it stand?
+  quality::Buildability buildability(all, printed.particle_diameter);
+  for (const auto& entry : entries) buildability.observe(entry.time, io::read_particle_frame(entry.file).positions);
+  report.heights = buildability.history();
+  report.shortfall = buildability.shortfall();
   io::write_text_atomically(folder / "quality.json", quality::report_json(report));
   io::write_text_atomically(folder / "quality.csv", quality::report_csv(report));
 
@@ -115,6 +119,12 @@ int quality_command(const QualityOptions& options) {
   const auto& fill = report.fill;
   fmt::print("  fill: {:.2f} cm3 designed, {:.2f} cm3 printed; over-fill {:.2f} cm3, under-fill {:.2f} cm3\n", 1e6 * fill.designed,
              1e6 * fill.printed, 1e6 * fill.over, 1e6 * fill.under);
+  if (report.shortfall)
+    fmt::print("  height: fell short of the design at layer {} ({:.2f} s: {:.1f} of {:.1f} mm)\n", report.shortfall->layer,
+               report.shortfall->time, 1e3 * report.shortfall->printed, 1e3 * report.shortfall->designed);
+  else
+    fmt::print("  height: stood ({:.1f} mm printed of {:.1f} mm designed at the end)\n", 1e3 * report.heights.back().printed,
+               1e3 * report.heights.back().designed);
   fmt::print("  surface off the design: mean {:+.2f} mm, 95th percentile {:.2f} mm, max {:.2f} mm over {} vertices "
              "(quality_mesh.ply, quality_mesh.vtp)\n",
              1e3 * report.deviation->mean, 1e3 * report.deviation->p95, 1e3 * report.deviation->max, report.deviation->points);

@@ -20,6 +20,7 @@ assert 10 <= printed <= 30, layer
 assert abs(layer["design_width_m"] - 0.01373) < 1e-4 and abs(layer["design_height_m"] - 0.008) < 1e-6, layer
 assert 0.8 * 0.01373 < layer["width_m"] < 1.4 * 0.01373, layer
 assert 0.006 < layer["height_m"] < 0.012, layer
+assert report["height"]["stood"] is True and report["height"]["shortfall"] is None, report["height"]["shortfall"]
 fill = report["fill_m3"]
 assert fill["under"] > 0.5 * fill["designed"], fill  # most of the wall is not printed yet
 rows = list(csv.DictReader((folder / "quality.csv").open()))

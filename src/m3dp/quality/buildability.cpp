@@ -8,16 +8,20 @@
 namespace m3dp::quality {
 
 namespace {
-/// Whether (x, y) lies over a bead's footprint (its width about its straight stretch).
-bool over(const Bead& bead, const Eigen::Vector2d& point) {
+/// When the design has laid `bead` over (x, y) (s; its nozzle two bead widths past it: the material
+/// under and just behind the nozzle is still being shaped, and a print's first strand is thin), if it lies
+/// over the bead's footprint (its width about its straight stretch).
+std::optional<double> laid_over(const Bead& bead, const Eigen::Vector2d& point) {
   const Eigen::Vector2d start = bead.start.head<2>(), end = bead.end.head<2>();
   const Eigen::Vector2d along = end - start;
   const double length = along.norm();
-  if (length <= 0) return false;
+  if (length <= 0) return std::nullopt;
   const double s = (point - start).dot(along / length);
-  if (s < 0 || s > length) return false;
+  if (s < 0 || s > length) return std::nullopt;
   const Eigen::Vector2d across(-along.y() / length, along.x() / length);
-  return std::abs((point - start).dot(across)) <= bead.width / 2;
+  if (std::abs((point - start).dot(across)) > bead.width / 2) return std::nullopt;
+  const double speed = length / std::max(bead.end_time - bead.start_time, 1e-9);
+  return bead.start_time + (s + 2 * bead.width) / speed;
 }
 }  // namespace
 
@@ -31,42 +35,51 @@ Buildability::Buildability(const Design& design, double particle_diameter, doubl
   if (design_.beads.empty()) return;
   for (double x = low.x() + cell_ / 2; x < high.x(); x += cell_)
     for (double y = low.y() + cell_ / 2; y < high.y(); y += cell_) {
-      const Eigen::Vector2d centre(x, y);
-      if (std::any_of(design_.beads.begin(), design_.beads.end(), [&](const Bead& bead) { return over(bead, centre); }))
-        footprint_.push_back(centre);
+      Cell cell{Eigen::Vector2d(x, y), {}};
+      for (const Bead& bead : design_.beads)
+        if (const auto laid = laid_over(bead, cell.centre)) cell.laid.emplace_back(*laid, std::max(bead.start.z(), bead.end.z()));
+      if (!cell.laid.empty()) footprint_.push_back(std::move(cell));
     }
 }
 
 void Buildability::observe(double time, std::span<const Vec3> positions) {
   HeightSample sample;
   sample.time = time;
-  // What the design has laid by now: its finished beads' tops.
   for (const Bead& bead : design_.beads)
-    if (bead.end_time <= time + 1e-9) {
-      sample.designed = std::max(sample.designed, std::max(bead.start.z(), bead.end.z()) - plate_z_);
-      sample.layer = std::max(sample.layer, bead.layer);
-    }
-  // Each footprint cell's highest material, by the cell a particle falls in.
+    if (bead.start_time <= time) sample.layer = std::max(sample.layer, bead.layer);
+  // The cells laid by now, with the design's top there; then each one's highest material.
   auto key = [&](double x, double y) {
     return (std::int64_t(std::floor(x / cell_)) << 32) ^ (std::int64_t(std::floor(y / cell_)) & 0xffffffff);
   };
-  std::unordered_map<std::int64_t, double> tops;
-  tops.reserve(footprint_.size());
-  for (const Eigen::Vector2d& centre : footprint_) tops.emplace(key(centre.x(), centre.y()), plate_z_);
+  std::unordered_map<std::int64_t, double> tops;  // printed top per laid cell
+  std::vector<double> designed;
+  for (const Cell& cell : footprint_) {
+    double top = -std::numeric_limits<double>::infinity();
+    for (const auto& [laid, z] : cell.laid)
+      if (laid <= time) top = std::max(top, z);
+    if (!std::isfinite(top)) continue;
+    designed.push_back(top - plate_z_);
+    tops.emplace(key(cell.centre.x(), cell.centre.y()), plate_z_);
+  }
   const double radius = cell_ / 4;  // a particle's radius
   for (const Vec3& p : positions) {
     const auto found = tops.find(key(p.x(), p.y()));
     if (found != tops.end()) found->second = std::max(found->second, double(p.z()) + radius);
   }
-  std::vector<double> heights;
-  heights.reserve(tops.size());
-  for (const auto& [cell, top] : tops) heights.push_back(top - plate_z_);
-  if (!heights.empty()) {
-    std::nth_element(heights.begin(), heights.begin() + std::ptrdiff_t(heights.size() / 2), heights.end());
-    sample.printed = heights[heights.size() / 2];
-  }
+  std::vector<double> printed;
+  printed.reserve(tops.size());
+  for (const auto& [cell, top] : tops) printed.push_back(top - plate_z_);
+  auto median = [](std::vector<double>& values) {
+    if (values.empty()) return 0.0;
+    std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
+    return values[values.size() / 2];
+  };
+  sample.designed = median(designed);
+  sample.printed = median(printed);
   history_.push_back(sample);
-  if (!shortfall_ && sample.designed > 0 && sample.printed < (1 - tolerance_) * sample.designed)
+  // Judged over enough of the footprint (a few bead widths of wall), not its first cells alone.
+  constexpr std::size_t kLeastCells = 25;
+  if (!shortfall_ && designed.size() >= kLeastCells && sample.designed > 0 && sample.printed < (1 - tolerance_) * sample.designed)
     shortfall_ = Shortfall{time, sample.layer, sample.designed, sample.printed};
 }
 

@@ -1,9 +1,10 @@
 #pragma once
 // Whether a print stood (issue 39): its printed height against the design's over time, and the time
-// and layer at which it fell short by more than a tolerance (a slump or a collapse). The printed
-// height is the median, over the design's footprint in cells two particles wide, of each cell's
-// highest material: a splash or a strand hanging from the nozzle moves it little, a wall that sinks
-// or spreads moves it all.
+// and layer at which it fell short by more than a tolerance (a slump or a collapse). Over the part of
+// the design's footprint laid by then (in cells two particles wide; a cell is laid once the nozzle
+// has passed it by two bead widths), the printed height is the median of each cell's highest material
+// and the designed one the median of the design's tops there: a splash or a strand hanging from the
+// nozzle moves it little, a wall that sinks or spreads moves it all.
 #include <optional>
 #include <span>
 #include <vector>
@@ -39,7 +40,11 @@ class Buildability {
  private:
   Design design_;
   double cell_, plate_z_, tolerance_;
-  std::vector<Eigen::Vector2d> footprint_;  // the cells' centres (m) inside the design's beads
+  struct Cell {
+    Eigen::Vector2d centre;                            // m
+    std::vector<std::pair<double, double>> laid;       // (s when the design has laid a bead over it, its top z in m)
+  };
+  std::vector<Cell> footprint_;  // the cells inside the design's beads
   std::vector<HeightSample> history_;
   std::optional<Shortfall> shortfall_;
 };

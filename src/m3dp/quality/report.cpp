@@ -71,17 +71,21 @@ Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, d
   report.particle_diameter = printed.particle_diameter;
   report.particles = printed.positions.size();
   report.spacing = spacing;
-  Design all;
   for (const HeadDesign& head : designs) {
     HeadReport entry;
     entry.name = head.name;
     entry.sections = measure_sections(head.design, printed, spacing);
     entry.layers = layer_figures(head.design, entry.sections);
     report.heads.push_back(std::move(entry));
-    all.beads.insert(all.beads.end(), head.design.beads.begin(), head.design.beads.end());
   }
-  report.fill = measure_fill(all, Printed{printed.positions, {}, printed.particle_diameter});
+  report.fill = measure_fill(combined(designs), Printed{printed.positions, {}, printed.particle_diameter});
   return report;
+}
+
+Design combined(const std::vector<HeadDesign>& designs) {
+  Design all;
+  for (const HeadDesign& head : designs) all.beads.insert(all.beads.end(), head.design.beads.begin(), head.design.beads.end());
+  return all;
 }
 
 std::string report_json(const Report& report) {
@@ -126,6 +130,23 @@ std::string report_json(const Report& report) {
                                      {"mean", report.deviation->mean},
                                      {"p95", report.deviation->p95},
                                      {"max", report.deviation->max}};
+  if (!report.heights.empty()) {
+    nlohmann::json history = nlohmann::json::array();
+    for (const HeightSample& sample : report.heights) history.push_back({sample.time, sample.layer, sample.designed, sample.printed});
+    nlohmann::json shortfall;  // null: it stood
+    if (report.shortfall)
+      shortfall = {{"time_s", report.shortfall->time},
+                   {"layer", report.shortfall->layer},
+                   {"designed_m", report.shortfall->designed},
+                   {"printed_m", report.shortfall->printed}};
+    result["height"] = {{"definition", "the printed height (the median over the design's footprint of each cell's highest "
+                                       "material) against the design's laid by then, each particle frame; it fell short when "
+                                       "below 90 % of the design's"},
+                        {"stood", !report.shortfall.has_value()},
+                        {"shortfall", shortfall},
+                        {"history_columns", {"time_s", "layer", "designed_m", "printed_m"}},
+                        {"history", history}};
+  }
   return result.dump(2) + "\n";
 }
 

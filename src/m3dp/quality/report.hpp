@@ -6,6 +6,7 @@
 
 #include <optional>
 
+#include "m3dp/quality/buildability.hpp"
 #include "m3dp/quality/deviation.hpp"
 #include "m3dp/quality/sections.hpp"
 
@@ -44,7 +45,13 @@ struct Report {
   Fill fill;                     // every head's design against all the printed material
   /// The printed surface's signed distance to the design at its mesh's vertices, when measured.
   std::optional<DeviationStatistics> deviation;
+  /// The printed height against the design's over the frames (Buildability), when measured.
+  std::vector<HeightSample> heights;
+  std::optional<Shortfall> shortfall;
 };
+
+/// Every head's beads as one design (the fill, the surface's distance, the height).
+[[nodiscard]] Design combined(const std::vector<HeadDesign>& designs);
 
 /// Measures `printed` against the heads' designs, a section every `spacing` (m) along each bead.
 [[nodiscard]] Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, double spacing, double time);
