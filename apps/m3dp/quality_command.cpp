@@ -11,11 +11,7 @@
 #include <sstream>
 
 #include "m3dp/core/error.hpp"
-#include "m3dp/io/atomic_file.hpp"
-#include "m3dp/io/mesh_io.hpp"
 #include "m3dp/io/particle_reader.hpp"
-#include "m3dp/io/vtk_writer.hpp"
-#include "m3dp/surface/surface.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/print_quality.hpp"
 
@@ -86,25 +82,12 @@ int quality_command(const QualityOptions& options) {
   const quality::Printed printed{frame.positions, frame.layer, 2 * double(scene.solver.particle_radius)};
   const std::vector<quality::HeadDesign> designs = sim::head_designs(scene, paths);
   quality::Report report = quality::measure(designs, printed, options.spacing, entries.back().time);
-  // The printed surface (the scene's meshing method) with its distance to the design at each vertex.
-  surface::SurfaceSettings surface_settings = scene.meshing.surface;
-  surface_settings.particle_radius = scene.solver.particle_radius;
-  const TriangleMesh mesh = surface::reconstruct_surface(frame.positions, surface_settings);
+  // The printed height against the design's, frame by frame (did it stand?), and the surface's
+  // distance to the design at the end.
   const quality::Design all = quality::combined(designs);
-  const std::vector<float> deviation = quality::deviation_at(quality::DesignDistance(all), mesh.vertices);
-  report.deviation = quality::statistics(deviation);
-  io::write_ply_with_quality(folder / "quality_mesh.ply", mesh, deviation,
-                             "quality: the signed distance (m) to the designed print, > 0 outside it");
-  const std::vector<Real> deviation_field(deviation.begin(), deviation.end());
-  io::write_vtp(folder / "quality_mesh.vtp",
-                io::PolyData{mesh.vertices, mesh.triangles, {}, {}, {io::PointArray::of("deviation_m", std::span<const Real>(deviation_field))}, {}});
-  // The printed height against the design's, frame by frame: did it stand?
   quality::Buildability buildability(all, printed.particle_diameter);
   for (const auto& entry : entries) buildability.observe(entry.time, io::read_particle_frame(entry.file).positions);
-  report.heights = buildability.history();
-  report.shortfall = buildability.shortfall();
-  io::write_text_atomically(folder / "quality.json", quality::report_json(report));
-  io::write_text_atomically(folder / "quality.csv", quality::report_csv(report));
+  sim::complete_and_write_report(report, scene, all, frame.positions, buildability, folder);
 
   fmt::print("{}: the print at {:.3f} s ({} particles) against its design, a section every {:.1f} mm\n", folder.string(), report.time,
              report.particles, 1e3 * report.spacing);

@@ -5,7 +5,25 @@ set -euo pipefail
 m3dp=$1 scenes=$2 work=$3
 rm -rf "$work" && mkdir -p "$work"
 "$m3dp" run "$scenes/ur10_wall.sdf" -o "$work/run" --until 4 --quiet > /dev/null
+# The run wrote its own report (the in-run observer); the command remakes it from the frames alone.
+cp "$work/run/quality.json" "$work/in_run_quality.json"
 "$m3dp" quality "$work/run"
+/usr/bin/python3 - "$work/in_run_quality.json" "$work/run/quality.json" "$work/run/summary.json" <<'PY'
+import json, sys
+in_run, offline, summary = (json.load(open(path)) for path in sys.argv[1:])
+assert abs(in_run["time_s"] - offline["time_s"]) < 1e-6  # particles.pvd keeps 9 digits
+for key in ("particles", "fill_m3", "surface_deviation_m"):
+    assert in_run[key] == offline[key], (key, in_run[key], offline[key])
+assert in_run["heads"] == offline["heads"]
+history, frames = in_run["height"]["history"], offline["height"]["history"]
+assert len(history) == len(frames), (len(history), len(frames))
+for (time, *rest), (frame_time, *frame_rest) in zip(history, frames):  # looked at every 0.1 s, as the frames
+    assert abs(time - frame_time) < 1e-6 and rest == frame_rest, (time, rest, frame_time, frame_rest)
+quality = summary["quality"]
+assert quality["file"] == "quality.json" and quality["stood"] is True and quality["layers"] == 1, quality
+assert abs(quality["fill_under_m3"] - in_run["fill_m3"]["under"]) < 1e-12
+print("the in-run report and m3dp quality's agree")
+PY
 /usr/bin/python3 - "$work/run" <<'PY'
 import csv, json, pathlib, sys
 folder = pathlib.Path(sys.argv[1])

@@ -83,4 +83,16 @@ void Buildability::observe(double time, std::span<const Vec3> positions) {
     shortfall_ = Shortfall{time, sample.layer, sample.designed, sample.printed};
 }
 
+void Buildability::save(StateWriter& out) const {
+  out.put(history_);
+  out.put(shortfall_.has_value());
+  if (shortfall_) out.put(*shortfall_);
+}
+
+void Buildability::load(StateReader& in) {
+  in.get(history_);
+  shortfall_.reset();
+  if (in.get<bool>()) shortfall_ = in.get<Shortfall>();
+}
+
 }  // namespace m3dp::quality

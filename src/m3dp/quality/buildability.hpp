@@ -9,6 +9,7 @@
 #include <span>
 #include <vector>
 
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/quality/design.hpp"
 
 namespace m3dp::quality {
@@ -36,6 +37,9 @@ class Buildability {
   [[nodiscard]] const std::vector<HeightSample>& history() const { return history_; }
   /// The first time the print fell short of its design by more than the tolerance; none: it stood.
   [[nodiscard]] const std::optional<Shortfall>& shortfall() const { return shortfall_; }
+  /// A checkpoint of what it has seen, and back.
+  void save(StateWriter& out) const;
+  void load(StateReader& in);
 
  private:
   Design design_;

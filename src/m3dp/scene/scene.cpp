@@ -2214,7 +2214,7 @@ std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& ele
 
 void SceneReader::read_output(const pugi::xml_node& output) {
   check_attributes(output, {});
-  check_children(output, {"particles_period", "particles", "mcap", "serve", "checkpoint_period"});
+  check_children(output, {"particles_period", "particles", "mcap", "serve", "checkpoint_period", "quality_period"});
   if (const auto period =
           read_scalar(output, "particles_period", Quantity::time, Limits::non_negative(), Presence::optional)) {
     scene_.output.particles_period = Real(*period);
@@ -2225,6 +2225,8 @@ void SceneReader::read_output(const pugi::xml_node& output) {
           read_scalar(output, "checkpoint_period", Quantity::time, Limits::non_negative(), Presence::optional)) {
     scene_.output.checkpoint_period = *period;
   }
+  if (const auto period = read_scalar(output, "quality_period", Quantity::time, Limits::non_negative(), Presence::optional))
+    scene_.output.quality_period = *period;
   if (const auto port = read_int(output, "serve", 0)) {
     if (*port > 65535) report(output.child("serve"), fmt::format("<serve> is a TCP port, 0 (any free one) to 65535, got {}", *port));
     else scene_.output.serve_port = static_cast<std::uint16_t>(*port);

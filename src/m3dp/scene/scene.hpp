@@ -126,6 +126,9 @@ struct OutputSettings {
   bool mcap = false;                   // run.mcap: the run in Foxglove's messages (also `m3dp run --record`)
   std::optional<std::uint16_t> serve_port;  // a live Foxglove WebSocket stream on this port (0: any free one)
   double checkpoint_period = 0;        // s of simulated time between checkpoints (m3dp run --resume); 0 = none
+  /// s of simulated time between the in-run quality report's looks at the printed height (quality.json,
+  /// written at the end of a run with an output folder and print heads); 0 = no in-run quality report.
+  double quality_period = 0.1;
 };
 
 /// Surface meshes made during the run (issue 4): every `period` seconds of simulated time the fluid

@@ -1,6 +1,10 @@
 #include "m3dp/sim/print_quality.hpp"
 
+#include "m3dp/io/atomic_file.hpp"
+#include "m3dp/io/mesh_io.hpp"
+#include "m3dp/io/vtk_writer.hpp"
 #include "m3dp/sim/simulation.hpp"
+#include "m3dp/surface/surface.hpp"
 
 namespace m3dp::sim {
 
@@ -19,6 +23,24 @@ quality::Report print_quality(const Simulation& simulation, double spacing) {
   const auto& fluid = simulation.solver().fluid();
   const quality::Printed printed{fluid.position, fluid.print_layer, double(simulation.solver().particle_diameter())};
   return quality::measure(head_designs(simulation.scene(), paths), printed, spacing, simulation.time());
+}
+
+void complete_and_write_report(quality::Report& report, const scene::Scene& scene, const quality::Design& design,
+                               std::span<const Vec3> positions, const quality::Buildability& heights,
+                               const std::filesystem::path& folder) {
+  surface::SurfaceSettings surface_settings = scene.meshing.surface;
+  surface_settings.particle_radius = scene.solver.particle_radius;
+  const TriangleMesh mesh = surface::reconstruct_surface(positions, surface_settings);
+  const std::vector<float> deviation = quality::deviation_at(quality::DesignDistance(design), mesh.vertices);
+  report.deviation = quality::statistics(deviation);
+  report.heights = heights.history();
+  report.shortfall = heights.shortfall();
+  io::write_ply_with_quality(folder / "quality_mesh.ply", mesh, deviation, "quality: the signed distance (m) to the designed print, > 0 outside it");
+  const std::vector<Real> field(deviation.begin(), deviation.end());
+  io::write_vtp(folder / "quality_mesh.vtp",
+                io::PolyData{mesh.vertices, mesh.triangles, {}, {}, {io::PointArray::of("deviation_m", std::span<const Real>(field))}, {}});
+  io::write_text_atomically(folder / "quality.json", quality::report_json(report));
+  io::write_text_atomically(folder / "quality.csv", quality::report_csv(report));
 }
 
 }  // namespace m3dp::sim

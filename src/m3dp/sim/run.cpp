@@ -21,7 +21,7 @@ namespace {
 /// summary, which summary.json then reports whole.
 constexpr outputs::MakeOutput kOutputs[] = {
     outputs::make_density_check, outputs::make_particle_frames, outputs::make_world_frames, outputs::make_printed_mesh,
-    outputs::make_camera_files,  outputs::make_run_messages,    outputs::make_timing_table, outputs::make_state_hash, outputs::make_run_figures,
+    outputs::make_camera_files,  outputs::make_run_messages,    outputs::make_quality_report, outputs::make_timing_table, outputs::make_state_hash, outputs::make_run_figures,
     outputs::make_progress_bar,  outputs::make_summary_file,    outputs::make_pace,
 };
 }  // namespace
@@ -202,6 +202,15 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
     }
     text += "\n";
   }
+  if (const auto& quality = summary.quality; quality && !quality->file.empty())
+    text += fmt::format("  quality     {} layers: beads {:.1f} mm wide, {:.1f} mm high (design {:.1f} x {:.1f}); fill {:.1f} cm3 over, "
+                        "{:.1f} cm3 under of {:.1f}; surface off the design {:.1f} mm (p95); {} ({})\n",
+                        quality->layers, 1e3 * quality->width, 1e3 * quality->height, 1e3 * quality->design_width,
+                        1e3 * quality->design_height, 1e6 * quality->fill_over, 1e6 * quality->fill_under, 1e6 * quality->fill_designed,
+                        1e3 * quality->deviation_p95,
+                        quality->stood ? std::string("stood")
+                                       : fmt::format("fell short at layer {} ({:.2f} s)", quality->shortfall_layer, quality->shortfall_time),
+                        quality->file);
   for (const auto& nozzle : summary.nozzles)
     if (nozzle.longest_blockage.duration >= RunSummary::kLongBlockage) {
       const Vec3& at = nozzle.longest_blockage.position;

@@ -149,6 +149,21 @@ struct RunSummary {
     std::optional<CoordinationReport> coordination;  // when the coordinator ran
   };
   std::vector<Robot> robots;
+  /// The print against its design (quality/, the in-run report in quality.json): none when the run
+  /// wrote no folder, has no print heads or its <quality_period> is 0.
+  struct Quality {
+    std::string file;                    // quality.json; empty: not measured
+    std::string note;                    // why not, when it could not be
+    std::size_t layers = 0, sections = 0;  // layers with material, sections in all
+    double width = 0, design_width = 0;  // m, the sections' mean and the design's (all layers)
+    double height = 0, design_height = 0;
+    double fill_over = 0, fill_under = 0, fill_designed = 0;  // m³
+    double deviation_p95 = 0, deviation_max = 0;              // m, the surface off the design
+    bool stood = true;
+    std::int32_t shortfall_layer = -1;
+    double shortfall_time = 0;           // s
+  };
+  std::optional<Quality> quality;
   double particle_steps_per_second = 0;
   std::string output_directory;
 };

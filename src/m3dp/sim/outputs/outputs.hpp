@@ -18,6 +18,7 @@ std::unique_ptr<RunObserver> make_run_messages(Simulation& simulation, const Run
 std::unique_ptr<RunObserver> make_pace(Simulation& simulation, const RunOptions& options);             // no faster than RunOptions::pace
 std::unique_ptr<RunObserver> make_camera_files(Simulation& simulation, const RunOptions& options);     // cameras/NAME/
 std::unique_ptr<RunObserver> make_printed_mesh(Simulation& simulation, const RunOptions& options);     // meshes/, the world's printed body
+std::unique_ptr<RunObserver> make_quality_report(Simulation& simulation, const RunOptions& options);    // quality.json (the print against its design)
 std::unique_ptr<RunObserver> make_state_hash(Simulation& simulation, const RunOptions& options);       // hashes.csv (--hash)
 std::unique_ptr<RunObserver> make_timing_table(Simulation& simulation, const RunOptions& options);     // timing.csv
 std::unique_ptr<RunObserver> make_run_figures(Simulation& simulation, const RunOptions& options);      // the summary's figures (always)

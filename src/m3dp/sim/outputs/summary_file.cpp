@@ -117,6 +117,29 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
             {"messages_sent", summary.live.messages_sent},
             {"bytes_sent", summary.live.bytes_sent},
             {"messages_dropped", summary.live.messages_dropped}};
+  nlohmann::json quality;  // null: not measured (no folder, no print heads, <quality_period> 0)
+  if (const auto& measured = summary.quality) {
+    if (measured->file.empty()) {
+      quality = {{"note", measured->note}};
+    } else {
+      nlohmann::json shortfall;
+      if (!measured->stood) shortfall = {{"layer", measured->shortfall_layer}, {"time_s", measured->shortfall_time}};
+      quality = {{"file", measured->file},
+                 {"layers", measured->layers},
+                 {"sections", measured->sections},
+                 {"width_m", measured->width},
+                 {"design_width_m", measured->design_width},
+                 {"height_m", measured->height},
+                 {"design_height_m", measured->design_height},
+                 {"fill_over_m3", measured->fill_over},
+                 {"fill_under_m3", measured->fill_under},
+                 {"fill_designed_m3", measured->fill_designed},
+                 {"surface_deviation_p95_m", measured->deviation_p95},
+                 {"surface_deviation_max_m", measured->deviation_max},
+                 {"stood", measured->stood},
+                 {"shortfall", shortfall}};
+    }
+  }
   return {
       {"scene", simulation.scene().file.string()},
       {"status", to_string(summary.status)},
@@ -169,6 +192,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"recording", recording},
       {"live", live},
       {"cameras", cameras},
+      {"quality", quality},
   };
 }
 
