@@ -27,6 +27,18 @@ void report(const StrandCase& strand, const deposition::StrandResult& result) {
               1e6 * deposition::nominal_area(strand), 100 * (result.area / deposition::nominal_area(strand) - 1), 1e3 * result.height,
               1e3 * result.top, 1e3 * result.width, 100 * result.landed, result.extrusion_pressure, result.steps, result.particles, result.blocked_layers,
               result.seconds);
+  std::printf("  quality module: width %.2f mm, height %.2f mm, area %.4g mm^2\n", 1e3 * result.quality_width, 1e3 * result.quality_height,
+              1e6 * result.quality_area);
+}
+
+/// The quality module (issue 39) reads the strand's sections as the deposition measurement does: the
+/// same width and the particles' area, and a height between the volume's and the top's.
+void expect_quality_agrees(const deposition::StrandResult& result, double width_tolerance) {
+  EXPECT_NEAR(result.quality_width / result.width, 1, width_tolerance);
+  EXPECT_NEAR(result.quality_area / result.counted_area, 1, 0.05);
+  EXPECT_GT(result.quality_height, 0.95 * result.height);
+  // Its extent: the top plus how far the first layer sinks into the bed (0.3-0.4 of a particle, D/8).
+  EXPECT_LT(result.quality_height, result.top + 0.5 * 0.01 / 8);
 }
 
 /// Lays a strand of `material` at g/D `gap` and V/U `speed` along a line `length` m long, and prints it.
@@ -72,6 +84,7 @@ TEST(Deposition, PressedMortarKeepsItsArea) {
   EXPECT_NEAR(result.height / gap, 1, 0.08);
   EXPECT_NEAR(result.width / width, 1, 0.10);
   EXPECT_LT(double(result.blocked_layers), 0.02 * double(result.steps));
+  expect_quality_agrees(result, 0.03);
 }
 
 // Free (U/V < (g/D)²): a mortar rope laid from 1.5 D lands along the whole line with its mass. It lands
@@ -84,6 +97,7 @@ TEST(Deposition, FreeMortarRopeLandsOnTheFloor) {
   EXPECT_NEAR(result.area / deposition::nominal_area(strand), 1, 0.03);
   EXPECT_GT(result.height, 0.7 * round) << "a rope, not a film";
   EXPECT_LT(result.height, 1.05 * round);
+  expect_quality_agrees(result, 0.03);
 }
 
 // A nozzle with a bore whose lip is pressed into the bed cannot extrude: the pump stalls, the delayed

@@ -1,3 +1,4 @@
+#include "m3dp/quality/sections.hpp"
 #include "m3dp/sim/strand_deposition.hpp"
 
 #include <algorithm>
@@ -201,6 +202,25 @@ StrandResult lay_strand(const StrandCase& strand) {
   const TriangleMesh mesh = surface::reconstruct_surface(strand_points, spheres);
   for (int k = 0; k < kStations; ++k)
     result.area += surface::cross_section_area(mesh, 0, low + (high - low) * (k + 0.5) / kStations) / kStations;
+  // The quality module on the same strand: its design is the printed line, its sections those in the window.
+  toolpath::PathSegment line;
+  line.curve = toolpath::LineCurve{Vec3(0, 0, Real(bottom + gap)), Vec3(Real(length), 0, Real(bottom + gap))};
+  line.speed = Real(travel_speed);
+  const quality::Design design = quality::design_of(toolpath::Trajectory({line}, 0), quality::Nozzle{D, strand.exit_speed, bottom});
+  const auto sections = quality::measure_sections(design, quality::Printed{strand_points, {}, d}, (high - low) / kStations);
+  std::size_t measured = 0;
+  for (const auto& section : sections) {
+    if (section.at.x() < low || section.at.x() > high || section.particles == 0) continue;
+    result.quality_width += section.width;
+    result.quality_height += section.height;
+    result.quality_area += section.area;
+    ++measured;
+  }
+  if (measured > 0) {
+    result.quality_width /= double(measured);
+    result.quality_height /= double(measured);
+    result.quality_area /= double(measured);
+  }
   result.extrusion_pressure = pressure_samples > 0 ? pressure_sum / double(pressure_samples) : 0;
   result.steps = static_cast<unsigned long long>(solver.state().step);
   result.blocked_layers = solver.state().nozzles[0].blocked_layers;

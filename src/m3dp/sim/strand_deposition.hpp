@@ -35,6 +35,9 @@ struct StrandResult {
   double height = 0;         // m, at the centreline: the material's volume per footprint (see lay_strand)
   double top = 0;            // m, the highest particles' tops over the surface below
   double landed = 0;         // fraction of the steady part whose bottom lies on the surface below (within d)
+  // The same steady part measured by the quality module (quality/sections.hpp) against the line as
+  // designed: its sections' mean width, height (the material's extent up) and area.
+  double quality_width = 0, quality_height = 0, quality_area = 0;
   double extrusion_pressure = 0;  // Pa, mean over the steady part
   double bottom = 0;         // m, the surface below
   double seconds = 0;        // wall time
