@@ -3,11 +3,16 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
 
 #include "m3dp/quality/buildability.hpp"
 #include "m3dp/quality/design.hpp"
 #include "m3dp/quality/deviation.hpp"
 #include "m3dp/quality/sections.hpp"
+#include "m3dp/toolpath/gcode.hpp"
 
 using namespace m3dp;
 
@@ -224,4 +229,37 @@ TEST(Quality, ABeadThatStandsAndOneThatSlumped) {
   ASSERT_TRUE(fell.shortfall().has_value());
   EXPECT_EQ(fell.shortfall()->layer, 0);
   EXPECT_NEAR(fell.shortfall()->printed, 0.6 * kHeight, d);
+}
+
+TEST(Quality, AGcodeDesignHasTheSlicersOwnWidths) {
+  // PrusaSlicer writes the width it planned each extrusion with (";WIDTH:") and computes E from the
+  // same rounded box (its Flow: A = (w − h)·h + π h²/4); the design recovered from E and the layer
+  // heights must give those widths back (scenes/gcode/cylinder_shell.gcode, 0.3 mm layers).
+  const std::filesystem::path file = std::filesystem::path(M3DP_SCENES) / "gcode" / "cylinder_shell.gcode";
+  const toolpath::GcodeProgram program = toolpath::read_gcode(file, {});
+  const quality::Design design =
+      quality::design_of(toolpath::Trajectory(program.path_segments(), 0), quality::Nozzle{0.0004, 0.05, 0});
+  // The slicer's width for each line of the file: the last ";WIDTH:" before it.
+  std::ifstream stream(file);
+  std::vector<double> width_at_line{0};
+  double width = 0;
+  for (std::string line; std::getline(stream, line);) {
+    if (line.rfind(";WIDTH:", 0) == 0) width = std::stod(line.substr(7)) * 1e-3;
+    width_at_line.push_back(width);
+  }
+  // Beads and extruding moves in the same order (a move is a straight line; vertical ones lay no bead).
+  std::size_t bead = 0;
+  double length = 0, matching = 0;
+  for (const auto& move : program.moves) {
+    if (!move.extruding() || (move.end - move.start).head<2>().norm() < 1e-6) continue;
+    ASSERT_LT(bead, design.beads.size());
+    const quality::Bead& designed = design.beads[bead++];
+    ASSERT_NEAR((designed.end - move.end.cast<double>()).norm(), 0, 1e-6) << "line " << move.line;
+    const double planned = width_at_line.at(std::size_t(move.line));
+    length += designed.length();
+    if (std::abs(designed.width / planned - 1) < 0.02) matching += designed.length();
+  }
+  EXPECT_EQ(bead, design.beads.size());
+  std::printf("%.1f %% of %.2f m of extrusion within 2 %% of PrusaSlicer's planned width\n", 100 * matching / length, length);
+  EXPECT_GT(matching, 0.95 * length);
 }
