@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Draws a print's quality report (m3dp quality RUN_DIR writes quality.json and quality.csv, then runs
 this): per head, each layer's measured bead width and height (mean, with the range of its sections)
-against the design, and the histogram of every section's width and top off the design.
+against the design, the histogram of every section's width and top off the design, and that of the
+printed surface's distance to the designed one (its mesh's vertices).
     python3 scripts/plot_quality.py RUN_DIR/quality.json RUN_DIR/quality.csv OUT.png
 """
 import csv
@@ -25,8 +26,9 @@ def main():
     heads = report["heads"]
     if not heads:
         sys.exit(f"{sys.argv[1]}: no print heads")
-    figure, axes = plt.subplots(1, 3, figsize=(14, 4.2))
-    width_axes, height_axes, histogram_axes = axes
+    surface = report.get("surface_deviation_m")
+    figure, axes = plt.subplots(1, 4 if surface else 3, figsize=(18 if surface else 14, 4.2))
+    width_axes, height_axes, histogram_axes = axes[:3]
     for index, head in enumerate(heads):
         layers = [layer for layer in head["layers"] if layer["stations"] > layer["stations_empty"]]
         numbers = [layer["layer"] + 0.12 * index for layer in layers]
@@ -38,6 +40,8 @@ def main():
             axes_.plot(numbers, [1e3 * layer[f"design_{key}_m"] for layer in layers], "k_", markersize=18, label=f"{head['name']}: design")
             axes_.set_xlabel("layer")
             axes_.xaxis.set_major_locator(MaxNLocator(integer=True))
+            last_layer = max((layer["layer"] for h in heads for layer in h["layers"]), default=0)
+            axes_.set_xlim(-0.5, last_layer + 0.5)
             axes_.set_ylabel(f"bead {label} (mm)")
             axes_.set_title(f"bead {label} per layer")
     designs = {(h["name"], layer["layer"]): layer for h in heads for layer in h["layers"]}
@@ -47,6 +51,14 @@ def main():
     histogram_axes.set_xlabel("deviation (mm)")
     histogram_axes.set_ylabel("sections")
     histogram_axes.set_title("sections off the design")
+    if surface:
+        edges = [1e3 * edge for edge in surface["histogram"]["edges_m"]]
+        counts = surface["histogram"]["counts"]
+        axes[3].stairs(counts, edges, fill=True, label=f"p95 {1e3 * surface['p95']:.2f} mm, mean {1e3 * surface['mean']:+.2f} mm")
+        axes[3].axvline(0, color="k", linewidth=0.8)
+        axes[3].set_xlabel("distance to the design (mm, < 0 inside)")
+        axes[3].set_ylabel("mesh vertices")
+        axes[3].set_title("printed surface off the design")
     for axes_ in axes:
         axes_.legend(fontsize=8)
         axes_.grid(alpha=0.3)

@@ -1,6 +1,8 @@
 // The viewer's page: connects to the server that served it (m3dp view's replay or m3dp run --view's
 // live stream), draws the world and the particles (world.js), plays, pauses and scrubs a replay,
-// and shows the cameras' images and the run's numbers as plots.
+// and shows the cameras' images and the run's numbers as plots; with print heads, the print against
+// its design (/quality: each layer's bead width and height, the surface's deviation histogram) and
+// the printed mesh coloured by its distance to the design (/quality/deviation).
 import uPlot from "uplot";
 import { Connection, PlaybackStatus } from "./protocol.js";
 import { World, rampColor, CATEGORIES } from "./world.js";
@@ -10,6 +12,7 @@ const state = {
   world: new World($("scene")),
   connection: new Connection(`ws://${location.host}/`),
   run: null,            // the newest m3dp.RunStats
+  quality: null,        // the newest m3dp.QualityStats
   cloud: null,          // the newest particle cloud (decoded point fields)
   frames: 0,            // particle frames drawn
   time: 0,              // ns, the clock
@@ -134,6 +137,60 @@ function drawPlots(now) {
   for (const plot of PLOTS) plot.chart.setData(plot.data);
 }
 
+// The print against its design, redrawn at each /quality: per layer (x: the layer) the beads' mean
+// width and height, printed and designed, over every head; and the surface's deviation histogram.
+const QUALITY_PLOTS = [
+  { title: "bead per layer (mm)", x: "layer", series: ["width", "design width", "height", "design height"], dash: [null, [6, 4], null, [6, 4]],
+    data: (quality) => {
+      const layers = new Map();
+      for (const layer of quality.layers) {
+        const printed = (layer.sections ?? 0) - (layer.empty ?? 0);
+        if (printed <= 0) continue;
+        const sum = layers.get(layer.layer ?? 0) ?? [0, 0, 0, 0, 0];
+        [layer.width, layer.design_width, layer.height, layer.design_height].forEach((value, k) => (sum[k] += printed * 1e3 * (value ?? 0)));
+        sum[4] += printed;
+        layers.set(layer.layer ?? 0, sum);
+      }
+      const numbers = [...layers.keys()].sort((a, b) => a - b);
+      return [numbers, ...[0, 1, 2, 3].map((k) => numbers.map((n) => layers.get(n)[k] / layers.get(n)[4]))];
+    } },
+  { title: "printed surface off the design (mesh vertices)", x: "mm", series: ["vertices"], bars: true,
+    data: (quality) => {
+      const edges = quality.histogram_edges ?? [], counts = (quality.histogram_counts ?? []).map(Number);
+      return [counts.map((_, b) => 500 * (edges[b] + edges[b + 1])), counts];
+    } },
+];
+for (const plot of QUALITY_PLOTS) {
+  const box = document.createElement("div");
+  box.className = "plot quality";
+  box.innerHTML = `<div class="title">${plot.title}</div>`;
+  box.hidden = true;  // until the run sends /quality
+  $("plots").appendChild(box);
+  plot.box = box;
+  plot.points = [[], ...plot.series.map(() => [])];
+  plot.chart = new uPlot({
+    width: 310, height: 120, legend: { show: true }, scales: { x: { time: false } },
+    axes: [{ stroke: "#aab", grid: { stroke: "#333" } }, { stroke: "#aab", grid: { stroke: "#333" }, size: 50 }],
+    series: [{ label: plot.x }, ...plot.series.map((label, k) => ({
+      label, stroke: COLORS[k], width: 1.5, dash: plot.dash?.[k] ?? undefined,
+      ...(plot.bars ? { fill: `${COLORS[k]}88`, paths: uPlot.paths.bars({ size: [0.9] }), points: { show: false } } : { points: { show: true } }),
+    }))],
+  }, plot.points, box);
+}
+state.qualityPlots = QUALITY_PLOTS;
+
+function showQuality(quality) {
+  state.quality = quality;
+  for (const plot of QUALITY_PLOTS) {
+    plot.points = plot.data(quality);
+    plot.box.hidden = false;
+    plot.chart.setData(plot.points);
+  }
+  const range = 1e3 * (quality.deviation_range || 0);
+  $("deviation-legend").innerHTML = `<span class="under">−${range.toFixed(1)} mm inside</span> · 0 · ` +
+    `<span class="over">+${range.toFixed(1)} mm outside</span>; p95 ${(1e3 * (quality.deviation_p95 || 0)).toFixed(2)} mm`;
+}
+
 // ---- cameras ----------------------------------------------------------------------------------
 
 const cameras = new Map();  // name → {canvas, caption, mode}
@@ -205,7 +262,8 @@ connection.addEventListener("info", ({ detail }) => {
 connection.addEventListener("message", ({ detail }) => {
   const { topic, value, time } = detail;
   try {
-    if (topic === "/scene" || topic === "/printed") state.world.applySceneUpdate(value);
+    if (topic === "/scene" || topic === "/printed" || topic === "/quality/deviation") state.world.applySceneUpdate(value);
+    else if (topic === "/quality") showQuality(value);
     else if (topic === "/tf") state.world.applyTransforms(value);
     else if (topic === "/run") {
       state.run = value;
@@ -245,6 +303,7 @@ $("scrub").addEventListener("change", () => {
 });
 $("field").addEventListener("change", drawParticles);
 $("show-mesh").addEventListener("change", () => state.world.setMeshVisible($("show-mesh").checked));
+$("show-deviation").addEventListener("change", () => state.world.setDeviationVisible($("show-deviation").checked));
 $("show-particles").addEventListener("change", () => state.world.particles && (state.world.particles.visible = $("show-particles").checked));
 $("reset-view").addEventListener("click", () => state.world.resetView());
 

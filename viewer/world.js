@@ -68,6 +68,7 @@ export class World {
     this.frames = new Map([["world", this.scene]]);  // frame id → Object3D
     this.entities = new Map();                         // entity id → Object3D
     this.showMesh = true;
+    this.showDeviation = false;
     this.particles = null;
     this.resetView();
   }
@@ -115,8 +116,20 @@ export class World {
         if (list.indices && list.indices.length) geometry.setIndex(list.indices);
         geometry.computeVertexNormals();
         const c = list.color || {};
+        // A colour per vertex (the printed mesh by its deviation) replaces the list's one colour.
+        const perVertex = list.colors && list.colors.length === list.points.length;
+        if (perVertex) {
+          // Sent as sRGB (as `color` is read); three.js keeps vertex colours linear.
+          const colors = new Float32Array(list.colors.length * 3), linear = new THREE.Color();
+          list.colors.forEach((color, i) => {
+            linear.setRGB(color.r ?? 0, color.g ?? 0, color.b ?? 0, THREE.SRGBColorSpace);
+            colors.set([linear.r, linear.g, linear.b], 3 * i);
+          });
+          geometry.setAttribute("color", new THREE.BufferAttribute(colors, 3));
+        }
         group.add(new THREE.Mesh(geometry, new THREE.MeshStandardMaterial({
-          color: new THREE.Color(c.r ?? 0.6, c.g ?? 0.6, c.b ?? 0.6), flatShading: true, roughness: 0.8, side: THREE.DoubleSide })));
+          color: perVertex ? new THREE.Color(1, 1, 1) : new THREE.Color(c.r ?? 0.6, c.g ?? 0.6, c.b ?? 0.6),
+          vertexColors: perVertex, flatShading: true, roughness: 0.8, side: THREE.DoubleSide })));
       }
       for (const line of entity.lines || []) {
         const points = line.points.map((p) => new THREE.Vector3(p.x || 0, p.y || 0, p.z || 0));
@@ -124,9 +137,9 @@ export class World {
         group.add(new THREE.Line(new THREE.BufferGeometry().setFromPoints(points),
           new THREE.LineBasicMaterial({ color: new THREE.Color(c.r ?? 0.6, c.g ?? 0.6, c.b ?? 0.6) })));
       }
-      if (entity.id === "printed_material") group.visible = this.showMesh;
-      this.frame(entity.frame_id || "world").add(group);
       this.entities.set(entity.id, group);
+      this.updateMeshVisibility();
+      this.frame(entity.frame_id || "world").add(group);
     }
   }
 
@@ -143,8 +156,19 @@ export class World {
 
   setMeshVisible(visible) {
     this.showMesh = visible;
-    const mesh = this.entities.get("printed_material");
-    if (mesh) mesh.visible = visible;
+    this.updateMeshVisibility();
+  }
+
+  /** The printed mesh in its material's colour, or coloured by its distance to the design. */
+  setDeviationVisible(visible) {
+    this.showDeviation = visible;
+    this.updateMeshVisibility();
+  }
+
+  updateMeshVisibility() {
+    const plain = this.entities.get("printed_material"), coloured = this.entities.get("printed_deviation");
+    if (plain) plain.visible = this.showMesh && !(this.showDeviation && coloured);
+    if (coloured) coloured.visible = this.showMesh && this.showDeviation;
   }
 
   /** The particles at `positions` (x y z per particle), coloured by `values` between low and high

@@ -10,7 +10,8 @@
 // - the content: every UR10 link of the URDF in /scene and on /tf in every frame, the particles'
 //   point cloud well formed and as many as the run's summary says, times that advance, the joints'
 //   positions, velocities and efforts (the shoulder holding the arm up), the cameras' images sized as
-//   their calibrations say, in their optical frames.
+//   their calibrations say, in their optical frames; the print against its design on /quality and
+//   the printed mesh coloured by its deviation on /quality/deviation, which read back agree.
 // With --killed the file is what a run killed by SIGKILL left: summary.json says "running" (no final figures), and every record up to
 // the cut must still read and decode.
 "use strict";
@@ -179,6 +180,50 @@ for (const name of cameraNames) {
     `${name}'s optical frame is not on /tf`);
 }
 
+// The print against its design (a finished run: its final mesh closes the file): /quality's figures
+// and /quality/deviation, the printed mesh with a colour per vertex by the documented map. The
+// deviations read back from the colours make the histogram /quality sends, and its p95.
+let qualityLine = "";
+if (!killed) {
+  const qualities = byTopic("/quality"), deviations = byTopic("/quality/deviation");
+  assert.ok(qualities.length >= 1, "no /quality message");
+  assert.equal(deviations.length, qualities.length, "a /quality without its coloured mesh");
+  const quality = qualities.at(-1).value, entity = deviations.at(-1).value.entities[0];
+  assert.equal(entity.id, "printed_deviation");
+  const triangles = entity.triangles[0];
+  assert.ok(triangles.points.length > 100, `the coloured mesh has ${triangles.points.length} vertices`);
+  assert.equal(triangles.colors.length, triangles.points.length, "not one colour per vertex");
+  assert.equal(Number(quality.vertices), triangles.points.length);
+  const metadata = Object.fromEntries(entity.metadata.map(({ key, value }) => [key, value]));
+  const range = Number(metadata.deviation_range_m);
+  assert.ok(range > 0 && Math.abs(range - quality.deviation_range) < 1e-12, `range ${metadata.deviation_range_m} vs ${quality.deviation_range}`);
+  const white = 0.95, blue = [0.23, 0.3, 0.75], red = [0.75, 0.1, 0.1];
+  const recovered = triangles.colors.map((c) => {
+    const t = (c.b ?? 0) > (c.r ?? 0) ? -(white - (c.r ?? 0)) / (white - blue[0]) : (white - (c.g ?? 0)) / (white - red[1]);
+    assert.ok(t >= -1 - 1e-9 && t <= 1 + 1e-9, `a colour off the map: ${JSON.stringify(c)}`);
+    return t * range;
+  });
+  const edges = quality.histogram_edges, counts = quality.histogram_counts.map(Number), bins = counts.length;
+  assert.equal(edges.length, bins + 1);
+  assert.ok(Math.abs(edges[0] + range) < 1e-12 && Math.abs(edges[bins] - range) < 1e-12, `edges ${edges[0]} … ${edges[bins]}`);
+  assert.equal(counts.reduce((a, b) => a + b, 0), triangles.points.length, "the histogram does not count every vertex");
+  const ours = new Array(bins).fill(0);
+  for (const value of recovered) ++ours[Math.min(bins - 1, Math.max(0, Math.floor(((value + range) / (2 * range)) * bins)))];
+  const moved = ours.reduce((sum, count, b) => sum + Math.abs(count - counts[b]), 0);
+  assert.ok(moved <= 0.01 * triangles.points.length, `the colours' histogram differs by ${moved} counts: ${ours} vs ${counts}`);
+  const magnitudes = recovered.map(Math.abs).sort((a, b) => a - b);
+  const p95 = magnitudes[Math.min(magnitudes.length - 1, Math.floor(0.95 * magnitudes.length))];
+  assert.ok(Math.abs(p95 - Math.min(quality.deviation_p95, range)) < 0.02 * range, `p95 from colours ${p95}, sent ${quality.deviation_p95}`);
+  // Layers: the first is printed, its bead within a factor of two of its design.
+  const printedLayers = quality.layers.filter((layer) => layer.sections > (layer.empty ?? 0));
+  assert.ok(printedLayers.length >= 1, `layers ${JSON.stringify(quality.layers)}`);
+  for (const layer of printedLayers)
+    assert.ok(layer.width > 0.5 * layer.design_width && layer.width < 2 * layer.design_width, `layer ${layer.layer ?? 0}: ${JSON.stringify(layer)}`);
+  assert.ok(quality.fill_designed > 0, "no designed volume");
+  qualityLine = `; quality at ${quality.time.toFixed(2)} s: ${triangles.points.length} vertices, p95 ${(1e3 * quality.deviation_p95).toFixed(2)} mm ` +
+    `(from colours ${(1e3 * p95).toFixed(2)}), ${printedLayers.length} layers printed`;
+}
+
 if (killed) {
   assert.ok(!records.some((record) => record.type === "Footer"), "a killed run's file has a footer");
   console.log(`read ${records.length} records of a killed run: ${messages.length} messages, ${runTimes.length} frames, last at ${runTimes.at(-1)} s, ${lastCount} particles`);
@@ -218,7 +263,7 @@ assert.ok(stream.done(), "the stream reader did not reach the footer");
   assert.equal(Number(statistics.messageCount), summary.recording.messages, "summary.json's message count");
   console.log(
     `read ${records.length} records, ${messages.length} messages on ${channels.size} channels in ${indexed.chunkIndexes.length} chunks; ` +
-      `${runTimes.length} frames to ${runTimes.at(-1).toFixed(3)} s; ${urdfLinks.length} links; ${lastCount} particles`,
+      `${runTimes.length} frames to ${runTimes.at(-1).toFixed(3)} s; ${urdfLinks.length} links; ${lastCount} particles${qualityLine}`,
   );
 })().catch((error) => {
   console.error(error);

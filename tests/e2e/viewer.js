@@ -3,7 +3,8 @@
 // 1. A short recorded run (SCENE, the UR10 demo) played back by `m3dp view`: the page gets the
 //    scene and a particle frame after a seek through its own timeline; the arm's links and the
 //    particles show their colours where they project; toggling the printed mesh and scrubbing to
-//    another time change the picture; the plots have data and the camera panels images; playing
+//    another time change the picture; the printed mesh coloured by its deviation from the design
+//    shows, and the quality plots have /quality's layers and histogram; the plots have data and the camera panels images; playing
 //    moves the clock. 2. A live run with --view: the page gets frames while it runs.
 // The page must log no error. Screenshots are kept in OUT for a person to look at.
 "use strict";
@@ -147,6 +148,31 @@ async function probe(page) {
     const withMesh = await picture(page);
     const meshPixels = differingPixels(withoutMesh, withMesh);
     assert.ok(meshPixels > 200, `toggling the printed mesh changed ${meshPixels} pixels`);
+    // The print against its design: the mesh coloured by its deviation replaces the plain one, and
+    // the quality plots show the layers and the histogram of what /quality sent.
+    await page.waitForFunction(() => window.m3dp.quality && window.m3dp.world.entities.has("printed_deviation"), { timeout: 20000 });
+    await page.click("#show-deviation");
+    await sleep(500);
+    await page.screenshot({ path: path.join(out, "replay_5s_deviation.png") });
+    const deviationPixels = differingPixels(withMesh, await picture(page));
+    assert.ok(deviationPixels > 200, `colouring the mesh by its deviation changed ${deviationPixels} pixels`);
+    const quality = await page.evaluate(() => {
+      const world = window.m3dp.world, coloured = world.entities.get("printed_deviation"), plain = world.entities.get("printed_material");
+      const mesh = coloured.children[0];
+      return {
+        shown: coloured.visible && !(plain && plain.visible), vertexColors: mesh.material.vertexColors,
+        colours: mesh.geometry.getAttribute("color")?.count ?? 0, vertices: Number(window.m3dp.quality.vertices),
+        plots: window.m3dp.qualityPlots.map((plot) => ({ hidden: plot.box.hidden, x: plot.points[0].length, y: plot.points.slice(1) })),
+        legend: document.getElementById("deviation-legend").textContent,
+      };
+    });
+    assert.ok(quality.shown && quality.vertexColors && quality.colours === quality.vertices, `the coloured mesh: ${JSON.stringify({ ...quality, plots: 0 })}`);
+    const [layerPlot, histogramPlot] = quality.plots;
+    assert.ok(!layerPlot.hidden && layerPlot.x >= 1 && layerPlot.y.every((series) => series.every((mm) => mm > 1 && mm < 40)),
+      `the layer plot: ${JSON.stringify(layerPlot)}`);
+    assert.equal(histogramPlot.y[0].reduce((a, b) => a + b, 0), quality.vertices, "the histogram plot does not count every vertex");
+    assert.match(quality.legend, /mm inside .* mm outside; p95 \d/);
+    await page.click("#show-deviation");
     await seek(page, 2.5);
     await page.screenshot({ path: path.join(out, "replay_2.5s.png") });
     const earlier = await picture(page);
@@ -164,7 +190,8 @@ async function probe(page) {
     const errors = await page.evaluate(() => window.m3dp.errors);
     assert.deepEqual(errors, [], "the page's own errors");
     console.log(`replay: ${seen.links} links seen (${seen.bluish} bluish), ${seen.orange} of ${seen.sampled} particles in their colour ` +
-      `(${seen.particles} particles at 5 s); the mesh toggled ${meshPixels} pixels, scrubbing ${scrubPixels}; plots ${plots}; ${fps.toFixed(0)} fps`);
+      `(${seen.particles} particles at 5 s); the mesh toggled ${meshPixels} pixels, its deviation colours ${deviationPixels}, scrubbing ${scrubPixels}; ` +
+      `plots ${plots}; ${fps.toFixed(0)} fps`);
     await page.close();
     view.child.kill("SIGINT");
     assert.equal(await view.exited, 0);

@@ -4,6 +4,10 @@
 #include <cmath>
 #include <limits>
 
+#include <fmt/format.h>
+
+#include "m3dp/core/error.hpp"
+
 namespace m3dp::quality {
 
 double signed_distance(const Bead& bead, const Vec3d& point) {
@@ -85,6 +89,24 @@ DeviationStatistics statistics(std::span<const float> deviation) {
   result.max = magnitude.back();
   result.p95 = magnitude[std::min(magnitude.size() - 1, static_cast<std::size_t>(0.95 * double(magnitude.size())))];
   return result;
+}
+
+Histogram histogram(std::span<const float> deviation, double range, std::size_t bins) {
+  Histogram result;
+  if (!(range > 0) || bins == 0) throw Error(fmt::format("a deviation histogram needs a range > 0 and bins (got {} m, {})", range, bins));
+  for (std::size_t b = 0; b <= bins; ++b) result.edges.push_back(-range + 2 * range * double(b) / double(bins));
+  result.counts.assign(bins, 0);
+  for (const float value : deviation) {
+    const double at = std::floor((double(value) + range) / (2 * range) * double(bins));
+    ++result.counts[std::size_t(std::clamp(at, 0.0, double(bins - 1)))];
+  }
+  return result;
+}
+
+double deviation_range(const Design& design) {
+  double thickest = 0;
+  for (const Bead& bead : design.beads) thickest = std::max(thickest, bead.height);
+  return thickest > 0 ? thickest : 0.01;
 }
 
 }  // namespace m3dp::quality

@@ -38,4 +38,15 @@ struct DeviationStatistics {
 };
 [[nodiscard]] DeviationStatistics statistics(std::span<const float> deviation);
 
+/// The deviations counted in `bins` equal bins over [−range, range] (m), those beyond in the end bins.
+struct Histogram {
+  std::vector<double> edges;  // m, bins + 1
+  std::vector<std::uint64_t> counts;
+};
+[[nodiscard]] Histogram histogram(std::span<const float> deviation, double range, std::size_t bins);
+
+/// The scale a deviation is judged on: the design's thickest layer (m), what colour maps and
+/// histograms span either side of zero.
+[[nodiscard]] double deviation_range(const Design& design);
+
 }  // namespace m3dp::quality

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <map>
 #include <nlohmann/json.hpp>
 
@@ -78,7 +79,15 @@ Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, d
     entry.layers = layer_figures(head.design, entry.sections);
     report.heads.push_back(std::move(entry));
   }
-  report.fill = measure_fill(combined(designs), Printed{printed.positions, {}, printed.particle_diameter});
+  const Design all = combined(designs);
+  report.fill = measure_fill(all, Printed{printed.positions, {}, printed.particle_diameter});
+  double thinnest = std::numeric_limits<double>::infinity();
+  for (const Bead& bead : all.beads) thinnest = std::min(thinnest, bead.height);
+  if (std::isfinite(thinnest) && thinnest < 2 * printed.particle_diameter)
+    report.resolution_warning = fmt::format(
+        "the design's thinnest layer, {:.2f} mm, is under two particle diameters ({:.2f} mm): its beads' widths and heights are "
+        "measured at the resolution's limit; a <particle_radius> of {:.2f} mm or less resolves them",
+        1e3 * thinnest, 2e3 * printed.particle_diameter, 1e3 * thinnest / 4);
   return report;
 }
 
@@ -121,7 +130,8 @@ std::string report_json(const Report& report) {
       {"spacing_m", report.spacing},
       {"fill_m3",
        {{"designed", report.fill.designed}, {"printed", report.fill.printed}, {"over", report.fill.over}, {"under", report.fill.under}}},
-      {"heads", heads}};
+      {"heads", heads},
+      {"resolution_warning", report.resolution_warning.empty() ? nlohmann::json() : nlohmann::json(report.resolution_warning)}};
   nlohmann::json result = json;
   if (report.deviation)
     result["surface_deviation_m"] = {{"definition", "the printed surface's signed distance to the designed one at its mesh's vertices "
@@ -129,7 +139,9 @@ std::string report_json(const Report& report) {
                                      {"vertices", report.deviation->points},
                                      {"mean", report.deviation->mean},
                                      {"p95", report.deviation->p95},
-                                     {"max", report.deviation->max}};
+                                     {"max", report.deviation->max},
+                                     {"histogram",
+                                      {{"edges_m", report.deviation_histogram.edges}, {"counts", report.deviation_histogram.counts}}}};
   if (!report.heights.empty()) {
     nlohmann::json history = nlohmann::json::array();
     for (const HeightSample& sample : report.heights) history.push_back({sample.time, sample.layer, sample.designed, sample.printed});

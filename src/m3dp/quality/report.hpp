@@ -45,9 +45,13 @@ struct Report {
   Fill fill;                     // every head's design against all the printed material
   /// The printed surface's signed distance to the design at its mesh's vertices, when measured.
   std::optional<DeviationStatistics> deviation;
+  Histogram deviation_histogram;  // of those distances, over ± deviation_range(design)
   /// The printed height against the design's over the frames (Buildability), when measured.
   std::vector<HeightSample> heights;
   std::optional<Shortfall> shortfall;
+  /// Set when the design's thinnest layer is under two particle diameters: the widths and heights are
+  /// then measured at the resolution's limit (a strand one or two particles thick), not resolved.
+  std::string resolution_warning;
 };
 
 /// Every head's beads as one design (the fill, the surface's distance, the height).

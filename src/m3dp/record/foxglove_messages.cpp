@@ -26,7 +26,7 @@ const std::map<std::string, const google::protobuf::Descriptor*, std::less<>>& d
     for (const auto* descriptor :
          {foxglove::SceneUpdate::descriptor(), foxglove::FrameTransforms::descriptor(), foxglove::PointCloud::descriptor(),
           foxglove::RawImage::descriptor(), foxglove::CompressedImage::descriptor(), foxglove::CameraCalibration::descriptor(),
-          m3dp::RunStats::descriptor(), m3dp::JointStates::descriptor()})
+          m3dp::RunStats::descriptor(), m3dp::JointStates::descriptor(), m3dp::QualityStats::descriptor()})
       map.emplace(descriptor->full_name(), descriptor);
     return map;
   }();
@@ -107,6 +107,13 @@ std::string encode_scene_update(double time, std::span<const SceneEntity> entiti
       auto& triangles = *out.add_triangles();
       set_identity(*triangles.mutable_pose());
       set_color(*triangles.mutable_color(), entity.color);
+      if (!entity.vertex_colors.empty()) {
+        if (entity.vertex_colors.size() != entity.triangles->vertices.size())
+          throw Error(fmt::format("entity '{}': {} vertex colours for {} vertices", entity.id, entity.vertex_colors.size(),
+                                  entity.triangles->vertices.size()));
+        triangles.mutable_colors()->Reserve(static_cast<int>(entity.vertex_colors.size()));
+        for (const Color& color : entity.vertex_colors) set_color(*triangles.add_colors(), color);
+      }
       triangles.mutable_points()->Reserve(static_cast<int>(entity.triangles->vertices.size()));
       for (const Vec3& vertex : entity.triangles->vertices) set_point(*triangles.add_points(), vertex);
       triangles.mutable_indices()->Reserve(static_cast<int>(3 * entity.triangles->triangles.size()));
@@ -233,6 +240,36 @@ std::string encode_run_stats(const RunStats& stats) {
   message.set_step(stats.step);
   for (const double density : stats.material_density) message.add_material_density(density);
   message.set_particle_radius(stats.particle_radius);
+  return serialized(message);
+}
+
+std::string encode_quality_stats(const QualityStats& stats) {
+  m3dp::QualityStats message;
+  set_timestamp(*message.mutable_timestamp(), stats.time);
+  message.set_time(stats.time);
+  message.set_vertices(stats.vertices);
+  message.set_deviation_mean(stats.deviation_mean);
+  message.set_deviation_p95(stats.deviation_p95);
+  message.set_deviation_max(stats.deviation_max);
+  message.set_deviation_range(stats.deviation_range);
+  for (const double edge : stats.histogram_edges) message.add_histogram_edges(edge);
+  for (const std::uint64_t count : stats.histogram_counts) message.add_histogram_counts(count);
+  message.set_fill_designed(stats.fill_designed);
+  message.set_fill_over(stats.fill_over);
+  message.set_fill_under(stats.fill_under);
+  for (const auto& layer : stats.layers) {
+    auto& out = *message.add_layers();
+    out.set_head(layer.head);
+    out.set_layer(layer.layer);
+    out.set_sections(layer.sections);
+    out.set_empty(layer.empty);
+    out.set_width(layer.width);
+    out.set_design_width(layer.design_width);
+    out.set_height(layer.height);
+    out.set_design_height(layer.design_height);
+    out.set_offset_across(layer.offset_across);
+    out.set_offset_up(layer.offset_up);
+  }
   return serialized(message);
 }
 

@@ -35,6 +35,7 @@ struct SceneEntity {
   std::vector<std::vector<Vec3>> line_strips;        // in the frame (m)
   double line_thickness = 0.003;                     // m
   std::vector<std::pair<std::string, std::string>> metadata;
+  std::vector<Color> vertex_colors;  // one per vertex of `triangles` (then `color` is not used), or none
 };
 /// foxglove.SceneUpdate: these entities added or replaced, and the ids given deleted, at `time` (s).
 [[nodiscard]] std::string encode_scene_update(double time, std::span<const SceneEntity> entities,
@@ -87,6 +88,25 @@ struct RunStats {
   double particle_radius = 0;            // m
 };
 [[nodiscard]] std::string encode_run_stats(const RunStats& stats);
+
+/// m3dp.QualityStats: the print against its design (quality/), each time its surface is meshed.
+struct LayerQuality {
+  std::string head;
+  std::int32_t layer = 0;
+  std::uint32_t sections = 0, empty = 0;
+  double width = 0, design_width = 0, height = 0, design_height = 0;  // m
+  double offset_across = 0, offset_up = 0;                            // m
+};
+struct QualityStats {
+  double time = 0;
+  std::uint64_t vertices = 0;
+  double deviation_mean = 0, deviation_p95 = 0, deviation_max = 0, deviation_range = 0;  // m
+  std::vector<double> histogram_edges;                                                  // m
+  std::vector<std::uint64_t> histogram_counts;
+  double fill_designed = 0, fill_over = 0, fill_under = 0;  // m³
+  std::vector<LayerQuality> layers;
+};
+[[nodiscard]] std::string encode_quality_stats(const QualityStats& stats);
 
 /// m3dp.JointStates: a robot's joints at `time` (s): positions (rad or m), velocities (rad/s or m/s)
 /// and efforts (N·m or N), each in the order of `names`.

@@ -8,6 +8,11 @@
 
 namespace m3dp::sim {
 
+namespace {
+/// Bins of the surface deviation's histogram over ± the thickest layer.
+constexpr std::size_t kHistogramBins = 40;
+}  // namespace
+
 std::vector<quality::HeadDesign> head_designs(const scene::Scene& scene, std::span<const toolpath::Trajectory> paths) {
   std::vector<quality::HeadDesign> designs;
   for (std::size_t h = 0; h < scene.print_heads.size(); ++h) {
@@ -17,12 +22,31 @@ std::vector<quality::HeadDesign> head_designs(const scene::Scene& scene, std::sp
   return designs;
 }
 
-quality::Report print_quality(const Simulation& simulation, double spacing) {
+namespace {
+std::vector<quality::HeadDesign> designs_now(const Simulation& simulation) {
   std::vector<toolpath::Trajectory> paths;
   for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) paths.push_back(simulation.head_path(h));
+  return head_designs(simulation.scene(), paths);
+}
+quality::Report measure_now(const Simulation& simulation, const std::vector<quality::HeadDesign>& designs, double spacing) {
   const auto& fluid = simulation.solver().fluid();
   const quality::Printed printed{fluid.position, fluid.print_layer, double(simulation.solver().particle_diameter())};
-  return quality::measure(head_designs(simulation.scene(), paths), printed, spacing, simulation.time());
+  return quality::measure(designs, printed, spacing, simulation.time());
+}
+}  // namespace
+
+quality::Report print_quality(const Simulation& simulation, double spacing) {
+  return measure_now(simulation, designs_now(simulation), spacing);
+}
+
+SurfaceQuality surface_quality(const Simulation& simulation, const TriangleMesh& surface, double spacing) {
+  const auto designs = designs_now(simulation);
+  const quality::Design design = quality::combined(designs);
+  SurfaceQuality result{measure_now(simulation, designs, spacing), {}, quality::deviation_range(design)};
+  result.deviation = quality::deviation_at(quality::DesignDistance(design), surface.vertices);
+  result.report.deviation = quality::statistics(result.deviation);
+  result.report.deviation_histogram = quality::histogram(result.deviation, result.range, kHistogramBins);
+  return result;
 }
 
 void complete_and_write_report(quality::Report& report, const scene::Scene& scene, const quality::Design& design,
@@ -33,6 +57,7 @@ void complete_and_write_report(quality::Report& report, const scene::Scene& scen
   const TriangleMesh mesh = surface::reconstruct_surface(positions, surface_settings);
   const std::vector<float> deviation = quality::deviation_at(quality::DesignDistance(design), mesh.vertices);
   report.deviation = quality::statistics(deviation);
+  report.deviation_histogram = quality::histogram(deviation, quality::deviation_range(design), kHistogramBins);
   report.heights = heights.history();
   report.shortfall = heights.shortfall();
   io::write_ply_with_quality(folder / "quality_mesh.ply", mesh, deviation, "quality: the signed distance (m) to the designed print, > 0 outside it");

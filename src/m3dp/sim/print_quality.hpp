@@ -19,6 +19,16 @@ class Simulation;
 /// time included), a section every `spacing` (m).
 [[nodiscard]] quality::Report print_quality(const Simulation& simulation, double spacing);
 
+/// The print now against its design on its printed surface (a mesh of it): the sections and fill of
+/// print_quality, the surface's deviation at each vertex and its statistics and histogram; what
+/// run.mcap and the live stream carry on /quality and /quality/deviation.
+struct SurfaceQuality {
+  quality::Report report;
+  std::vector<float> deviation;  // m, at each of the surface's vertices
+  double range = 0;              // m, quality::deviation_range of the design
+};
+[[nodiscard]] SurfaceQuality surface_quality(const Simulation& simulation, const TriangleMesh& surface, double spacing);
+
 /// A print's report with its surface: `report` (sections and fill) gets the surface's deviation (the
 /// particles' surface by the scene's meshing method, against `design`) and `heights`' history, and
 /// the folder gets quality.json, quality.csv, quality_mesh.vtp (deviation_m) and quality_mesh.ply

@@ -36,6 +36,8 @@ class PrintedBody {
   /// as one resumed from a checkpoint here will. Returns the newest mesh when it is new.
   std::shared_ptr<const TriangleMesh> settle();
 
+  /// The newest finished mesh, mesh_now's (the final state's) included; null before the first.
+  [[nodiscard]] std::shared_ptr<const TriangleMesh> newest() const { return worker_->latest_mesh(); }
   [[nodiscard]] std::vector<MeshingWorker::Mesh> meshes() const { return worker_->meshes(); }
   [[nodiscard]] std::size_t skipped() const { return worker_->skipped(); }
   [[nodiscard]] std::string error() const { return worker_->error(); }

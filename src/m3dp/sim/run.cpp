@@ -211,6 +211,8 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         quality->stood ? std::string("stood")
                                        : fmt::format("fell short at layer {} ({:.2f} s)", quality->shortfall_layer, quality->shortfall_time),
                         quality->file);
+  if (const auto& quality = summary.quality; quality && !quality->resolution_warning.empty())
+    text += fmt::format("  warning     quality: {}\n", quality->resolution_warning);
   for (const auto& nozzle : summary.nozzles)
     if (nozzle.longest_blockage.duration >= RunSummary::kLongBlockage) {
       const Vec3& at = nozzle.longest_blockage.position;

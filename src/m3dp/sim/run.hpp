@@ -162,6 +162,7 @@ struct RunSummary {
     bool stood = true;
     std::int32_t shortfall_layer = -1;
     double shortfall_time = 0;           // s
+    std::string resolution_warning;      // quality::Report's: the layers are too thin for the particles
   };
   std::optional<Quality> quality;
   double particle_steps_per_second = 0;

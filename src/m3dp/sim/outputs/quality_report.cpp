@@ -71,6 +71,7 @@ class QualityReport final : public RunObserver {
     if (report.deviation) result.deviation_p95 = report.deviation->p95, result.deviation_max = report.deviation->max;
     result.stood = !report.shortfall.has_value();
     if (report.shortfall) result.shortfall_layer = report.shortfall->layer, result.shortfall_time = report.shortfall->time;
+    result.resolution_warning = report.resolution_warning;
     summary.quality = result;
   }
 

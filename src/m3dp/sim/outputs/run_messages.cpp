@@ -5,12 +5,15 @@
 // commanded paths; later the nozzles' extrusion colour and the printed material's newest mesh),
 // /tf (world → every link, body, nozzle and camera frame), /particles (the fluid with its fields),
 // /printed (the part of each path printed so far), /joints (each robot's), /run (the run's numbers),
-// and per camera /camera/NAME/image, depth, segmentation, points and calibration (optical frame).
+// with print heads /quality (the print against its design, m3dp.QualityStats) and /quality/deviation
+// (the printed mesh coloured by its distance to the designed surface) at each new printed mesh and
+// the final state's, and per camera /camera/NAME/image, depth, segmentation, points and calibration (optical frame).
 // The file gets a frame every <output><particles_period> of simulated time and each camera's images
 // at its rate; the live stream the same at most RunOptions::live_rate per wall second each, and
 // only on the topics someone is subscribed to.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -21,6 +24,8 @@
 #include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/particle_cloud.hpp"
+#include "m3dp/sim/print_quality.hpp"
+#include "m3dp/sim/printed_body.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/sim/world_view.hpp"
 
@@ -42,6 +47,19 @@ record::Color kind_color(BodyKind kind) {
 }
 constexpr record::Color kPathColor{0.6, 0.6, 0.6, 0.6}, kPrintedColor{0.9, 0.3, 0.1, 1}, kMaterialColor{0.72, 0.6, 0.48, 1};
 constexpr record::Color kNozzleIdle{0.3, 0.3, 0.3, 1}, kNozzleExtruding{0.9, 0.3, 0.1, 1};
+
+/// /quality/deviation's colours: blue at −range (inside the design: under-filled), white at 0, red at
+/// +range (outside it: over-filled), linear in between and clamped beyond; its metadata says so.
+constexpr record::Color kUnderColor{0.23, 0.3, 0.75, 1}, kOnDesignColor{0.95, 0.95, 0.95, 1}, kOverColor{0.75, 0.1, 0.1, 1};
+record::Color deviation_color(double deviation, double range) {
+  const double t = std::clamp(deviation / range, -1.0, 1.0);
+  const record::Color& end = t < 0 ? kUnderColor : kOverColor;
+  const double f = std::abs(t);
+  return {kOnDesignColor.r + f * (end.r - kOnDesignColor.r), kOnDesignColor.g + f * (end.g - kOnDesignColor.g),
+          kOnDesignColor.b + f * (end.b - kOnDesignColor.b), 1};
+}
+/// Sections this far apart along each bead for /quality, as m3dp quality's default.
+constexpr double kQualitySpacing = 0.01;  // m
 
 /// The run's topics, in channel order, then each camera's; how the live stream treats each.
 enum Topic : std::size_t { scene, transforms, particles, printed, joints, run, run_topic_count };
@@ -78,7 +96,7 @@ struct Sinks {
 class RunMessages final : public RunObserver {
  public:
   RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate,
-              const std::vector<scene::CameraEntry>& cameras, const RunOptions& options)
+              const std::vector<scene::CameraEntry>& cameras, bool print_heads, const RunOptions& options)
       : period_(period), live_interval_(live_rate > 0 ? 1 / live_rate : 0), topics_(run_topics()) {
     for (const auto& camera : cameras) {
       const auto& settings = camera.settings;
@@ -95,6 +113,12 @@ class RunMessages final : public RunObserver {
         ids.points = add("points", "foxglove.PointCloud");
       ids.calibration = add("calibration", "foxglove.CameraCalibration");
       camera_topics_.push_back(ids);
+    }
+    if (print_heads) {
+      quality_topic_ = topics_.size();
+      topics_.push_back({"/quality", "m3dp.QualityStats", record::Delivery::latched});
+      deviation_topic_ = topics_.size();
+      topics_.push_back({"/quality/deviation", "foxglove.SceneUpdate", record::Delivery::latched});
     }
     mcap_file_ = mcap_file;
     if (serve_port) {
@@ -179,13 +203,13 @@ class RunMessages final : public RunObserver {
   void send_scene(const Simulation& simulation, const Sinks& sinks) {
     std::vector<record::SceneEntity> entities;
     for (const auto& body : layout_.bodies) {
-      record::SceneEntity entity{body.name, body.own_frame() ? body.name : "world", kind_color(body.kind), &body.triangles, {}, 0, {}};
+      record::SceneEntity entity{body.name, body.own_frame() ? body.name : "world", kind_color(body.kind), &body.triangles, {}, 0, {}, {}};
       entity.metadata = {{"kind", body_kind_name(body.kind)}};
       if (!body.robot.empty()) entity.metadata.emplace_back("robot", body.robot);
       entities.push_back(std::move(entity));
     }
     for (const auto& path : layout_.paths) {
-      record::SceneEntity entity{(path.base_path ? "base_path/" : "path/") + path.name, "world", kPathColor, nullptr, {}, 0.002, {}};
+      record::SceneEntity entity{(path.base_path ? "base_path/" : "path/") + path.name, "world", kPathColor, nullptr, {}, 0.002, {}, {}};
       std::vector<Vec3> strip;
       for (const auto& vertex : path.vertices) strip.push_back(vertex.position);
       entity.line_strips.push_back(std::move(strip));
@@ -213,6 +237,10 @@ class RunMessages final : public RunObserver {
   void finish(const Simulation& simulation, RunSummary& summary) override {
     const auto began = Clock::now();
     if (last_time_ < simulation.time()) write_frame(simulation, nullptr, Sinks{mcap_.has_value(), live_ != nullptr});
+    // The final state's mesh (made at the end, kept out of the world) closes the recording.
+    if (const PrintedBody* body = simulation.printed_body())
+      if (auto final_mesh = body->newest(); final_mesh && final_mesh != simulation.printed_mesh())
+        send_printed_mesh(simulation, *final_mesh);
     if (mcap_) {
       mcap_->close();
       summary.recording = {mcap_file_.string(), mcap_->message_count(), mcap_->bytes_written(), mcap_->chunk_count(), 0};
@@ -294,15 +322,12 @@ class RunMessages final : public RunObserver {
       const auto& nozzle = layout_.nozzles[n];
       const std::string id = "nozzle/" + nozzle.name;
       const record::SceneEntity entity{id, id, extruding ? kNozzleExtruding : kNozzleIdle, &nozzle.triangles, {}, 0,
-                                       {{"extruding", extruding ? "true" : "false"}}};
+                                       {{"extruding", extruding ? "true" : "false"}}, {}};
       send(Sinks{mcap_.has_value(), live_ != nullptr}, Topic::scene, stamp, record::encode_scene_update(time, {&entity, 1}), id);
     }
     if (simulation.printed_mesh() && simulation.printed_mesh_version() != mesh_version_) {
       mesh_version_ = simulation.printed_mesh_version();
-      const record::SceneEntity entity{"printed_material", "world", kMaterialColor, simulation.printed_mesh().get(), {}, 0,
-                                       {{"kind", "printed_material"}}};
-      send(Sinks{mcap_.has_value(), live_ != nullptr}, Topic::scene, stamp, record::encode_scene_update(time, {&entity, 1}),
-           "printed_material");
+      send_printed_mesh(simulation, *simulation.printed_mesh());
     }
 
     if (wanted(sinks, Topic::printed)) {
@@ -310,7 +335,7 @@ class RunMessages final : public RunObserver {
       for (std::size_t p = 0; p < layout_.paths.size(); ++p)
         if (!layout_.paths[p].base_path)
           printed.push_back({"printed/" + layout_.paths[p].name, "world", kPrintedColor, nullptr, printed_runs(layout_.paths[p], poses.path_times[p]),
-                             0.004, {}});
+                             0.004, {}, {}});
       if (!printed.empty()) send(sinks, Topic::printed, stamp, record::encode_scene_update(time, printed));
     }
 
@@ -332,6 +357,51 @@ class RunMessages final : public RunObserver {
     if (wanted(sinks, Topic::run)) send(sinks, Topic::run, stamp, record::encode_run_stats(run_stats(simulation, stats, poses)));
     // Each file frame ends a chunk, so a reader of a killed run sees every frame before it.
     if (sinks.file) mcap_->flush();
+  }
+
+  /// A new mesh of the printed material: as the scene's "printed_material", and measured against the
+  /// design on /quality and /quality/deviation.
+  void send_printed_mesh(const Simulation& simulation, const TriangleMesh& mesh) {
+    const double time = simulation.time();
+    const std::uint64_t stamp = nanoseconds(time);
+    const Sinks all{mcap_.has_value(), live_ != nullptr};
+    const record::SceneEntity entity{"printed_material", "world", kMaterialColor, &mesh, {}, 0, {{"kind", "printed_material"}}, {}};
+    send(all, Topic::scene, stamp, record::encode_scene_update(time, {&entity, 1}), "printed_material");
+    if (!wanted(all, quality_topic_) && !wanted(all, deviation_topic_)) return;
+    const SurfaceQuality measured = surface_quality(simulation, mesh, kQualitySpacing);
+    record::SceneEntity coloured{"printed_deviation", "world", kOnDesignColor, &mesh, {}, 0,
+                                 {{"kind", "printed_deviation"},
+                                  {"deviation_range_m", fmt::format("{}", measured.range)},
+                                  {"colours", "the signed distance (m) to the designed surface: blue at -range (inside), white at 0, "
+                                              "red at +range (outside), linear between, clamped beyond"}},
+                                 {}};
+    coloured.vertex_colors.reserve(measured.deviation.size());
+    for (const float deviation : measured.deviation) coloured.vertex_colors.push_back(deviation_color(deviation, measured.range));
+    send(all, deviation_topic_, stamp, record::encode_scene_update(time, {&coloured, 1}), "printed_deviation");
+    send(all, quality_topic_, stamp, record::encode_quality_stats(quality_stats(measured, time, mesh.vertices.size())), "quality");
+  }
+
+  static record::QualityStats quality_stats(const SurfaceQuality& measured, double time, std::size_t vertices) {
+    const quality::Report& report = measured.report;
+    record::QualityStats stats;
+    stats.time = time;
+    stats.vertices = vertices;
+    if (report.deviation) {
+      stats.deviation_mean = report.deviation->mean;
+      stats.deviation_p95 = report.deviation->p95;
+      stats.deviation_max = report.deviation->max;
+    }
+    stats.deviation_range = measured.range;
+    stats.histogram_edges = report.deviation_histogram.edges;
+    stats.histogram_counts = report.deviation_histogram.counts;
+    stats.fill_designed = report.fill.designed;
+    stats.fill_over = report.fill.over;
+    stats.fill_under = report.fill.under;
+    for (const auto& head : report.heads)
+      for (const auto& layer : head.layers)
+        stats.layers.push_back({head.name, layer.layer, std::uint32_t(layer.stations), std::uint32_t(layer.empty), layer.width,
+                                layer.design_width, layer.height, layer.design_height, layer.offset_across, layer.offset_up});
+    return stats;
   }
 
   /// A camera's image, depth, segmentation, point cloud and calibration, in its optical frame.
@@ -403,6 +473,7 @@ class RunMessages final : public RunObserver {
   double period_, live_interval_;  // s simulated; s wall
   std::vector<TopicInfo> topics_;
   std::vector<CameraTopics> camera_topics_;  // per camera of the scene
+  std::size_t quality_topic_ = kNoTopic, deviation_topic_ = kNoTopic;  // with print heads
   std::vector<record::PointField> camera_fields_ = camera_point_fields();
   Periodic next_frame_;
   std::vector<Periodic> next_camera_;
@@ -430,7 +501,7 @@ std::unique_ptr<RunObserver> make_run_messages(Simulation& simulation, const Run
   // Frames at the particle period; a scene without particle frames is recorded 20 times a second.
   return std::make_unique<RunMessages>(record ? options.output_directory / "run.mcap" : std::filesystem::path(), serve_port,
                                        output.particles_period > 0 ? output.particles_period : 0.05, options.live_rate,
-                                       simulation.scene().cameras, options);
+                                       simulation.scene().cameras, !simulation.scene().print_heads.empty(), options);
 }
 
 }  // namespace m3dp::sim::outputs

@@ -137,7 +137,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                  {"surface_deviation_p95_m", measured->deviation_p95},
                  {"surface_deviation_max_m", measured->deviation_max},
                  {"stood", measured->stood},
-                 {"shortfall", shortfall}};
+                 {"shortfall", shortfall},
+                 {"resolution_warning", measured->resolution_warning.empty() ? nlohmann::json() : nlohmann::json(measured->resolution_warning)}};
     }
   }
   return {
