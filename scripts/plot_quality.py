@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Draws a print's quality report (m3dp quality RUN_DIR writes quality.json and quality.csv, then runs
 this): per head, each layer's measured bead width and height (mean, with the range of its sections)
-against the design, the histogram of every section's width and top off the design, and that of the
+against the design, the printed height against the design's over time (did each head's part stand?),
+the histogram of every section's width and top off the design, and that of the
 printed surface's distance to the designed one (its mesh's vertices).
     python3 scripts/plot_quality.py RUN_DIR/quality.json RUN_DIR/quality.csv OUT.png
 """
@@ -27,8 +28,12 @@ def main():
     if not heads:
         sys.exit(f"{sys.argv[1]}: no print heads")
     surface = report.get("surface_deviation_m")
-    figure, axes = plt.subplots(1, 4 if surface else 3, figsize=(18 if surface else 14, 4.2))
-    width_axes, height_axes, histogram_axes = axes[:3]
+    figure, grid = plt.subplots(2, 3, figsize=(15, 8))
+    width_axes, height_axes, time_axes = grid[0]
+    histogram_axes, surface_axes, text_axes = grid[1]
+    axes = [width_axes, height_axes, time_axes, histogram_axes] + ([surface_axes] if surface else [])
+    if not surface:
+        surface_axes.axis("off")
     for index, head in enumerate(heads):
         layers = [layer for layer in head["layers"] if layer["stations"] > layer["stations_empty"]]
         numbers = [layer["layer"] + 0.12 * index for layer in layers]
@@ -51,14 +56,36 @@ def main():
     histogram_axes.set_xlabel("deviation (mm)")
     histogram_axes.set_ylabel("sections")
     histogram_axes.set_title("sections off the design")
+    verdicts = []
+    for index, head in enumerate(heads):
+        height = head.get("height")
+        if not height:
+            continue
+        times = [row[0] for row in height["history"]]
+        color = f"C{index}"
+        time_axes.plot(times, [1e3 * row[3] for row in height["history"]], color=color, label=f"{head['name']}: printed")
+        time_axes.plot(times, [1e3 * row[2] for row in height["history"]], color=color, linestyle="--", linewidth=0.8,
+                       label=f"{head['name']}: design")
+        shortfall = height["shortfall"]
+        if shortfall:
+            time_axes.plot([shortfall["time_s"]], [1e3 * shortfall["printed_m"]], "x", color=color, markersize=10)
+            verdicts.append(f"{head['name']}: fell short at layer {shortfall['layer']} ({shortfall['time_s']:.2f} s)")
+        else:
+            verdicts.append(f"{head['name']}: stood")
+    time_axes.set_xlabel("time (s)")
+    time_axes.set_ylabel("height (mm)")
+    time_axes.set_title("printed height against the design (x: fell short)")
     if surface:
         edges = [1e3 * edge for edge in surface["histogram"]["edges_m"]]
         counts = surface["histogram"]["counts"]
-        axes[3].stairs(counts, edges, fill=True, label=f"p95 {1e3 * surface['p95']:.2f} mm, mean {1e3 * surface['mean']:+.2f} mm")
-        axes[3].axvline(0, color="k", linewidth=0.8)
-        axes[3].set_xlabel("distance to the design (mm, < 0 inside)")
-        axes[3].set_ylabel("mesh vertices")
-        axes[3].set_title("printed surface off the design")
+        surface_axes.stairs(counts, edges, fill=True, label=f"p95 {1e3 * surface['p95']:.2f} mm, mean {1e3 * surface['mean']:+.2f} mm")
+        surface_axes.axvline(0, color="k", linewidth=0.8)
+        surface_axes.set_xlabel("distance to the design (mm, < 0 inside)")
+        surface_axes.set_ylabel("mesh vertices")
+        surface_axes.set_title("printed surface off the design")
+    text_axes.axis("off")
+    lines = verdicts + ([f"warning: {report['resolution_warning']}"] if report.get("resolution_warning") else [])
+    text_axes.text(0, 1, "\n".join(lines), va="top", fontsize=10, wrap=True)
     for axes_ in axes:
         axes_.legend(fontsize=8)
         axes_.grid(alpha=0.3)

@@ -85,7 +85,7 @@ int quality_command(const QualityOptions& options) {
   // The printed height against the design's, frame by frame (did it stand?), and the surface's
   // distance to the design at the end.
   const quality::Design all = quality::combined(designs);
-  quality::Buildability buildability(all, printed.particle_diameter);
+  quality::PrintHeights buildability(designs, printed.particle_diameter);
   for (const auto& entry : entries) buildability.observe(entry.time, io::read_particle_frame(entry.file).positions);
   sim::complete_and_write_report(report, scene, all, frame.positions, buildability, folder);
 
@@ -102,6 +102,13 @@ int quality_command(const QualityOptions& options) {
   const auto& fill = report.fill;
   fmt::print("  fill: {:.2f} cm3 designed, {:.2f} cm3 printed; over-fill {:.2f} cm3, under-fill {:.2f} cm3\n", 1e6 * fill.designed,
              1e6 * fill.printed, 1e6 * fill.over, 1e6 * fill.under);
+  if (report.heads.size() > 1)
+    for (const auto& head : report.heads)
+      fmt::print("  height of '{}': {}\n", head.name,
+                 head.shortfall ? fmt::format("fell short of its design at layer {} ({:.2f} s: {:.1f} of {:.1f} mm)", head.shortfall->layer,
+                                              head.shortfall->time, 1e3 * head.shortfall->printed, 1e3 * head.shortfall->designed)
+                                : fmt::format("stood ({:.1f} mm printed of {:.1f} mm designed at the end)", 1e3 * head.heights.back().printed,
+                                              1e3 * head.heights.back().designed));
   if (report.shortfall)
     fmt::print("  height: fell short of the design at layer {} ({:.2f} s: {:.1f} of {:.1f} mm)\n", report.shortfall->layer,
                report.shortfall->time, 1e3 * report.shortfall->printed, 1e3 * report.shortfall->designed);

@@ -14,11 +14,14 @@ in_run, offline, summary = (json.load(open(path)) for path in sys.argv[1:])
 assert abs(in_run["time_s"] - offline["time_s"]) < 1e-6  # particles.pvd keeps 9 digits
 for key in ("particles", "fill_m3", "surface_deviation_m"):
     assert in_run[key] == offline[key], (key, in_run[key], offline[key])
+def same_history(history, frames):
+    assert len(history) == len(frames), (len(history), len(frames))
+    for (time, *rest), (frame_time, *frame_rest) in zip(history, frames):  # looked at every 0.1 s, as the frames
+        assert abs(time - frame_time) < 1e-6 and rest == frame_rest, (time, rest, frame_time, frame_rest)
+same_history(in_run["height"]["history"], offline["height"]["history"])
+for head, frame_head in zip(in_run["heads"], offline["heads"], strict=True):  # each head's own height too
+    same_history(head.pop("height")["history"], frame_head.pop("height")["history"])
 assert in_run["heads"] == offline["heads"]
-history, frames = in_run["height"]["history"], offline["height"]["history"]
-assert len(history) == len(frames), (len(history), len(frames))
-for (time, *rest), (frame_time, *frame_rest) in zip(history, frames):  # looked at every 0.1 s, as the frames
-    assert abs(time - frame_time) < 1e-6 and rest == frame_rest, (time, rest, frame_time, frame_rest)
 quality = summary["quality"]
 assert quality["file"] == "quality.json" and quality["stood"] is True and quality["layers"] == 1, quality
 assert abs(quality["fill_under_m3"] - in_run["fill_m3"]["under"]) < 1e-12

@@ -97,6 +97,58 @@ Design combined(const std::vector<HeadDesign>& designs) {
   return all;
 }
 
+PrintHeights::PrintHeights(const std::vector<HeadDesign>& designs, double particle_diameter)
+    : whole_(combined(designs), particle_diameter) {
+  for (const HeadDesign& head : designs) heads_.emplace_back(head.design, particle_diameter);
+}
+
+void PrintHeights::observe(double time, std::span<const Vec3> positions) {
+  whole_.observe(time, positions);
+  for (Buildability& head : heads_) head.observe(time, positions);
+}
+
+void PrintHeights::fill_in(Report& report) const {
+  report.heights = whole_.history();
+  report.shortfall = whole_.shortfall();
+  for (std::size_t h = 0; h < heads_.size() && h < report.heads.size(); ++h) {
+    report.heads[h].heights = heads_[h].history();
+    report.heads[h].shortfall = heads_[h].shortfall();
+  }
+}
+
+void PrintHeights::save(StateWriter& out) const {
+  whole_.save(out);
+  out.put(heads_.size());
+  for (const Buildability& head : heads_) head.save(out);
+}
+
+void PrintHeights::load(StateReader& in) {
+  whole_.load(in);
+  if (in.get<std::size_t>() != heads_.size()) in.fail("another number of print heads than the scene has");
+  for (Buildability& head : heads_) head.load(in);
+}
+
+namespace {
+/// A height history and its shortfall as quality.json's "height" object.
+nlohmann::json height_json(const std::vector<HeightSample>& heights, const std::optional<Shortfall>& shortfall_found) {
+  nlohmann::json history = nlohmann::json::array();
+  for (const HeightSample& sample : heights) history.push_back({sample.time, sample.layer, sample.designed, sample.printed});
+  nlohmann::json shortfall;  // null: it stood
+  if (shortfall_found)
+    shortfall = {{"time_s", shortfall_found->time},
+                 {"layer", shortfall_found->layer},
+                 {"designed_m", shortfall_found->designed},
+                 {"printed_m", shortfall_found->printed}};
+  return {{"definition", "the printed height (the median over the design's footprint of each cell's highest "
+                         "material) against the design's laid by then, each particle frame; it fell short when "
+                         "below 90 % of the design's"},
+          {"stood", !shortfall_found.has_value()},
+          {"shortfall", shortfall},
+          {"history_columns", {"time_s", "layer", "designed_m", "printed_m"}},
+          {"history", history}};
+}
+}  // namespace
+
 std::string report_json(const Report& report) {
   nlohmann::json heads = nlohmann::json::array();
   for (const HeadReport& head : report.heads) {
@@ -118,7 +170,9 @@ std::string report_json(const Report& report) {
                         {"offset_across_m", layer.offset_across},
                         {"offset_across_largest_m", layer.offset_across_max},
                         {"offset_up_m", layer.offset_up}});
-    heads.push_back({{"name", head.name}, {"sections", head.sections.size()}, {"layers", layers}});
+    nlohmann::json entry = {{"name", head.name}, {"sections", head.sections.size()}, {"layers", layers}};
+    if (!head.heights.empty()) entry["height"] = height_json(head.heights, head.shortfall);
+    heads.push_back(std::move(entry));
   }
   const nlohmann::json json = {
       {"definition", "sections across each designed bead (a slicer's rounded box of the commanded flow over the speed and the "
@@ -142,23 +196,7 @@ std::string report_json(const Report& report) {
                                      {"max", report.deviation->max},
                                      {"histogram",
                                       {{"edges_m", report.deviation_histogram.edges}, {"counts", report.deviation_histogram.counts}}}};
-  if (!report.heights.empty()) {
-    nlohmann::json history = nlohmann::json::array();
-    for (const HeightSample& sample : report.heights) history.push_back({sample.time, sample.layer, sample.designed, sample.printed});
-    nlohmann::json shortfall;  // null: it stood
-    if (report.shortfall)
-      shortfall = {{"time_s", report.shortfall->time},
-                   {"layer", report.shortfall->layer},
-                   {"designed_m", report.shortfall->designed},
-                   {"printed_m", report.shortfall->printed}};
-    result["height"] = {{"definition", "the printed height (the median over the design's footprint of each cell's highest "
-                                       "material) against the design's laid by then, each particle frame; it fell short when "
-                                       "below 90 % of the design's"},
-                        {"stood", !report.shortfall.has_value()},
-                        {"shortfall", shortfall},
-                        {"history_columns", {"time_s", "layer", "designed_m", "printed_m"}},
-                        {"history", history}};
-  }
+  if (!report.heights.empty()) result["height"] = height_json(report.heights, report.shortfall);
   return result.dump(2) + "\n";
 }
 

@@ -34,6 +34,10 @@ struct HeadReport {
   std::string name;
   std::vector<Section> sections;
   std::vector<LayerFigures> layers;
+  /// The head's own printed height against its design over the frames, when measured: which of
+  /// several walls stood.
+  std::vector<HeightSample> heights;
+  std::optional<Shortfall> shortfall;
 };
 
 struct Report {
@@ -56,6 +60,24 @@ struct Report {
 
 /// Every head's beads as one design (the fill, the surface's distance, the height).
 [[nodiscard]] Design combined(const std::vector<HeadDesign>& designs);
+
+/// The printed height against the design over time (Buildability) for the whole print and for each
+/// head's part of it, looked at together.
+class PrintHeights {
+ public:
+  PrintHeights(const std::vector<HeadDesign>& designs, double particle_diameter);
+  void observe(double time, std::span<const Vec3> positions);
+  [[nodiscard]] const Buildability& whole() const { return whole_; }
+  [[nodiscard]] const std::vector<Buildability>& heads() const { return heads_; }
+  /// Into `report`: the whole print's history and shortfall, and each head's.
+  void fill_in(Report& report) const;
+  void save(StateWriter& out) const;
+  void load(StateReader& in);
+
+ private:
+  Buildability whole_;
+  std::vector<Buildability> heads_;
+};
 
 /// Measures `printed` against the heads' designs, a section every `spacing` (m) along each bead.
 [[nodiscard]] Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, double spacing, double time);

@@ -50,7 +50,7 @@ SurfaceQuality surface_quality(const Simulation& simulation, const TriangleMesh&
 }
 
 void complete_and_write_report(quality::Report& report, const scene::Scene& scene, const quality::Design& design,
-                               std::span<const Vec3> positions, const quality::Buildability& heights,
+                               std::span<const Vec3> positions, const quality::PrintHeights& heights,
                                const std::filesystem::path& folder) {
   surface::SurfaceSettings surface_settings = scene.meshing.surface;
   surface_settings.particle_radius = scene.solver.particle_radius;
@@ -58,8 +58,7 @@ void complete_and_write_report(quality::Report& report, const scene::Scene& scen
   const std::vector<float> deviation = quality::deviation_at(quality::DesignDistance(design), mesh.vertices);
   report.deviation = quality::statistics(deviation);
   report.deviation_histogram = quality::histogram(deviation, quality::deviation_range(design), kHistogramBins);
-  report.heights = heights.history();
-  report.shortfall = heights.shortfall();
+  heights.fill_in(report);
   io::write_ply_with_quality(folder / "quality_mesh.ply", mesh, deviation, "quality: the signed distance (m) to the designed print, > 0 outside it");
   const std::vector<Real> field(deviation.begin(), deviation.end());
   io::write_vtp(folder / "quality_mesh.vtp",

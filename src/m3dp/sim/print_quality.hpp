@@ -30,11 +30,11 @@ struct SurfaceQuality {
 [[nodiscard]] SurfaceQuality surface_quality(const Simulation& simulation, const TriangleMesh& surface, double spacing);
 
 /// A print's report with its surface: `report` (sections and fill) gets the surface's deviation (the
-/// particles' surface by the scene's meshing method, against `design`) and `heights`' history, and
+/// particles' surface by the scene's meshing method, against `design`) and `heights`' histories, and
 /// the folder gets quality.json, quality.csv, quality_mesh.vtp (deviation_m) and quality_mesh.ply
 /// (vertex quality). What m3dp quality and the in-run report write alike.
 void complete_and_write_report(quality::Report& report, const scene::Scene& scene, const quality::Design& design,
-                               std::span<const Vec3> positions, const quality::Buildability& heights,
+                               std::span<const Vec3> positions, const quality::PrintHeights& heights,
                                const std::filesystem::path& folder);
 
 }  // namespace m3dp::sim

@@ -211,6 +211,13 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         quality->stood ? std::string("stood")
                                        : fmt::format("fell short at layer {} ({:.2f} s)", quality->shortfall_layer, quality->shortfall_time),
                         quality->file);
+  if (const auto& quality = summary.quality; quality && quality->heads.size() > 1) {
+    text += "  quality     by head:";
+    for (const auto& head : quality->heads)
+      text += head.stood ? fmt::format(" {} stood;", head.name)
+                         : fmt::format(" {} fell short at layer {} ({:.2f} s);", head.name, head.shortfall_layer, head.shortfall_time);
+    text.back() = '\n';
+  }
   if (const auto& quality = summary.quality; quality && !quality->resolution_warning.empty())
     text += fmt::format("  warning     quality: {}\n", quality->resolution_warning);
   for (const auto& nozzle : summary.nozzles)

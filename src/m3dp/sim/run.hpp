@@ -163,6 +163,13 @@ struct RunSummary {
     std::int32_t shortfall_layer = -1;
     double shortfall_time = 0;           // s
     std::string resolution_warning;      // quality::Report's: the layers are too thin for the particles
+    struct Head {                        // each print head's own wall: stood, or where it fell short
+      std::string name;
+      bool stood = true;
+      std::int32_t shortfall_layer = -1;
+      double shortfall_time = 0;  // s
+    };
+    std::vector<Head> heads;
   };
   std::optional<Quality> quality;
   double particle_steps_per_second = 0;

@@ -27,7 +27,7 @@ class QualityReport final : public RunObserver {
       : folder_(std::move(folder)),
         period_(simulation.scene().output.quality_period),
         design_(quality::combined(head_designs(simulation.scene(), paths_of(simulation)))),
-        heights_(design_, double(simulation.solver().particle_diameter())) {}
+        heights_(head_designs(simulation.scene(), paths_of(simulation)), double(simulation.solver().particle_diameter())) {}
   [[nodiscard]] double period() const override { return period_; }
   // The first look at the start, as the particle frames' first frame.
   void start(const Simulation& simulation) override { heights_.observe(simulation.time(), simulation.solver().fluid().position); }
@@ -45,7 +45,7 @@ class QualityReport final : public RunObserver {
       summary.quality = result;
       return;
     }
-    if (heights_.history().empty() || heights_.history().back().time < simulation.time())
+    if (heights_.whole().history().empty() || heights_.whole().history().back().time < simulation.time())
       heights_.observe(simulation.time(), simulation.solver().fluid().position);
     quality::Report report = print_quality(simulation, kSpacing);
     complete_and_write_report(report, simulation.scene(), design_, simulation.solver().fluid().position, heights_, folder_);
@@ -71,6 +71,9 @@ class QualityReport final : public RunObserver {
     if (report.deviation) result.deviation_p95 = report.deviation->p95, result.deviation_max = report.deviation->max;
     result.stood = !report.shortfall.has_value();
     if (report.shortfall) result.shortfall_layer = report.shortfall->layer, result.shortfall_time = report.shortfall->time;
+    for (const auto& head : report.heads)
+      result.heads.push_back({head.name, !head.shortfall.has_value(), head.shortfall ? head.shortfall->layer : -1,
+                              head.shortfall ? head.shortfall->time : 0.0});
     result.resolution_warning = report.resolution_warning;
     summary.quality = result;
   }
@@ -79,7 +82,7 @@ class QualityReport final : public RunObserver {
   std::filesystem::path folder_;
   double period_;
   quality::Design design_;
-  quality::Buildability heights_;
+  quality::PrintHeights heights_;
 };
 
 }  // namespace

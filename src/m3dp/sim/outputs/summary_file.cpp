@@ -124,6 +124,12 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
     } else {
       nlohmann::json shortfall;
       if (!measured->stood) shortfall = {{"layer", measured->shortfall_layer}, {"time_s", measured->shortfall_time}};
+      nlohmann::json heads = nlohmann::json::array();
+      for (const auto& head : measured->heads) {
+        nlohmann::json head_shortfall;
+        if (!head.stood) head_shortfall = {{"layer", head.shortfall_layer}, {"time_s", head.shortfall_time}};
+        heads.push_back({{"name", head.name}, {"stood", head.stood}, {"shortfall", head_shortfall}});
+      }
       quality = {{"file", measured->file},
                  {"layers", measured->layers},
                  {"sections", measured->sections},
@@ -138,6 +144,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                  {"surface_deviation_max_m", measured->deviation_max},
                  {"stood", measured->stood},
                  {"shortfall", shortfall},
+                 {"heads", heads},
                  {"resolution_warning", measured->resolution_warning.empty() ? nlohmann::json() : nlohmann::json(measured->resolution_warning)}};
     }
   }
