@@ -77,6 +77,21 @@ print("OK", report["vertices"], low, high)
 PY
 tail -n 1 "$work/pvpython.out"
 grep -q "^OK" "$work/pvpython.out" || { echo "FAIL: pvpython did not read the deviation field"; exit 1; }
+# gcode_part (PrusaSlicer's G-code, five times larger) reports its quality too, and says that its
+# 1.5 mm layers are under two particle diameters (2 mm particles): at the resolution's limit.
+"$m3dp" run "$scenes/gcode_part.sdf" -o "$work/gcode_part" --until 3 --quiet 2> /dev/null | grep -E "quality" || true
+/usr/bin/python3 - "$work/gcode_part" <<'PY'
+import json, pathlib, sys
+folder = pathlib.Path(sys.argv[1])
+quality = json.loads((folder / "summary.json").read_text())["quality"]
+report = json.loads((folder / "quality.json").read_text())
+assert quality["file"] == "quality.json" and quality["layers"] >= 1, quality
+assert "thinnest layer, 1.50 mm" in quality["resolution_warning"] and "0.37 mm or less" in quality["resolution_warning"], quality
+assert report["resolution_warning"] == quality["resolution_warning"]
+first = report["heads"][0]["layers"][0]
+assert first["stations"] > first["stations_empty"] and abs(first["design_height_m"] - 0.0015) < 1e-6, first
+print("gcode_part: its quality reported, with the resolution warning")
+PY
 expect_error() {  # expected message, then the command's arguments
   local expected=$1; shift
   set +e
