@@ -365,3 +365,58 @@ TEST(Gcode, ARetractionIsPushedBackBeforeMaterialAndAPrimeComesOutWithTheNextMov
   EXPECT_NEAR(program.material_volume / per_mm, 3.05, 1e-6);
   EXPECT_NEAR(program.net_extrusion, 3.05, 1e-9);
 }
+
+TEST(Gcode, AFilamentDiameterNobodyStatedIsAssumedAloud) {
+  const std::string moves = "G1 X0 Y0 F600\nG1 X5\nG1 X10 E2\n";
+  const double area_175 = kPiDouble * 1.75 * 1.75 / 4, area_285 = kPiDouble * 2.85 * 2.85 / 4;  // mm²
+  // Neither the file nor the scene says: 1.75 mm, and a warning at the first move that lays material.
+  const GcodeProgram silent = parse(moves);
+  EXPECT_NEAR(silent.material_volume * 1e9, 2 * area_175, 1e-6);
+  ASSERT_EQ(silent.warnings.size(), 1u);
+  EXPECT_EQ(silent.warnings[0].location.line, 3);
+  EXPECT_NE(silent.warnings[0].message.find("neither the file nor the scene says how thick: read as 1.75 mm filament; sliced for "
+                                            "2.85 mm filament, the print would need 2.65 times this material"),
+            std::string::npos)
+      << silent.warnings[0].message;
+  // Every header that states it is read, and nothing is assumed.
+  for (const std::string& header : {std::string("; filament_diameter = 2.85\n"),           // PrusaSlicer, Slic3r, Orca
+                                    std::string(";   filamentDiameters,2.85|2.85|2.85\n"),  // Simplify3D
+                                    std::string("; fiber_dia_mm = 2.85\n"),                 // KISSlicer
+                                    std::string("M404 N2.85\n"),                           // RepRapFirmware
+                                    // Cura: its changed settings, JSON cut into lines at the end of the file
+                                    std::string(";SETTING_3 {\"extruder_quality\": [\"[general]\\\\nversion = 4\\\\n[values]\\\\nmaterial_di\n"
+                                                ";SETTING_3 ameter = 2.85\\\\n\\\\n\"]}\n")}) {
+    const GcodeProgram program = parse(header + moves);
+    EXPECT_NEAR(program.material_volume * 1e9, 2 * area_285, 1e-6) << header;
+    EXPECT_TRUE(program.warnings.empty()) << header << (program.warnings.empty() ? "" : program.warnings[0].message);
+  }
+  // The scene settles it, and volumetric E needs no diameter.
+  GcodeSettings scene;
+  scene.filament_diameter = Real(2.85e-3);
+  EXPECT_TRUE(parse(moves, scene).warnings.empty());
+  EXPECT_TRUE(parse("; use_volumetric_e = 1\n" + moves).warnings.empty());
+  // A file that lays nothing has nothing to warn about.
+  EXPECT_TRUE(parse("G1 X0 Y0 F600\nG1 X10\n").warnings.empty());
+}
+
+TEST(Gcode, AFeedRateBeyondAnyMachineIsRefusedAtItsLine) {
+  // A feed of 10²⁶ mm/min would make its moves take no time; the fastest taken is 10 m/s at the
+  // file's scale. (F1e26 itself is refused as ambiguous: F1 then e26.)
+  const std::string huge = "G1 X0 Y0 F600\nG1 X10 E1 F100000000000000000000000000\n";
+  EXPECT_NE(error_of(huge).find("test.gcode:2: error: F1e+26: a feed rate of 1.67e+21 m/s, beyond any printer; the fastest this reader "
+                                "takes is F600000 (10 m/s at this file's scale)"),
+            std::string::npos)
+      << error_of(huge);
+  EXPECT_EQ(error_of("G1 X0 Y0 F600000\nG1 X10 E1\n"), "no error");  // 10 m/s: a gantry's travel, taken
+  // Printed five times larger, the same 10 m/s is F120000 of the file's millimetres.
+  GcodeSettings larger;
+  larger.geometry_scale = 5;
+  try {
+    (void)parse("G1 X10 F200000\n", larger);
+    ADD_FAILURE() << "F200000 at × 5 (16.7 m/s) was taken";
+  } catch (const InputError& error) {
+    EXPECT_NE(std::string(error.what()).find("the fastest this reader takes is F120000 (10 m/s at this file's scale, × 5)"),
+              std::string::npos)
+        << error.what();
+  }
+}

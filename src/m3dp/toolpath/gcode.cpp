@@ -20,6 +20,12 @@ namespace {
 
 constexpr double kPiDouble = 3.14159265358979323846;
 constexpr double kMaxArcPieces = 1e6;  // lines one arc is split into: more is a centre far off, not a print
+/// The fastest nozzle a feed rate may ask for (m/s in the world): beyond any printer or robot (a
+/// desktop printer's 1 m/s, a gantry's or an arm's few m/s); a faster F is a typo, whose moves would
+/// take no time and lay their material in no time.
+constexpr double kMaxFeedSpeed = 10;
+/// What E is read as when neither the file nor the scene says how thick the filament is.
+constexpr double kAssumedFilamentMm = 1.75, kOtherFilamentMm = 2.85;
 
 /// One parsed line: its command (e.g. "G1") and the values of its parameter letters.
 struct Words {
@@ -57,20 +63,49 @@ class Parser {
     throw InputError(SourceLocation{file_.string(), line}, message);
   }
 
-  /// The slicer's own record of how it counted E, read before any move: PrusaSlicer and Slic3r end
-  /// the file with their settings ("; use_volumetric_e = 1", "; filament_diameter = 2.85",
-  /// "; extrusion_axis = A"), Cura starts it with ";FLAVOR:UltiGCode" (E in mm³). The file is
-  /// followed where the scene says nothing; where the scene says otherwise it is refused, since one
-  /// of the two is wrong and the material would be off by their ratio.
+  /// The slicer's own record of how it counted E, read before any move: PrusaSlicer, Slic3r and their
+  /// forks end the file with their settings ("; use_volumetric_e = 1", "; filament_diameter = 2.85",
+  /// "; extrusion_axis = A"), Cura starts it with ";FLAVOR:UltiGCode" (E in mm³) and ends it with its
+  /// changed settings (";SETTING_3 … material_diameter = 2.85 …"), Simplify3D lists
+  /// ";   filamentDiameters,2.85|…", KISSlicer "; fiber_dia_mm = 2.85", and RepRapFirmware's
+  /// "M404 N2.85" tells the printer. The file is followed where the scene says nothing; where the scene
+  /// says otherwise it is refused, since one of the two is wrong and the material would be off by their
+  /// ratio; where neither says, 1.75 mm is assumed and the first extruding move warns so.
   void read_slicer_settings(std::string_view text) {
     std::optional<bool> file_volumetric;
     std::optional<double> file_diameter;
     int volumetric_line = 0, diameter_line = 0, flavor_line = 0;
     std::optional<char> file_axis;
-    std::string flavor;
+    std::string flavor, cura_settings;
+    auto take_diameter = [&](std::string_view value, int line_number) {
+      double diameter = 0;  // mm; the first extruder's ("1.75,1.75" or "1.75|1.75" for two)
+      const std::string_view first = value.substr(0, value.find_first_of(",|"));
+      const auto [end, error] = std::from_chars(first.data(), first.data() + first.size(), diameter);
+      if (error == std::errc() && diameter > 0 && std::isfinite(diameter)) {
+        file_diameter = diameter;
+        diameter_line = line_number;
+      }
+    };
     for_each_line(text, [&](std::string_view line, int line_number) {
+      while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.remove_suffix(1);
+      if (line.rfind("M404 ", 0) == 0 && line.find('N') != std::string_view::npos) {  // RepRapFirmware's filament width
+        take_diameter(line.substr(line.find('N') + 1), line_number);
+        return;
+      }
       if (line.empty() || line.front() != ';') return;
       line.remove_prefix(1);
+      if (line.rfind("SETTING_3 ", 0) == 0) {  // Cura's changed settings, JSON cut into lines
+        cura_settings += line.substr(10);
+        if (const std::size_t at = cura_settings.find("material_diameter = "); at != std::string::npos && !file_diameter) {
+          const std::size_t start = at + 20, stop = cura_settings.find("\\n", start);
+          if (stop != std::string::npos) take_diameter(std::string_view(cura_settings).substr(start, stop - start), line_number);
+        }
+        return;
+      }
+      if (const std::size_t at = line.find("filamentDiameters,"); at != std::string_view::npos) {  // Simplify3D
+        take_diameter(line.substr(at + 18), line_number);
+        return;
+      }
       while (!line.empty() && (line.back() == '\r' || line.back() == ' ')) line.remove_suffix(1);
       while (!line.empty() && line.front() == ' ') line.remove_prefix(1);
       if (line == "FLAVOR:UltiGCode") {
@@ -84,14 +119,8 @@ class Parser {
       if (key == "use_volumetric_e") {
         file_volumetric = value == "1";
         volumetric_line = line_number;
-      } else if (key == "filament_diameter") {
-        double diameter = 0;  // mm; the first extruder's ("1.75,1.75" for two)
-        const std::string_view first = value.substr(0, value.find(','));
-        const auto [end, error] = std::from_chars(first.data(), first.data() + first.size(), diameter);
-        if (error == std::errc() && diameter > 0 && std::isfinite(diameter)) {
-          file_diameter = diameter;
-          diameter_line = line_number;
-        }
+      } else if (key == "filament_diameter" || key == "fiber_dia_mm") {
+        take_diameter(value, line_number);
       } else if (key == "extrusion_axis" && value.size() == 1 && std::isalpha(static_cast<unsigned char>(value[0]))) {
         file_axis = static_cast<char>(std::toupper(static_cast<unsigned char>(value[0])));
       } else if (key == "gcode_flavor") {
@@ -113,7 +142,8 @@ class Parser {
                        *settings_.volumetric_extrusion ? "volumetric E" : "mm of filament"));
     // The scene's diameter to 6 digits: a float's 1.75e-3 m is 1.7500000540 mm.
     filament_diameter_mm_ = settings_.filament_diameter ? std::round(double(*settings_.filament_diameter) * 1e9) / 1e6
-                                                        : file_diameter.value_or(1.75);
+                                                        : file_diameter.value_or(kAssumedFilamentMm);
+    diameter_assumed_ = !volumetric_ && !settings_.filament_diameter && !file_diameter;
     if (!volumetric_ && settings_.filament_diameter && file_diameter &&
         std::abs(*file_diameter / filament_diameter_mm_ - 1) > 1e-3)
       fail(diameter_line,
@@ -243,9 +273,9 @@ class Parser {
 
   /// The commands this reader follows; every other one is skipped with a warning.
   static bool is_read(std::string_view command) {
-    static constexpr std::array<std::string_view, 20> kRead{"G0",  "G1",  "G00", "G01", "G2",  "G3",  "G02",
+    static constexpr std::array<std::string_view, 21> kRead{"G0",  "G1",  "G00", "G01", "G2",  "G3",  "G02",
                                                              "G03", "G4",  "G04", "G90", "G91", "M82", "M83",
-                                                             "G20", "G21", "G92", "G17", "G18", "G19"};
+                                                             "G20", "G21", "G92", "G17", "G18", "G19", "M404"};
     return std::find(kRead.begin(), kRead.end(), command) != kRead.end();
   }
 
@@ -259,6 +289,7 @@ class Parser {
     if (command == "G91") { absolute_xyz_ = false; absolute_e_ = false; return; }
     if (command == "M82") { absolute_e_ = true; return; }
     if (command == "M83") { absolute_e_ = false; return; }
+    if (command == "M404") return;  // the filament's diameter: read before the moves (read_slicer_settings)
     if (command == "G20") { unit_to_mm_ = 25.4; return; }
     if (command == "G21") { unit_to_mm_ = 1.0; return; }
     if (command == "G92") {
@@ -304,6 +335,12 @@ class Parser {
     if (!words['F']) return;
     const double feed = number(words, 'F', line_number) * unit_to_mm_;
     if (!(feed > 0)) fail(line_number, fmt::format("F{} : the feed rate must be > 0 (mm/min)", feed));
+    const double mm_to_world = settings_.length_scale * settings_.geometry_scale;  // m per G-code mm
+    if (feed / 60 * mm_to_world > kMaxFeedSpeed * (1 + 1e-6))  // the scale is a float: 10 m/s itself is taken
+      fail(line_number, fmt::format("F{:g}: a feed rate of {:.3g} m/s, beyond any printer; the fastest this reader takes is F{:.6g} "
+                                    "({} m/s at this file's scale{})",
+                                    feed / unit_to_mm_, feed / 60 * mm_to_world, kMaxFeedSpeed / mm_to_world * 60 / unit_to_mm_,
+                                    kMaxFeedSpeed, settings_.geometry_scale != 1 ? fmt::format(", × {:g}", double(settings_.geometry_scale)) : ""));
     feed_rate_ = feed;
   }
 
@@ -358,6 +395,15 @@ class Parser {
     move.duration = travel_mm / feed_rate_ * 60;
     move.dwell = length_mm == 0;
     move.material_volume = volume_of(laid_by(extrusion, length_mm > 0));
+    if (diameter_assumed_ && move.material_volume > 0) {
+      diameter_assumed_ = false;  // said once, at the first move that lays material
+      program_.warnings.push_back(Diagnostic{
+          SourceLocation{file_.string(), line_number},
+          fmt::format("E counts millimetres of filament, but neither the file nor the scene says how thick: read as {} mm "
+                      "filament; sliced for {} mm filament, the print would need {:.3g} times this material. Set <filament_diameter> "
+                      "in the scene's <gcode> to say which",
+                      kAssumedFilamentMm, kOtherFilamentMm, std::pow(kOtherFilamentMm / kAssumedFilamentMm, 2))});
+    }
     program_.net_extrusion += extrusion;
     program_.material_volume += move.material_volume;
     program_.duration += move.duration;
@@ -469,7 +515,8 @@ class Parser {
   double retracted_ = 0, primed_ = 0;  // E units pulled back, and pushed out beyond that, not yet laid
   char extrusion_axis_ = 'E';        // 'A' for Slic3r's mach3 and machinekit flavours
   bool volumetric_ = false;          // E in mm³ (from the scene, else the file)
-  double filament_diameter_mm_ = 1.75;
+  double filament_diameter_mm_ = kAssumedFilamentMm;
+  bool diameter_assumed_ = false;  // neither the file nor the scene said: warn at the first extruding move
   int layer_ = -1;
   std::string feature_;
   std::map<std::string, Skipped> skipped_;

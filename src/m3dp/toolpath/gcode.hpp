@@ -19,8 +19,10 @@ namespace m3dp::toolpath {
 
 struct GcodeSettings {
   // How E counts material. Unset: as the slicer's settings in the file say (PrusaSlicer's and Slic3r's
-  // "; filament_diameter = …", "; use_volumetric_e = …", Cura's ";FLAVOR:UltiGCode"), else 1.75 mm
-  // filament. Set and contradicted by the file: an InputError, since one of them is wrong.
+  // "; filament_diameter = …", "; use_volumetric_e = …", Cura's ";FLAVOR:UltiGCode" and its
+  // material_diameter setting, Simplify3D's filamentDiameters, KISSlicer's fiber_dia_mm, M404 N…),
+  // else 1.75 mm filament with a warning at the first extruding move. Set and contradicted by the
+  // file: an InputError, since one of them is wrong.
   std::optional<Real> filament_diameter;    // m; in filament mode E counts millimetres of this filament
   std::optional<bool> volumetric_extrusion; // true: E counts mm³ of material (slicers' "volumetric E")
   Pose placement;                          // the G-code frame (scaled to m) → world: where the build plate is
