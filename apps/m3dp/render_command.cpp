@@ -30,8 +30,10 @@ void add_render_options(CLI::App& command, RenderOptions& options) {
   command.add_option("-o,--output", options.output, "The picture (PNG)")->capture_default_str();
   command.add_option("--time", options.time, "Simulated time in s (default: the last frame); the frame at or before it");
   command.add_option("--camera", options.camera, "One of the scene's cameras, where it was at that time");
-  command.add_option("--eye", options.eye, "A free camera at X Y Z (m) ...")->expected(3);
-  command.add_option("--target", options.target, "... looking at X Y Z (m)")->expected(3);
+  command.add_option("--eye", options.eye, "A free camera at X Y Z (m) ... (default: a view framing the robots and the print)")
+      ->expected(3);
+  command.add_option("--target", options.target, "... looking at X Y Z (m) (default: the middle of the robots and the print)")
+      ->expected(3);
   command.add_option("--width", options.width, "The free camera's image width")->check(CLI::Range(16, 8192))->capture_default_str();
   command.add_option("--height", options.height, "The free camera's image height")->check(CLI::Range(16, 8192))->capture_default_str();
   command.add_option("--fov", options.fov_degrees, "The free camera's horizontal field of view (degrees)")
@@ -80,6 +82,22 @@ Pose look_at(const Vec3& eye, const Vec3& target) {
   rotation.col(1) = left;
   rotation.col(2) = forward.cross(left);
   return Pose{eye, Quat(rotation)};
+}
+
+/// The box around what a picture is of: the robots' links and free bodies where they are, the
+/// nozzles, the particles and the printed mesh (not static shapes: a floor of many metres would make
+/// the print a dot). Empty if there is none of these.
+Aabb subject_box(const sim::WorldLayout& layout, std::span<const Pose> bodies, std::span<const Pose> nozzles,
+                 std::span<const Vec3> particles, const TriangleMesh* printed) {
+  Aabb box;
+  for (std::size_t b = 0; b < layout.bodies.size(); ++b)
+    if (layout.bodies[b].kind != sim::BodyKind::static_body)
+      for (const Vec3& vertex : layout.bodies[b].triangles.vertices) box.extend(bodies[b].apply(vertex));
+  for (const Pose& nozzle : nozzles) box.extend(nozzle.position);
+  for (const Vec3& position : particles) box.extend(position);
+  if (printed)
+    for (const Vec3& vertex : printed->vertices) box.extend(vertex);
+  return box;
 }
 
 /// Where a scene camera was at `time`: its frames.csv row at or before it (the optical frame's
@@ -148,6 +166,7 @@ int render_command(const RenderOptions& options) {
   // The camera.
   sensors::CameraSettings settings;
   Pose camera_pose;
+  std::string framed;  // how the view was chosen, when m3dp chose it
   if (!options.camera.empty()) {
     const auto found = std::find_if(scene.cameras.begin(), scene.cameras.end(),
                                     [&](const scene::CameraEntry& entry) { return entry.settings.name == options.camera; });
@@ -164,9 +183,26 @@ int render_command(const RenderOptions& options) {
     else throw Error(fmt::format("{}: camera '{}' rides on {}/{}, and the run has no cameras/{}/frames.csv to say where it was",
                                  run.string(), options.camera, settings.robot, settings.link, options.camera));
   } else {
-    if (options.eye.size() != 3 || options.target.size() != 3) throw Error("m3dp render: give --camera NAME, or --eye X Y Z and --target X Y Z");
-    const Vec3 eye(Real(options.eye[0]), Real(options.eye[1]), Real(options.eye[2]));
-    const Vec3 target(Real(options.target[0]), Real(options.target[1]), Real(options.target[2]));
+    // Without --eye (or --target), a view of the robots and the print: from the front right and above
+    // (as the viewer's), far enough back for their box to fill the picture's narrower angle.
+    const Aabb box = subject_box(layout, bodies, nozzles, particles.positions, printed ? &*printed : nullptr);
+    if ((options.eye.empty() || options.target.empty()) && box.empty())
+      throw Error(fmt::format("{}: nothing to frame at {:.3f} s (no robot, free body, nozzle, particle or printed mesh); give --eye X Y Z "
+                              "and --target X Y Z, or --camera NAME",
+                              run.string(), time));
+    const Vec3 middle = box.empty() ? Vec3::Zero() : Vec3((box.min + box.max) / 2);
+    const Vec3 target = options.target.size() == 3 ? Vec3(Real(options.target[0]), Real(options.target[1]), Real(options.target[2])) : middle;
+    Vec3 eye;
+    if (options.eye.size() == 3) {
+      eye = Vec3(Real(options.eye[0]), Real(options.eye[1]), Real(options.eye[2]));
+    } else {
+      const double radius = std::max(0.05, 0.5 * double((box.max - box.min).norm()));
+      const double half_fov = options.fov_degrees * std::acos(-1.0) / 360;
+      const double narrower = std::min(half_fov, std::atan(std::tan(half_fov) * options.height / options.width));
+      eye = target + Vec3(Real(1), Real(-0.8), Real(0.6)).normalized() * Real(1.05 * radius / std::sin(narrower));
+      framed = fmt::format("a view framing the robots and the print (--eye {:.3f} {:.3f} {:.3f} --target {:.3f} {:.3f} {:.3f})", eye.x(),
+                           eye.y(), eye.z(), target.x(), target.y(), target.z());
+    }
     if ((target - eye).norm() < Real(1e-6)) throw Error("m3dp render: --eye and --target are the same point");
     settings.name = "render";
     settings.type = sensors::CameraType::camera;
@@ -181,7 +217,7 @@ int render_command(const RenderOptions& options) {
   rig.render(settings, camera_pose, 0, image);
   io::write_png(options.output, image.width, image.height, 3, 8, image.rgb.data());
   fmt::print("m3dp: {} at {:.3f} s ({} particles) from {} → {} ({}x{})\n", run.string(), time, particles.positions.size(),
-             options.camera.empty() ? "the eye point" : "camera " + options.camera, options.output.string(), image.width, image.height);
+             !options.camera.empty() ? "camera " + options.camera : !framed.empty() ? framed : std::string("the eye point"), options.output.string(), image.width, image.height);
   return 0;
 }
 
