@@ -105,6 +105,48 @@ sim::RunSummary run_into(sim::Simulation& simulation, const fs::path& directory)
 }
 }  // namespace
 
+TEST(Outputs, ParticleFramesKeepALongRunsFolderReasonableAndZeroSaysNone) {
+  // Without <particles_period>: 0.02 s for a run of up to 10 s, else the next 1, 2 or 5 × 10^k s that
+  // keeps it to 500 frames (a 15-minute print: one every 2 s, 450 frames, not 45,000).
+  const scene::OutputSettings unset;
+  for (const auto& [end_time, period] : std::vector<std::pair<double, double>>{
+           {1, 0.02}, {10, 0.02}, {12, 0.05}, {31, 0.1}, {60, 0.2}, {900, 2}, {3600, 10}, {86400, 200}})
+    EXPECT_DOUBLE_EQ(scene::particle_frame_period(unset, end_time), period) << end_time << " s";
+  scene::OutputSettings given;
+  given.particles_period = Real(0.5);
+  EXPECT_FLOAT_EQ(float(scene::particle_frame_period(given, 900)), 0.5f);
+
+  // A short run chosen for, and a run with <particles_period>0: the summary says which, and why.
+  sim::HydrostaticSetup setup;
+  setup.particle_radius = Real(0.005);
+  setup.end_time = 0.06;
+  for (const std::optional<Real> period : {std::optional<Real>(), std::optional<Real>(Real(0))}) {
+    scene::Scene scene = sim::hydrostatic_scene(setup);
+    scene.output.particles_period = period;
+    sim::Simulation simulation(scene);
+    const fs::path directory = fresh_directory("frame_period");
+    sim::RunOptions options;
+    options.output_directory = directory;
+    options.show_progress = false;
+    const auto summary = sim::run_simulation(simulation, options);
+    const std::string text = sim::format_summary(summary, directory);
+    const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+    if (!period) {
+      EXPECT_EQ(summary.frames_written, 4u);  // 0, 0.02, 0.04, 0.06
+      EXPECT_NE(text.find("4 particle frames, one every 0.02 s (chosen for a 0.06 s run: at most 500 frames; "
+                          "<output><particles_period> sets it)"),
+                std::string::npos)
+          << text;
+      EXPECT_TRUE(json["particle_frame_period_chosen"].get<bool>());
+    } else {
+      EXPECT_EQ(summary.frames_written, 0u);
+      EXPECT_FALSE(fs::exists(directory / "particles.pvd"));
+      EXPECT_NE(text.find("(no particle frames: <output><particles_period> is 0)"), std::string::npos) << text;
+      EXPECT_EQ(json["particle_frame_period_s"].get<double>(), 0.0);
+    }
+  }
+}
+
 TEST(Outputs, MeshesAreMadeDuringTheRunAndOfTheFinalState) {
   scene::Scene scene = meshed_tank(0.1, Real(0.04));
   scene.meshing.format = "stl";

@@ -204,7 +204,8 @@ TEST(Scene, ValidSceneLoadsInSiUnits) {
   EXPECT_DOUBLE_EQ(head.trajectory.start_time(), 0.5);
   EXPECT_GT(head.trajectory.end_time(), 0.5);
 
-  EXPECT_FLOAT_EQ(scene.output.particles_period, 0.02f);
+  ASSERT_TRUE(scene.output.particles_period.has_value());
+  EXPECT_FLOAT_EQ(*scene.output.particles_period, 0.02f);
   EXPECT_TRUE(scene.output.write_particles);
 }
 

@@ -2448,4 +2448,15 @@ PathSegments load_path_from_string(const std::string& text, const std::filesyste
   return SceneReader(text, file_name).read_path_text();
 }
 
+double particle_frame_period(const OutputSettings& output, double end_time) {
+  if (output.particles_period) return double(*output.particles_period);
+  constexpr double kShortest = 0.02;  // s: smooth playback of a short run
+  const double wanted = end_time / kDefaultMostParticleFrames;
+  if (!(wanted > kShortest)) return kShortest;
+  const double decade = std::pow(10.0, std::floor(std::log10(wanted)));
+  for (const double step : {1.0, 2.0, 5.0, 10.0})
+    if (step * decade >= wanted * (1 - 1e-9)) return step * decade;
+  return 10 * decade;
+}
+
 }  // namespace m3dp::scene

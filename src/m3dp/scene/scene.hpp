@@ -121,7 +121,9 @@ struct PrintHead {
 };
 
 struct OutputSettings {
-  Real particles_period = Real(0.02);  // s of simulated time between particle frames; 0 = none
+  /// s of simulated time between particle frames (and world.pvd's, and run.mcap's); 0 = none; unset:
+  /// chosen for the run's length (particle_frame_period).
+  std::optional<Real> particles_period;
   bool write_particles = true;
   bool mcap = false;                   // run.mcap: the run in Foxglove's messages (also `m3dp run --record`)
   std::optional<std::uint16_t> serve_port;  // a live Foxglove WebSocket stream on this port (0: any free one)
@@ -130,6 +132,14 @@ struct OutputSettings {
   /// written at the end of a run with an output folder and print heads); 0 = no in-run quality report.
   double quality_period = 0.1;
 };
+
+/// The frames of particles a run writes, at most this many by default: a 15-minute print at one every
+/// 0.02 s would be 45,000 files.
+constexpr double kDefaultMostParticleFrames = 500;
+/// The period (s) between particle frames of a run to `end_time` (s): the scene's <particles_period>
+/// if it gives one, else 0.02 s, or for a run longer than 10 s the next 1, 2 or 5 × 10^k s that keeps
+/// it to kDefaultMostParticleFrames frames.
+[[nodiscard]] double particle_frame_period(const OutputSettings& output, double end_time);
 
 /// Surface meshes made during the run (issue 4): every `period` seconds of simulated time the fluid
 /// is meshed on a worker thread and written to meshes/ (the solver does not wait for it).

@@ -73,6 +73,8 @@ Run::Run(Simulation& simulation, const RunOptions& options) : impl_(std::make_un
   CheckpointRun& checkpoint = impl_->checkpoint;
   const double end_time = options.until.value_or(simulation.scene().end_time);
   summary.end_time = end_time;
+  summary.frame_period = scene::particle_frame_period(simulation.scene().output, end_time);
+  summary.frame_period_chosen = !simulation.scene().output.particles_period.has_value();
   summary.output_directory = options.output_directory.string();
   summary.mass_initial = simulation.initial_fluid_mass();
   if (!options.output_directory.empty()) std::filesystem::create_directories(options.output_directory);
@@ -240,8 +242,16 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
     text += fmt::format("  solver      {:.2f} density + {:.2f} divergence + {:.2f} viscosity iterations per step\n",
                         summary.mean_density_iterations, summary.mean_divergence_iterations, summary.mean_viscosity_iterations);
   if (!output_directory.empty()) {
-    text += fmt::format("  output      {} ({} particle frames; open particles.pvd{} in ParaView)\n", output_directory.string(),
-                        summary.frames_written, summary.world_frames_written > 0 ? " and world.pvd" : "");
+    if (summary.frame_period > 0)
+      text += fmt::format("  output      {} ({} particle frames, one every {:g} s{}; open particles.pvd{} in ParaView)\n",
+                          output_directory.string(), summary.frames_written, summary.frame_period,
+                          summary.frame_period_chosen
+                              ? fmt::format(" (chosen for a {:g} s run: at most {:g} frames; <output><particles_period> sets it)",
+                                            summary.end_time, scene::kDefaultMostParticleFrames)
+                              : std::string(),
+                          summary.world_frames_written > 0 ? " and world.pvd" : "");
+    else
+      text += fmt::format("  output      {} (no particle frames: <output><particles_period> is 0)\n", output_directory.string());
   }
   if (!summary.recording.file.empty())
     text += fmt::format("  recording   {}: {} messages, {:.1f} MB (Foxglove or Lichtblick: open the file; {:.2f} s to make and write)\n",

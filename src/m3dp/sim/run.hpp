@@ -116,6 +116,8 @@ struct RunSummary {
   double mean_viscosity_iterations = 0;   // conjugate-gradient iterations of the implicit viscosity solve
   bool granular = false;                  // the materials are discrete spheres: no pressure or viscosity solve
   std::size_t frames_written = 0;
+  double frame_period = 0;                // s between particle frames (0: none)
+  bool frame_period_chosen = false;       // chosen for the run's length: the scene gave no <particles_period>
   std::size_t world_frames_written = 0;   // world/*.vtm in world.pvd
   struct Recording {
     std::string file;                     // run.mcap; empty: not recorded

@@ -42,9 +42,10 @@ class DensityCheck final : public RunObserver {
 
 std::unique_ptr<RunObserver> make_density_check(Simulation& simulation, const RunOptions& options) {
   const auto& output = simulation.scene().output;
-  const bool frames = !options.output_directory.empty() && output.write_particles && output.particles_period > 0;
   const double end_time = options.until.value_or(simulation.scene().end_time);
-  return std::make_unique<DensityCheck>(frames ? output.particles_period : end_time / 100);
+  const double period = frame_period(simulation, options);
+  const bool frames = !options.output_directory.empty() && output.write_particles && period > 0;
+  return std::make_unique<DensityCheck>(frames ? period : end_time / 100);
 }
 
 }  // namespace m3dp::sim::outputs

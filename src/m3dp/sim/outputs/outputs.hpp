@@ -8,6 +8,9 @@
 
 namespace m3dp::sim::outputs {
 
+/// s between particle frames in this run (0: none): the scene's, or chosen for the run's length.
+[[nodiscard]] double frame_period(const Simulation& simulation, const RunOptions& options);
+
 /// The output's observer for a run, or null where the scene or the options leave it out.
 using MakeOutput = std::unique_ptr<RunObserver> (*)(Simulation& simulation, const RunOptions& options);
 

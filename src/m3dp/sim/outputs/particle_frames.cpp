@@ -54,10 +54,15 @@ class ParticleFrames final : public RunObserver {
 
 }  // namespace
 
+double frame_period(const Simulation& simulation, const RunOptions& options) {
+  return scene::particle_frame_period(simulation.scene().output, options.until.value_or(simulation.scene().end_time));
+}
+
 std::unique_ptr<RunObserver> make_particle_frames(Simulation& simulation, const RunOptions& options) {
   const auto& output = simulation.scene().output;
-  if (options.output_directory.empty() || !output.write_particles || !(output.particles_period > 0)) return nullptr;
-  return std::make_unique<ParticleFrames>(options.output_directory, output.particles_period);
+  const double period = frame_period(simulation, options);
+  if (options.output_directory.empty() || !output.write_particles || !(period > 0)) return nullptr;
+  return std::make_unique<ParticleFrames>(options.output_directory, period);
 }
 
 }  // namespace m3dp::sim::outputs

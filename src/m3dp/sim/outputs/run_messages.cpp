@@ -499,8 +499,9 @@ std::unique_ptr<RunObserver> make_run_messages(Simulation& simulation, const Run
   if (!record && !serve_port) return nullptr;
   if (record) std::filesystem::create_directories(options.output_directory);
   // Frames at the particle period; a scene without particle frames is recorded 20 times a second.
+  const double frame_period = outputs::frame_period(simulation, options);
   return std::make_unique<RunMessages>(record ? options.output_directory / "run.mcap" : std::filesystem::path(), serve_port,
-                                       output.particles_period > 0 ? output.particles_period : 0.05, options.live_rate,
+                                       frame_period > 0 ? frame_period : 0.05, options.live_rate,
                                        simulation.scene().cameras, !simulation.scene().print_heads.empty(), options);
 }
 

@@ -187,6 +187,8 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"granular", summary.granular},
       {"particles_at_rest", summary.particles_at_rest},
       {"frames_written", summary.frames_written},
+      {"particle_frame_period_s", summary.frame_period},
+      {"particle_frame_period_chosen", summary.frame_period_chosen},
       {"world_frames_written", summary.world_frames_written},
       {"particle_radius_m", simulation.solver().parameters().settings.particle_radius},
       {"materials", materials},

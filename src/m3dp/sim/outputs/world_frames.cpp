@@ -159,8 +159,9 @@ class WorldFrames final : public RunObserver {
 
 std::unique_ptr<RunObserver> make_world_frames(Simulation& simulation, const RunOptions& options) {
   const auto& output = simulation.scene().output;
-  if (options.output_directory.empty() || !(output.particles_period > 0)) return nullptr;
-  return std::make_unique<WorldFrames>(options.output_directory, output.particles_period);
+  const double period = frame_period(simulation, options);
+  if (options.output_directory.empty() || !(period > 0)) return nullptr;
+  return std::make_unique<WorldFrames>(options.output_directory, period);
 }
 
 }  // namespace m3dp::sim::outputs
