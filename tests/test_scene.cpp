@@ -1172,3 +1172,21 @@ TEST(Scene, ACoordinatorsMistakesAreErrorsAtTheirLine) {
   const std::string alone = replaced(valid_scene(), "<output>", "<coordinator/><output>");
   expect_error_at(alone, "<coordinator/>", "<coordinator> coordinates robots: the world needs at least two");
 }
+
+TEST(Scene, MessagesNameTheElementWrittenAndSuggestTheClosestInThePluginBlock) {
+  // The engine's field behind <max_volume_error> is volume_tolerance, behind <shifting>
+  // shifting_factor: the messages name what the user wrote, at its line.
+  const std::string solver_tail = "<max_time_step>0.005</max_time_step>";
+  expect_error_at(replaced(valid_scene(), solver_tail, solver_tail + "\n<max_volume_error>2</max_volume_error>"), "<max_volume_error>",
+                  "<max_volume_error> must be in [0, 1), got 2");
+  expect_error_at(replaced(valid_scene(), solver_tail, solver_tail + "\n<shifting>20</shifting>"), "<shifting>",
+                  "<shifting> must be in [0, 10], got 20");
+  EXPECT_EQ(std::string(load_error(replaced(valid_scene(), solver_tail, solver_tail + "\n<max_volume_error>2</max_volume_error>")).what())
+                .find("volume_tolerance"),
+            std::string::npos);
+  // A misspelling inside the plugin block gets the closest name, as SDF elements do.
+  expect_error_at(replaced(valid_scene(), solver_tail, solver_tail + "\n<shiftng>2</shiftng>"), "<shiftng>",
+                  "unknown element <shiftng> in <solver>; did you mean <shifting>? (expected one of: particle_radius, kernel");
+  expect_error_at(replaced(valid_scene(), solver_tail, solver_tail + "\n<max_volum_error>0.5</max_volum_error>"), "<max_volum_error>",
+                  "unknown element <max_volum_error> in <solver>; did you mean <max_volume_error>?");
+}

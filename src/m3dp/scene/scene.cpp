@@ -431,7 +431,12 @@ class SceneReader {
   void check_sizes();
   /// Records where `parent`'s child `name` was written as `field` (nothing if it is not there).
   void record_field(FieldLocations& fields, std::string field, const pugi::xml_node& parent, const char* name) {
-    if (const pugi::xml_node child = parent.child(name)) fields.emplace_back(std::move(field), where(child));
+    const pugi::xml_node child = parent.child(name);
+    if (!child) return;
+    // The engine's name for it may differ (<max_volume_error> fills volume_tolerance): messages name what was written.
+    const std::size_t dot = field.rfind('.');
+    if (field.substr(dot == std::string::npos ? 0 : dot + 1) != name) written_as_[field] = name;
+    fields.emplace_back(std::move(field), where(child));
   }
   /// Reports `problems` of `parameters`: `phase_entries` (one per phase) and the scene's solver fields say where.
   void report_parameter_problems(const std::vector<sph::ParameterProblem>& problems, const sph::Parameters& parameters,
@@ -441,6 +446,7 @@ class SceneReader {
   fs::path file_;
   LineIndex lines_;
   std::optional<double> max_particles_;  // <solver><max_particles>; none: from the machine's memory
+  std::map<std::string, std::string> written_as_;  // an engine field → the element that filled it, where they differ
   Scene scene_;
   std::vector<Diagnostic> diagnostics_;
 
@@ -454,6 +460,21 @@ class SceneReader {
 
 // ---- structure checks ----
 
+namespace {
+/// The name among `candidates` at most two letters off `name` (the nearest), or empty: a misspelling's fix.
+template <typename Names>
+std::string_view closest_name(std::string_view name, const Names& candidates) {
+  std::string_view closest;
+  std::size_t best = 3;
+  for (const std::string_view candidate : candidates)
+    if (const std::size_t distance = edit_distance(name, candidate); distance < best) {
+      best = distance;
+      closest = candidate;
+    }
+  return closest;
+}
+}  // namespace
+
 void SceneReader::check_children(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed,
                                  std::initializer_list<std::string_view> repeatable) {
   std::vector<std::pair<std::string_view, int>> first_line_of;
@@ -464,6 +485,9 @@ void SceneReader::check_children(const pugi::xml_node& element, std::initializer
       if (allowed.size() == 0) {
         report(child, fmt::format("unknown element <{}> in <{}>; <{}> takes a value, not elements", name,
                                   element.name(), element.name()));
+      } else if (const std::string_view closest = closest_name(name, allowed); !closest.empty()) {
+        report(child, fmt::format("unknown element <{}> in <{}>; did you mean <{}>? (expected one of: {})", name, element.name(),
+                                  closest, join(allowed)));
       } else {
         report(child,
                fmt::format("unknown element <{}> in <{}>; expected one of: {}", name, element.name(), join(allowed)));
@@ -487,6 +511,9 @@ void SceneReader::check_attributes(const pugi::xml_node& element, std::initializ
     if (contains(allowed, attribute.name())) continue;
     if (allowed.size() == 0) {
       report(element, fmt::format("unknown attribute '{}' on <{}>; it takes none", attribute.name(), element.name()));
+    } else if (const std::string_view closest = closest_name(attribute.name(), allowed); !closest.empty()) {
+      report(element, fmt::format("unknown attribute '{}' on <{}>; did you mean '{}'? (expected one of: {})", attribute.name(),
+                                  element.name(), closest, join(allowed)));
     } else {
       report(element, fmt::format("unknown attribute '{}' on <{}>; expected one of: {}", attribute.name(),
                                   element.name(), join(allowed)));
@@ -805,13 +832,7 @@ void SceneReader::warn_unknown_children(const pugi::xml_node& element, std::span
     if (child.type() != pugi::node_element) continue;
     const std::string_view name = child.name();
     if (std::find(known.begin(), known.end(), name) != known.end()) continue;
-    std::string_view closest;
-    std::size_t best = 3;  // at most two letters off
-    for (const auto candidate : known)
-      if (const std::size_t distance = edit_distance(name, candidate); distance < best) {
-        best = distance;
-        closest = candidate;
-      }
+    const std::string_view closest = closest_name(name, known);
     scene_.warnings.push_back({where(child), closest.empty()
                                                  ? fmt::format("unknown element <{}> in <{}>, ignored: SDF has no such element there", name, element.name())
                                                  : fmt::format("unknown element <{}> in <{}>, ignored; did you mean <{}>?", name, element.name(), closest)});
@@ -2372,7 +2393,8 @@ void SceneReader::report_parameter_problems(const std::vector<sph::ParameterProb
     }
     // "<poisson_ratio> must be in [0, 0.49], got 0.5"; a whole material's problem names the material.
     const std::size_t dot = problem.field.rfind('.');
-    const std::string element = problem.field.substr(dot == std::string::npos ? 0 : dot + 1);
+    const auto written = written_as_.find(problem.field);
+    const std::string element = written != written_as_.end() ? written->second : problem.field.substr(dot == std::string::npos ? 0 : dot + 1);
     report(location, problem.field.empty() ? fmt::format("{} {}", owner, problem.message)
                                            : fmt::format("<{}> {}", element, problem.message));
   }
