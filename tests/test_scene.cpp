@@ -1,5 +1,6 @@
 // Loading SDF scene files: values land in the right fields in SI units, and every mistake is reported
 // with file:line and what was expected.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <unistd.h>
@@ -14,6 +15,7 @@
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/scene/schema.hpp"
 
 namespace {
 
@@ -217,7 +219,7 @@ TEST(Scene, OutputRecordsAndServes) {
   EXPECT_EQ(*scene.output.serve_port, 0);
   EXPECT_FALSE(load_scene_from_string(valid_scene(), "scenes/valid.sdf").output.serve_port.has_value());
   expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<serve>70000</serve>"),
-                  "<serve>", "<serve> is a TCP port, 0 (any free one) to 65535, got 70000");
+                  "<serve>", "<serve> must be a whole number in [0, 65535], got 70000");
   expect_error_at(replaced(valid_scene(), "<particles>true</particles>", "<particles>true</particles>\n<mcap>yes</mcap>"),
                   "<mcap>", "<mcap> must be true or false (or 1 or 0), got 'yes'");
   EXPECT_EQ(load_scene_from_string(valid_scene(), "scenes/valid.sdf").output.checkpoint_period, 0.0);
@@ -1189,4 +1191,46 @@ TEST(Scene, MessagesNameTheElementWrittenAndSuggestTheClosestInThePluginBlock) {
                   "unknown element <shiftng> in <solver>; did you mean <shifting>? (expected one of: particle_radius, kernel");
   expect_error_at(replaced(valid_scene(), solver_tail, solver_tail + "\n<max_volum_error>0.5</max_volum_error>"), "<max_volum_error>",
                   "unknown element <max_volum_error> in <solver>; did you mean <max_volume_error>?");
+}
+
+TEST(Scene, EveryTableRowRefusesABadValueAtItsLineByItsOwnName) {
+  // Each row of the scene table (schema.cpp) with a value to check is given one it must refuse, in
+  // its block of the valid scene, and the error names the element at its line.
+  std::size_t checked = 0;
+  for (const m3dp::scene::SchemaRow& row : m3dp::scene::schema_rows()) {
+    using m3dp::scene::ValueKind;
+    std::string bad;
+    switch (row.kind) {
+      case ValueKind::number:
+      case ValueKind::integer:
+        if (row.limits.greater_than) bad = fmt::format("{:g}", *row.limits.greater_than);
+        else if (row.limits.at_least) bad = fmt::format("{:g}", *row.limits.at_least - 1);
+        else if (row.limits.less_than) bad = fmt::format("{:g}", *row.limits.less_than);
+        else if (row.limits.at_most) bad = fmt::format("{:g}", *row.limits.at_most + 1);
+        break;
+      case ValueKind::boolean: bad = "maybe"; break;
+      case ValueKind::keyword: bad = "no_such_word"; break;
+      case ValueKind::structure: break;
+    }
+    if (bad.empty()) continue;
+    const std::string element = fmt::format("<{0}>{1}</{0}>", row.name, bad);
+    std::string text = valid_scene();
+    const std::string block(row.block);
+    if (text.find("<" + block + ">") == std::string::npos && text.find("<" + block + " ") == std::string::npos)
+      text = replaced(text, "<output>", "<" + block + "></" + block + ">\n      <output>");
+    // The element first in its block (replacing one the scene has: no duplicate).
+    const std::size_t open = text.find(">", text.find("<" + block)) + 1;
+    const std::string existing = fmt::format("<{}>", row.name);
+    const std::size_t close_block = text.find("</" + block + ">", open);
+    if (const std::size_t at = text.find(existing, open); at != std::string::npos && at < close_block)
+      text.erase(at, text.find(fmt::format("</{}>", row.name), at) + row.name.size() + 3 - at);
+    text.insert(open, "\n" + element);
+    const std::string expected = row.kind == ValueKind::keyword ? fmt::format("<{}> must be one of:", row.name)
+                                 : row.kind == ValueKind::boolean ? fmt::format("<{}> must be true or false", row.name)
+                                                                  : fmt::format("<{}> must be", row.name);
+    SCOPED_TRACE(fmt::format("<{}> in <{}> = {}", row.name, row.block, bad));
+    expect_error_at(text, element, expected);
+    ++checked;
+  }
+  EXPECT_GE(checked, 40u);
 }

@@ -17,6 +17,7 @@
 
 #include "bench_command.hpp"
 #include "mesh_command.hpp"
+#include "m3dp/scene/schema.hpp"
 #include "quality_command.hpp"
 #include "render_command.hpp"
 #include "view_command.hpp"
@@ -167,6 +168,9 @@ int main(int argc, char** argv) {
   auto* quality = app.add_subcommand("quality", "Measure a finished run's print against its design: quality.json, quality.csv");
   m3dp::app::add_quality_options(*quality, quality_options);
 
+  auto* schema = app.add_subcommand("schema", "Print the scene reference (Markdown): every element the table has, its unit, range, default "
+                                              "and meaning, as docs/scene_reference.md holds it");
+
   CLI11_PARSE(app, argc, argv);
   try {
     if (run->parsed()) {
@@ -202,6 +206,10 @@ int main(int argc, char** argv) {
       return run_command(scene_file, output, threads, run_options, !no_coordinator);
     }
     if (validate->parsed()) return validate_command(validate_file);
+    if (schema->parsed()) {
+      fmt::print("{}", m3dp::scene::schema_reference());
+      return 0;
+    }
     if (bench->parsed()) return m3dp::app::bench_command(bench_options);
     if (mesh->parsed()) return m3dp::app::mesh_command(mesh_options);
     if (quality->parsed()) return m3dp::app::quality_command(quality_options);

@@ -1,4 +1,5 @@
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/scene/schema.hpp"
 #include "m3dp/scene/urdf_check.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 
@@ -53,126 +54,12 @@ namespace fs = std::filesystem;
 
 constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
-enum class Quantity {
-  plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass, stress, stress_rate, rate,
-  consistency, surface_tension, stiffness, area
-};
-
-struct Unit {
-  std::string_view symbol;
-  double to_si;  // SI value = written value × to_si
-};
-
-struct QuantityInfo {
-  std::string_view name;       // "length", for messages
-  std::string_view si_symbol;  // shown with limits; empty for plain numbers and fractions
-  std::span<const Unit> units;
-};
-
-QuantityInfo quantity_info(Quantity quantity) {
-  static constexpr Unit kLength[] = {{"m", 1}, {"cm", 1e-2}, {"mm", 1e-3}};
-  static constexpr Unit kTime[] = {{"s", 1}, {"ms", 1e-3}};
-  static constexpr Unit kSpeed[] = {{"m/s", 1}, {"mm/s", 1e-3}};
-  static constexpr Unit kAcceleration[] = {{"m/s^2", 1}, {"m/s2", 1}};
-  static constexpr Unit kDensity[] = {{"kg/m^3", 1}, {"kg/m3", 1}, {"g/cm^3", 1e3}, {"g/cm3", 1e3}};
-  static constexpr Unit kDynamicViscosity[] = {{"Pa*s", 1},      {"Pa.s", 1},      {"Pa·s", 1},
-                                               {"mPa*s", 1e-3},  {"mPa.s", 1e-3},  {"mPa·s", 1e-3},
-                                               {"cP", 1e-3},     {"P", 0.1}};
-  static constexpr Unit kFraction[] = {{"1", 1}, {"%", 1e-2}};
-  static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegree}};
-  static constexpr Unit kMass[] = {{"kg", 1}, {"g", 1e-3}};
-  static constexpr Unit kStress[] = {{"Pa", 1}, {"kPa", 1e3}};
-  static constexpr Unit kStressRate[] = {{"Pa/s", 1}, {"Pa/min", 1.0 / 60}};
-  static constexpr Unit kRate[] = {{"1/s", 1}, {"Hz", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
-  static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
-  static constexpr Unit kSurfaceTension[] = {{"N/m", 1}, {"mN/m", 1e-3}, {"J/m^2", 1}, {"J/m2", 1}};
-  static constexpr Unit kStiffness[] = {{"N/m", 1}, {"N/mm", 1e3}, {"kN/m", 1e3}};
-  static constexpr Unit kArea[] = {{"m^2", 1}, {"m2", 1}, {"mm^2", 1e-6}, {"mm2", 1e-6}};
-  switch (quantity) {
-    case Quantity::mass: return {"mass", "kg", kMass};
-    case Quantity::length: return {"length", "m", kLength};
-    case Quantity::time: return {"time", "s", kTime};
-    case Quantity::speed: return {"speed", "m/s", kSpeed};
-    case Quantity::acceleration: return {"acceleration", "m/s^2", kAcceleration};
-    case Quantity::density: return {"density", "kg/m^3", kDensity};
-    case Quantity::dynamic_viscosity: return {"dynamic viscosity", "Pa*s", kDynamicViscosity};
-    case Quantity::fraction: return {"fraction", "", kFraction};
-    case Quantity::angle: return {"angle", "rad", kAngle};
-    case Quantity::stress: return {"stress", "Pa", kStress};
-    case Quantity::stress_rate: return {"stress rate", "Pa/s", kStressRate};
-    case Quantity::rate: return {"rate", "1/s", kRate};
-    case Quantity::consistency: return {"consistency", "Pa*s^n", kConsistency};
-    case Quantity::surface_tension: return {"surface tension", "N/m", kSurfaceTension};
-    case Quantity::stiffness: return {"stiffness", "N/m", kStiffness};
-    case Quantity::area: return {"area", "m^2", kArea};
-    case Quantity::plain_number: break;
-  }
-  return {"plain number", "", {}};
-}
-
 /// Users often have viscosities from tables in kinematic units; these get a message saying how to convert.
 bool is_kinematic_viscosity_unit(std::string_view symbol) {
   constexpr std::string_view kKinematic[] = {"m^2/s", "m2/s", "mm^2/s", "mm2/s", "cSt", "St"};
   return std::find(std::begin(kKinematic), std::end(kKinematic), symbol) != std::end(kKinematic);
 }
 
-/// Allowed range of a value, with the words to explain it.
-/// The magnitudes a quantity may have in a scene: physical bounds, well inside what the engine's
-/// float stores finite and non-zero (about 1e-38 to 3e38). A value below `smallest` (other than 0)
-/// or beyond `largest` is an error at its line: checked in double, a 1e308 density would have run as
-/// inf, a 1e-300 radius as 0.
-struct Magnitude {
-  double smallest, largest;
-};
-Magnitude magnitude(Quantity quantity) {
-  switch (quantity) {
-    case Quantity::length: return {1e-7, 1e4};            // 0.1 µm to 10 km
-    case Quantity::time: return {1e-9, 1e7};              // 1 ns to four months
-    case Quantity::speed: return {1e-9, 1e3};             // m/s
-    case Quantity::acceleration: return {1e-9, 1e5};      // m/s²
-    case Quantity::density: return {1e-3, 1e5};           // kg/m³: thin gases to past osmium
-    case Quantity::dynamic_viscosity: return {1e-9, 1e12};  // Pa·s
-    case Quantity::mass: return {1e-12, 1e7};             // kg
-    case Quantity::stress: return {1e-9, 1e12};           // Pa
-    case Quantity::stress_rate: return {1e-12, 1e9};      // Pa/s
-    case Quantity::rate: return {1e-12, 1e9};             // 1/s
-    case Quantity::consistency: return {1e-9, 1e12};      // Pa·sⁿ
-    case Quantity::surface_tension: return {1e-9, 1e4};   // N/m
-    case Quantity::stiffness: return {1e-9, 1e15};        // N/m
-    case Quantity::area: return {1e-14, 1e8};             // m²
-    case Quantity::angle: return {1e-12, 1e4};            // rad
-    case Quantity::fraction:
-    case Quantity::plain_number: return {1e-12, 1e12};
-  }
-  return {1e-12, 1e12};
-}
-
-struct Limits {
-  std::optional<double> greater_than;
-  std::optional<double> at_least;
-  std::optional<double> at_most;
-
-  static Limits any() { return {}; }
-  static Limits positive() { return {0.0, std::nullopt, std::nullopt}; }
-  static Limits non_negative() { return {std::nullopt, 0.0, std::nullopt}; }
-  static Limits positive_up_to(double maximum) { return {0.0, std::nullopt, maximum}; }
-
-  [[nodiscard]] bool admits(double value) const {
-    return (!greater_than || value > *greater_than) && (!at_least || value >= *at_least) &&
-           (!at_most || value <= *at_most);
-  }
-  [[nodiscard]] std::string describe(std::string_view unit) const {
-    const std::string suffix = unit.empty() ? "" : fmt::format(" {}", unit);
-    const std::optional<double> lower = greater_than ? greater_than : at_least;
-    if (lower && at_most) {
-      return fmt::format("in {}{}, {}]{}", greater_than ? "(" : "[", *lower, *at_most, suffix);
-    }
-    if (greater_than) return fmt::format("> {}{}", *greater_than, suffix);
-    if (at_least) return fmt::format(">= {}{}", *at_least, suffix);
-    if (at_most) return fmt::format("<= {}{}", *at_most, suffix);
-    return "any number";
-  }
-};
 
 // ---------------------------------------------------------------------------------------------
 // Small text helpers
@@ -228,7 +115,8 @@ std::optional<bool> parse_bool(std::string_view word) {
   return std::nullopt;
 }
 
-std::string join(std::initializer_list<std::string_view> words) {
+template <typename Words>
+std::string join(const Words& words) {
   std::string text;
   for (const auto word : words) {
     if (!text.empty()) text += ", ";
@@ -237,7 +125,8 @@ std::string join(std::initializer_list<std::string_view> words) {
   return text;
 }
 
-bool contains(std::initializer_list<std::string_view> words, std::string_view word) {
+template <typename Words>
+bool contains(const Words& words, std::string_view word) {
   return std::find(words.begin(), words.end(), word) != words.end();
 }
 
@@ -321,7 +210,15 @@ class SceneReader {
 
   // ---- structure checks ----
   void check_children(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed,
-                      std::initializer_list<std::string_view> repeatable = {});
+                      std::initializer_list<std::string_view> repeatable = {}) {
+    check_children(element, std::span<const std::string_view>(allowed.begin(), allowed.size()),
+                   std::span<const std::string_view>(repeatable.begin(), repeatable.size()));
+  }
+  void check_children(const pugi::xml_node& element, std::span<const std::string_view> allowed,
+                      std::span<const std::string_view> repeatable);
+  /// The schema's block `block` (schema.hpp) in `element`: its children checked against the rows,
+  /// and every row with a setter read into the scene, its line recorded in `fields` under its field.
+  void read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields = nullptr);
   /// Outside the plugin, an element SDF does not have where M3DP reads is a warning (not an error:
   /// the file may be for a newer SDF), naming the known element it is closest to: a typo such as
   /// <modle> would otherwise delete a model without a word.
@@ -475,8 +372,8 @@ std::string_view closest_name(std::string_view name, const Names& candidates) {
 }
 }  // namespace
 
-void SceneReader::check_children(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed,
-                                 std::initializer_list<std::string_view> repeatable) {
+void SceneReader::check_children(const pugi::xml_node& element, std::span<const std::string_view> allowed,
+                                 std::span<const std::string_view> repeatable) {
   std::vector<std::pair<std::string_view, int>> first_line_of;
   for (const auto& child : element.children()) {
     if (child.type() != pugi::node_element) continue;
@@ -503,6 +400,47 @@ void SceneReader::check_children(const pugi::xml_node& element, std::initializer
     } else {
       first_line_of.emplace_back(name, where(child).line);
     }
+  }
+}
+
+void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields) {
+  const std::vector<const SchemaRow*> rows = schema_block(block);
+  std::vector<std::string_view> names;
+  for (const SchemaRow* row : rows) names.push_back(row->name);
+  check_children(element, names, {});
+  for (const SchemaRow* row : rows) {
+    const std::string name(row->name);
+    const Presence presence = row->required ? Presence::required : Presence::optional;
+    if (!row->set) {
+      if (row->required) (void)find_child(element, name.c_str(), presence);
+      continue;
+    }
+    std::optional<double> value;
+    switch (row->kind) {
+      case ValueKind::number: value = read_scalar(element, name.c_str(), row->quantity, row->limits, presence); break;
+      case ValueKind::integer:
+        if (const auto whole = read_int(element, name.c_str(), int(row->limits.at_least.value_or(-2147483648.0)))) {
+          if (row->limits.admits(*whole)) value = *whole;
+          else report(element.child(name.c_str()), fmt::format("<{}> must be a whole number {}, got {}", name, row->limits.describe(""), *whole));
+        }
+        break;
+      case ValueKind::boolean:
+        if (const auto flag = read_bool(element, name.c_str())) value = *flag ? 1 : 0;
+        break;
+      case ValueKind::keyword:
+        if (const pugi::xml_node child = element.child(name.c_str())) {
+          const std::string_view word = leaf_text(child, {});
+          const auto found = std::find(row->words.begin(), row->words.end(), word);
+          if (found != row->words.end())
+            value = double(found - row->words.begin());
+          else
+            report(child, fmt::format("<{}> must be one of: {}; got '{}'", name, row->hint.empty() ? join(row->words) : std::string(row->hint), word));
+        }
+        break;
+      case ValueKind::structure: break;
+    }
+    if (value) row->set(scene_, *value);
+    if (fields) record_field(*fields, std::string(row->field.empty() ? row->name : row->field), element, name.c_str());
   }
 }
 
@@ -1525,116 +1463,26 @@ void SceneReader::read_air(const pugi::xml_node& air) {
   // The air around the print: its drag on the material's surface (Gissler et al. 2017) is on when
   // the block is there, unless <drag>false</drag>.
   check_attributes(air, {});
-  check_children(air, {"drag", "density", "viscosity", "velocity"});
-  sph::SolverSettings& settings = scene_.solver;
-  settings.air_drag = read_bool(air, "drag").value_or(true);
-  if (const auto density = read_scalar(air, "density", Quantity::density, Limits::any(), Presence::optional))
-    settings.air_density = Real(*density);
-  if (const auto viscosity = read_scalar(air, "viscosity", Quantity::dynamic_viscosity, Limits::any(), Presence::optional))
-    settings.air_viscosity = Real(*viscosity);
-  record_field(scene_.solver_fields, "air.density", air, "density");
-  record_field(scene_.solver_fields, "air.viscosity", air, "viscosity");
-  if (const auto velocity = read_vector(air, "velocity", Quantity::speed, Presence::optional)) settings.air_velocity = *velocity;
+  scene_.solver.air_drag = true;
+  read_block(air, "air", &scene_.solver_fields);
+  if (const auto velocity = read_vector(air, "velocity", Quantity::speed, Presence::optional)) scene_.solver.air_velocity = *velocity;
 }
 
 void SceneReader::read_solver(const pugi::xml_node& solver) {
   check_attributes(solver, {});
-  check_children(solver, {"particle_radius", "kernel", "cfl_factor", "min_time_step", "max_time_step",
-                          "max_density_error", "max_divergence_error", "max_iterations", "divergence_solver",
-                          "warm_start", "end_time", "bounds", "viscosity_solver", "max_viscosity_error",
-                          "max_viscosity_iterations", "xsph", "rest_detection", "rest_speed", "rest_duration",
-                          "wake_speed", "wake_on_load", "load_wake_duration", "rest_compression", "surface_tension_model", "max_volume_error",
-                          "minimum_spacing", "shifting", "max_particles"});
   sph::SolverSettings& settings = scene_.solver;
+  scene_.solver_fields.emplace_back("", where(solver));  // for settings the file does not name
+  // The table's values (schema.cpp), then what ties them together or is not a plain value.
+  read_block(solver, "solver", &scene_.solver_fields);
+  if (solver.child("particle_radius") && settings.particle_radius > 0) particle_radius_ = settings.particle_radius;
   if (const auto limit = read_scalar(solver, "max_particles", Quantity::plain_number, Limits::positive(), Presence::optional))
     max_particles_ = *limit;
-  scene_.solver_fields.emplace_back("", where(solver));  // for settings the file does not name
-
-  // Its range, like every engine parameter's, is checked by sph::check_parameters (check_engine_parameters).
-  if (const auto radius = read_scalar(solver, "particle_radius", Quantity::length, Limits::any(), Presence::required)) {
-    settings.particle_radius = Real(*radius);
-    if (settings.particle_radius > 0) particle_radius_ = settings.particle_radius;
-  }
-  record_field(scene_.solver_fields, "particle_radius", solver, "particle_radius");
-  if (const auto kernel = read_keyword<sph::KernelType>(
-          solver, "kernel", {{"cubic_spline", sph::KernelType::cubic_spline}, {"wendland_c2", sph::KernelType::wendland_c2}}))
-    settings.kernel = *kernel;
-  if (const auto cfl = read_scalar(solver, "cfl_factor", Quantity::plain_number, Limits::positive_up_to(2),
-                                   Presence::optional)) {
-    settings.cfl_factor = Real(*cfl);
-  }
-  const auto min_step = read_scalar(solver, "min_time_step", Quantity::time, Limits::positive(), Presence::optional);
-  const auto max_step = read_scalar(solver, "max_time_step", Quantity::time, Limits::positive(), Presence::optional);
-  if (min_step) settings.min_time_step = Real(*min_step);
-  if (max_step) settings.max_time_step = Real(*max_step);
-  if ((min_step || max_step) && settings.max_time_step < settings.min_time_step) {
-    const pugi::xml_node culprit = max_step ? solver.child("max_time_step") : solver.child("min_time_step");
+  if ((solver.child("min_time_step") || solver.child("max_time_step")) && settings.max_time_step < settings.min_time_step) {
+    const pugi::xml_node culprit = solver.child("max_time_step") ? solver.child("max_time_step") : solver.child("min_time_step");
     report(culprit, fmt::format("<max_time_step> ({} s) must be >= <min_time_step> ({} s)", settings.max_time_step,
                                 settings.min_time_step));
   }
-  if (const auto method = read_keyword<sph::ViscositySolver>(
-          solver, "viscosity_solver",
-          {{"implicit", sph::ViscositySolver::implicit_weiler2018}, {"explicit", sph::ViscositySolver::explicit_morris1997}},
-          "implicit (Weiler et al. 2018, any viscosity), explicit (Morris et al. 1997, water-like fluids)"))
-    settings.viscosity_solver = *method;
-  if (const auto model = read_keyword<sph::SurfaceTensionModel>(
-          solver, "surface_tension_model",
-          {{"akinci2013", sph::SurfaceTensionModel::akinci2013},
-           {"brackbill1992", sph::SurfaceTensionModel::csf_brackbill1992}},
-          "akinci2013 (cohesion and adhesion, robust, σ as a scale), brackbill1992 (continuum surface force, "
-          "the physical σ on resolved surfaces, walls wetted at 90°)"))
-    settings.surface_tension_model = *model;
-  if (const auto error = read_scalar(solver, "max_viscosity_error", Quantity::fraction, Limits::positive_up_to(0.1),
-                                     Presence::optional)) {
-    settings.viscosity_tolerance = Real(*error);
-  }
-  if (const auto iterations = read_int(solver, "max_viscosity_iterations", 1)) settings.max_viscosity_iterations = *iterations;
-  if (const auto enabled = read_bool(solver, "rest_detection")) settings.rest_detection = *enabled;
-  if (const auto enabled = read_bool(solver, "wake_on_load")) settings.wake_on_load = *enabled;
-  if (const auto speed = read_scalar(solver, "rest_speed", Quantity::speed, Limits::positive(), Presence::optional))
-    settings.rest_speed = Real(*speed);
-  if (const auto duration = read_scalar(solver, "rest_duration", Quantity::time, Limits::positive(), Presence::optional))
-    settings.rest_duration = Real(*duration);
-  if (const auto speed = read_scalar(solver, "wake_speed", Quantity::speed, Limits::positive(), Presence::optional))
-    settings.wake_speed = Real(*speed);
-  if (const auto duration = read_scalar(solver, "load_wake_duration", Quantity::time, Limits::non_negative(), Presence::optional))
-    settings.load_wake_duration = Real(*duration);
-  if (const auto compression = read_scalar(solver, "rest_compression", Quantity::fraction, Limits::positive(), Presence::optional))
-    settings.rest_compression = Real(*compression);
-  if (const auto factor = read_scalar(solver, "xsph", Quantity::plain_number, Limits{std::nullopt, 0.0, 1.0},
-                                      Presence::optional)) {
-    settings.xsph_factor = Real(*factor);
-  }
-  if (const auto error = read_scalar(solver, "max_density_error", Quantity::fraction, Limits::positive_up_to(0.1),
-                                     Presence::optional)) {
-    settings.density_tolerance = Real(*error);
-  }
-  // The volume correction after the viscosity solve (sph::SolverSettings): its tolerance, and the
-  // least distance of two particles in particle diameters.
-  if (const auto error = read_scalar(solver, "max_volume_error", Quantity::fraction, Limits::any(), Presence::optional))
-    settings.volume_tolerance = Real(*error);
-  record_field(scene_.solver_fields, "volume_tolerance", solver, "max_volume_error");
-  if (const auto spacing = read_scalar(solver, "minimum_spacing", Quantity::plain_number, Limits::any(), Presence::optional))
-    settings.minimum_spacing = Real(*spacing);
-  record_field(scene_.solver_fields, "minimum_spacing", solver, "minimum_spacing");
-  if (const auto factor = read_scalar(solver, "shifting", Quantity::plain_number, Limits::any(), Presence::optional))
-    settings.shifting_factor = Real(*factor);
-  record_field(scene_.solver_fields, "shifting_factor", solver, "shifting");
-  if (const auto error = read_scalar(solver, "max_divergence_error", Quantity::fraction, Limits::positive_up_to(1),
-                                     Presence::optional)) {
-    settings.divergence_tolerance = Real(*error);
-  }
-  if (const auto iterations = read_int(solver, "max_iterations", 1)) {
-    settings.max_density_iterations = *iterations;
-    settings.max_divergence_iterations = *iterations;
-    settings.min_density_iterations = std::min(settings.min_density_iterations, *iterations);
-  }
-  if (const auto enabled = read_bool(solver, "divergence_solver")) settings.divergence_solver = *enabled;
-  if (const auto enabled = read_bool(solver, "warm_start")) settings.warm_start = *enabled;
-  if (const auto end_time = read_scalar(solver, "end_time", Quantity::time, Limits::positive(), Presence::optional)) {
-    scene_.end_time = *end_time;
-  }
-  if (const pugi::xml_node bounds = find_child(solver, "bounds", Presence::required)) {
+  if (const pugi::xml_node bounds = solver.child("bounds")) {
     check_attributes(bounds, {});
     check_children(bounds, {"min", "max"});
     if (const auto box = read_box(bounds)) {
@@ -2235,29 +2083,12 @@ std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& ele
 
 void SceneReader::read_output(const pugi::xml_node& output) {
   check_attributes(output, {});
-  check_children(output, {"particles_period", "particles", "mcap", "serve", "checkpoint_period", "quality_period"});
-  if (const auto period =
-          read_scalar(output, "particles_period", Quantity::time, Limits::non_negative(), Presence::optional)) {
-    scene_.output.particles_period = Real(*period);
-  }
-  if (const auto write = read_bool(output, "particles")) scene_.output.write_particles = *write;
-  if (const auto mcap = read_bool(output, "mcap")) scene_.output.mcap = *mcap;
-  if (const auto period =
-          read_scalar(output, "checkpoint_period", Quantity::time, Limits::non_negative(), Presence::optional)) {
-    scene_.output.checkpoint_period = *period;
-  }
-  if (const auto period = read_scalar(output, "quality_period", Quantity::time, Limits::non_negative(), Presence::optional))
-    scene_.output.quality_period = *period;
-  if (const auto port = read_int(output, "serve", 0)) {
-    if (*port > 65535) report(output.child("serve"), fmt::format("<serve> is a TCP port, 0 (any free one) to 65535, got {}", *port));
-    else scene_.output.serve_port = static_cast<std::uint16_t>(*port);
-  }
+  read_block(output, "output");
 }
 
 void SceneReader::read_meshing(const pugi::xml_node& meshing) {
   check_attributes(meshing, {});
-  check_children(meshing, {"method", "period", "format", "material", "region", "voxel_size", "kernel_radius", "iso_level",
-                           "smoothing_iterations"});
+  read_block(meshing, "meshing");
   MeshingSettings& settings = scene_.meshing;
   settings.enabled = true;
   settings.where = where(meshing);
@@ -2269,8 +2100,6 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
       report(method, fmt::format("<method> must be one of: {}; got '{}'", surface::method_names(), name));
     }
   }
-  if (const auto period = read_scalar(meshing, "period", Quantity::time, Limits::positive(), Presence::optional))
-    settings.period = Real(*period);
   if (const pugi::xml_node format = meshing.child("format")) {
     const std::string_view name = leaf_text(format, {});
     if (io::find_mesh_format(name))
@@ -2287,36 +2116,14 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
     check_children(region, {"min", "max"});
     settings.region = read_box(region);
   }
-  if (const auto voxel = read_scalar(meshing, "voxel_size", Quantity::length, Limits::positive(), Presence::optional))
-    settings.surface.voxel_size = Real(*voxel);
-  if (const auto kernel = read_scalar(meshing, "kernel_radius", Quantity::length, Limits::positive(), Presence::optional))
-    settings.surface.kernel_radius = Real(*kernel);
-  if (const auto iso = read_scalar(meshing, "iso_level", Quantity::fraction, Limits{0.0, std::nullopt, std::nullopt},
-                                   Presence::optional)) {
-    if (*iso < 1) {
-      settings.surface.iso_level = Real(*iso);
-    } else {
-      report(meshing.child("iso_level"), fmt::format("<iso_level> must lie between 0 and 1 (a volume fraction); got {}", *iso));
-    }
-  }
-  if (const auto iterations = read_int(meshing, "smoothing_iterations", 0)) settings.surface.smoothing_iterations = *iterations;
 }
 
 void SceneReader::read_coordinator(const pugi::xml_node& coordinator) {
   check_attributes(coordinator, {"enabled"});
-  check_children(coordinator, {"period", "horizon", "samples", "robot_clearance", "print_clearance", "priority"});
+  read_block(coordinator, "coordinator");
   CoordinatorSettings& settings = scene_.coordinator;
   settings.enabled = read_bool_attribute(coordinator, "enabled").value_or(true);
   settings.where = where(coordinator);
-  if (const auto period = read_scalar(coordinator, "period", Quantity::time, Limits::positive(), Presence::optional))
-    settings.period = *period;
-  if (const auto horizon = read_scalar(coordinator, "horizon", Quantity::time, Limits::positive(), Presence::optional))
-    settings.horizon = *horizon;
-  if (const auto samples = read_int(coordinator, "samples", 1)) settings.samples = *samples;
-  if (const auto clearance = read_scalar(coordinator, "robot_clearance", Quantity::length, Limits::non_negative(), Presence::optional))
-    settings.robot_clearance = Real(*clearance);
-  if (const auto clearance = read_scalar(coordinator, "print_clearance", Quantity::length, Limits::non_negative(), Presence::optional))
-    settings.print_clearance = Real(*clearance);
   if (const pugi::xml_node priority = coordinator.child("priority")) {
     for (const auto& name : split_words(leaf_text(priority, {}))) {
       const std::string robot(name);

@@ -1,0 +1,390 @@
+// The scene language's table (schema.hpp): units, ranges and the plugin's elements, and the
+// reference page made from them.
+#include "m3dp/scene/schema.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "m3dp/scene/scene.hpp"
+
+namespace m3dp::scene {
+
+namespace {
+constexpr double kRadiansPerDegreeHere = 3.14159265358979323846 / 180;
+}  // namespace
+
+QuantityInfo quantity_info(Quantity quantity) {
+  static constexpr Unit kLength[] = {{"m", 1}, {"cm", 1e-2}, {"mm", 1e-3}};
+  static constexpr Unit kTime[] = {{"s", 1}, {"ms", 1e-3}};
+  static constexpr Unit kSpeed[] = {{"m/s", 1}, {"mm/s", 1e-3}};
+  static constexpr Unit kAcceleration[] = {{"m/s^2", 1}, {"m/s2", 1}};
+  static constexpr Unit kDensity[] = {{"kg/m^3", 1}, {"kg/m3", 1}, {"g/cm^3", 1e3}, {"g/cm3", 1e3}};
+  static constexpr Unit kDynamicViscosity[] = {{"Pa*s", 1},      {"Pa.s", 1},      {"Pa·s", 1},
+                                               {"mPa*s", 1e-3},  {"mPa.s", 1e-3},  {"mPa·s", 1e-3},
+                                               {"cP", 1e-3},     {"P", 0.1}};
+  static constexpr Unit kFraction[] = {{"1", 1}, {"%", 1e-2}};
+  static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegreeHere}};
+  static constexpr Unit kMass[] = {{"kg", 1}, {"g", 1e-3}};
+  static constexpr Unit kStress[] = {{"Pa", 1}, {"kPa", 1e3}};
+  static constexpr Unit kStressRate[] = {{"Pa/s", 1}, {"Pa/min", 1.0 / 60}};
+  static constexpr Unit kRate[] = {{"1/s", 1}, {"Hz", 1}, {"1/min", 1.0 / 60}, {"1/h", 1.0 / 3600}};
+  static constexpr Unit kConsistency[] = {{"Pa*s^n", 1}, {"Pa.s^n", 1}, {"Pa·s^n", 1}};
+  static constexpr Unit kSurfaceTension[] = {{"N/m", 1}, {"mN/m", 1e-3}, {"J/m^2", 1}, {"J/m2", 1}};
+  static constexpr Unit kStiffness[] = {{"N/m", 1}, {"N/mm", 1e3}, {"kN/m", 1e3}};
+  static constexpr Unit kArea[] = {{"m^2", 1}, {"m2", 1}, {"mm^2", 1e-6}, {"mm2", 1e-6}};
+  switch (quantity) {
+    case Quantity::mass: return {"mass", "kg", kMass};
+    case Quantity::length: return {"length", "m", kLength};
+    case Quantity::time: return {"time", "s", kTime};
+    case Quantity::speed: return {"speed", "m/s", kSpeed};
+    case Quantity::acceleration: return {"acceleration", "m/s^2", kAcceleration};
+    case Quantity::density: return {"density", "kg/m^3", kDensity};
+    case Quantity::dynamic_viscosity: return {"dynamic viscosity", "Pa*s", kDynamicViscosity};
+    case Quantity::fraction: return {"fraction", "", kFraction};
+    case Quantity::angle: return {"angle", "rad", kAngle};
+    case Quantity::stress: return {"stress", "Pa", kStress};
+    case Quantity::stress_rate: return {"stress rate", "Pa/s", kStressRate};
+    case Quantity::rate: return {"rate", "1/s", kRate};
+    case Quantity::consistency: return {"consistency", "Pa*s^n", kConsistency};
+    case Quantity::surface_tension: return {"surface tension", "N/m", kSurfaceTension};
+    case Quantity::stiffness: return {"stiffness", "N/m", kStiffness};
+    case Quantity::area: return {"area", "m^2", kArea};
+    case Quantity::plain_number: break;
+  }
+  return {"plain number", "", {}};
+}
+
+Magnitude magnitude(Quantity quantity) {
+  switch (quantity) {
+    case Quantity::length: return {1e-7, 1e4};            // 0.1 µm to 10 km
+    case Quantity::time: return {1e-9, 1e7};              // 1 ns to four months
+    case Quantity::speed: return {1e-9, 1e3};             // m/s
+    case Quantity::acceleration: return {1e-9, 1e5};      // m/s²
+    case Quantity::density: return {1e-3, 1e5};           // kg/m³: thin gases to past osmium
+    case Quantity::dynamic_viscosity: return {1e-9, 1e12};  // Pa·s
+    case Quantity::mass: return {1e-12, 1e7};             // kg
+    case Quantity::stress: return {1e-9, 1e12};           // Pa
+    case Quantity::stress_rate: return {1e-12, 1e9};      // Pa/s
+    case Quantity::rate: return {1e-12, 1e9};             // 1/s
+    case Quantity::consistency: return {1e-9, 1e12};      // Pa·sⁿ
+    case Quantity::surface_tension: return {1e-9, 1e4};   // N/m
+    case Quantity::stiffness: return {1e-9, 1e15};        // N/m
+    case Quantity::area: return {1e-14, 1e8};             // m²
+    case Quantity::angle: return {1e-12, 1e4};            // rad
+    case Quantity::fraction:
+    case Quantity::plain_number: return {1e-12, 1e12};
+  }
+  return {1e-12, 1e12};
+}
+
+std::string Limits::describe(std::string_view unit) const {
+  const std::string suffix = unit.empty() ? "" : fmt::format(" {}", unit);
+  const std::optional<double> lower = greater_than ? greater_than : at_least;
+  const std::optional<double> upper = less_than ? less_than : at_most;
+  if (lower && upper) return fmt::format("in {}{}, {}{}{}", greater_than ? "(" : "[", *lower, *upper, less_than ? ")" : "]", suffix);
+  if (greater_than) return fmt::format("> {}{}", *greater_than, suffix);
+  if (at_least) return fmt::format(">= {}{}", *at_least, suffix);
+  if (at_most) return fmt::format("<= {}{}", *at_most, suffix);
+  if (less_than) return fmt::format("< {}{}", *less_than, suffix);
+  return "any number";
+}
+
+namespace {
+
+using Row = SchemaRow;
+
+/// A number that shows as written in the reference: 0.005, 1e-05, 300.
+std::string number_text(double value) { return fmt::format("{:g}", value); }
+std::string bool_text(bool value) { return value ? "true" : "false"; }
+
+std::vector<SchemaRow> make_rows() {
+  std::vector<SchemaRow> rows;
+  auto number = [&](std::string_view block, std::string_view name, Quantity quantity, Limits limits, std::string_view doc,
+                    std::function<void(Scene&, double)> set, std::function<std::string(const Scene&)> show, std::string_view field = {}) {
+    Row row;
+    row.block = block, row.name = name, row.kind = ValueKind::number, row.quantity = quantity, row.limits = limits, row.doc = doc;
+    row.set = std::move(set), row.show = std::move(show), row.field = field;
+    rows.push_back(std::move(row));
+    return &rows.back();
+  };
+  auto integer = [&](std::string_view block, std::string_view name, Limits limits, std::string_view doc,
+                     std::function<void(Scene&, double)> set, std::function<std::string(const Scene&)> show) {
+    Row row;
+    row.block = block, row.name = name, row.kind = ValueKind::integer, row.limits = limits, row.doc = doc;
+    row.set = std::move(set), row.show = std::move(show);
+    rows.push_back(std::move(row));
+  };
+  auto boolean = [&](std::string_view block, std::string_view name, std::string_view doc, std::function<void(Scene&, bool)> set,
+                     std::function<bool(const Scene&)> get) {
+    Row row;
+    row.block = block, row.name = name, row.kind = ValueKind::boolean, row.doc = doc;
+    row.set = [set](Scene& scene, double value) { set(scene, value != 0); };
+    row.show = [get](const Scene& scene) { return bool_text(get(scene)); };
+    rows.push_back(std::move(row));
+  };
+  auto keyword = [&](std::string_view block, std::string_view name, std::vector<std::string_view> words, std::string_view hint,
+                     std::string_view doc, std::function<void(Scene&, std::size_t)> set, std::function<std::size_t(const Scene&)> get) {
+    Row row;
+    row.block = block, row.name = name, row.kind = ValueKind::keyword, row.words = std::move(words), row.hint = hint, row.doc = doc;
+    row.set = [set](Scene& scene, double index) { set(scene, std::size_t(index)); };
+    row.show = [get, words = row.words](const Scene& scene) { return std::string(words[get(scene)]); };
+    rows.push_back(std::move(row));
+  };
+  auto structure = [&](std::string_view block, std::string_view name, std::string_view doc, bool required = false) {
+    Row row;
+    row.block = block, row.name = name, row.kind = ValueKind::structure, row.doc = doc, row.required = required;
+    rows.push_back(std::move(row));
+  };
+#define M3DP_SOLVER_REAL(member) \
+  [](Scene& scene, double value) { scene.solver.member = Real(value); }, [](const Scene& scene) { return number_text(scene.solver.member); }
+
+  // ---- <solver> ----
+  number("solver", "particle_radius", Quantity::length, Limits::positive(),
+         "the particles' radius; their rest spacing is twice it, and the kernel's support four times it", M3DP_SOLVER_REAL(particle_radius))
+      ->required = true;
+  keyword("solver", "kernel", {"cubic_spline", "wendland_c2"}, {}, "the SPH kernel",
+          [](Scene& scene, std::size_t word) { scene.solver.kernel = word == 0 ? sph::KernelType::cubic_spline : sph::KernelType::wendland_c2; },
+          [](const Scene& scene) { return std::size_t(scene.solver.kernel == sph::KernelType::cubic_spline ? 0 : 1); });
+  number("solver", "cfl_factor", Quantity::plain_number, Limits::positive_up_to(2),
+         "the time step is this × 0.4 × the particle diameter over the fastest particle's speed", M3DP_SOLVER_REAL(cfl_factor));
+  number("solver", "min_time_step", Quantity::time, Limits::positive(), "the shortest time step", M3DP_SOLVER_REAL(min_time_step));
+  number("solver", "max_time_step", Quantity::time, Limits::positive(), "the longest time step (at least <min_time_step>)",
+         M3DP_SOLVER_REAL(max_time_step));
+  number("solver", "max_density_error", Quantity::fraction, Limits::positive_up_to(0.1),
+         "the density solve's tolerance: the mean relative density error it leaves", M3DP_SOLVER_REAL(density_tolerance), "density_tolerance");
+  number("solver", "max_divergence_error", Quantity::fraction, Limits::positive_up_to(1),
+         "the divergence solve's tolerance: the mean relative density change per step it leaves", M3DP_SOLVER_REAL(divergence_tolerance),
+         "divergence_tolerance");
+  integer("solver", "max_iterations", Limits{std::nullopt, 1.0, std::nullopt, std::nullopt},
+          "the most iterations of the density and the divergence solves a step",
+          [](Scene& scene, double value) {
+            scene.solver.max_density_iterations = scene.solver.max_divergence_iterations = int(value);
+            scene.solver.min_density_iterations = std::min(scene.solver.min_density_iterations, int(value));
+          },
+          [](const Scene& scene) { return std::to_string(scene.solver.max_density_iterations); });
+  boolean("solver", "divergence_solver", "whether the divergence-free solve runs (DFSPH's second solve)",
+          [](Scene& scene, bool value) { scene.solver.divergence_solver = value; }, [](const Scene& scene) { return scene.solver.divergence_solver; });
+  boolean("solver", "warm_start", "whether the solves start from the last step's solution",
+          [](Scene& scene, bool value) { scene.solver.warm_start = value; }, [](const Scene& scene) { return scene.solver.warm_start; });
+  number("solver", "end_time", Quantity::time, Limits::positive(), "simulated time a run goes to (m3dp run --until overrides it)",
+         [](Scene& scene, double value) { scene.end_time = value; }, [](const Scene& scene) { return number_text(scene.end_time); });
+  structure("solver", "bounds",
+            "the box the simulation lives in (<min>x y z</min> <max>x y z</max>, m); material leaving it is removed and counted", true);
+  keyword("solver", "viscosity_solver", {"implicit", "explicit"},
+          "implicit (Weiler et al. 2018, any viscosity), explicit (Morris et al. 1997, water-like fluids)", "how viscosity is solved",
+          [](Scene& scene, std::size_t word) {
+            scene.solver.viscosity_solver = word == 0 ? sph::ViscositySolver::implicit_weiler2018 : sph::ViscositySolver::explicit_morris1997;
+          },
+          [](const Scene& scene) { return std::size_t(scene.solver.viscosity_solver == sph::ViscositySolver::implicit_weiler2018 ? 0 : 1); });
+  number("solver", "max_viscosity_error", Quantity::fraction, Limits::positive_up_to(0.1),
+         "the implicit viscosity solve's tolerance (relative residual)", M3DP_SOLVER_REAL(viscosity_tolerance), "viscosity_tolerance");
+  integer("solver", "max_viscosity_iterations", Limits{std::nullopt, 1.0, std::nullopt, std::nullopt},
+          "the most iterations of the implicit viscosity solve a step",
+          [](Scene& scene, double value) { scene.solver.max_viscosity_iterations = int(value); },
+          [](const Scene& scene) { return std::to_string(scene.solver.max_viscosity_iterations); });
+  number("solver", "xsph", Quantity::plain_number, Limits::between(0, 1), "XSPH velocity smoothing ε (Monaghan 1989); 0: none",
+         M3DP_SOLVER_REAL(xsph_factor), "xsph_factor");
+  boolean("solver", "rest_detection",
+          "whether material at rest (below <rest_speed> and its yield stress for <rest_duration>) leaves the solve until something "
+          "moves near it",
+          [](Scene& scene, bool value) { scene.solver.rest_detection = value; }, [](const Scene& scene) { return scene.solver.rest_detection; });
+  number("solver", "rest_speed", Quantity::speed, Limits::positive(), "the speed below which material may come to rest",
+         M3DP_SOLVER_REAL(rest_speed));
+  number("solver", "rest_duration", Quantity::time, Limits::positive(), "how long material stays slow before it rests",
+         M3DP_SOLVER_REAL(rest_duration));
+  number("solver", "wake_speed", Quantity::speed, Limits::positive(), "a neighbour this fast wakes resting material",
+         M3DP_SOLVER_REAL(wake_speed));
+  boolean("solver", "wake_on_load",
+          "whether resting layers wake when the weight printed on them passes Roussel's bound (a buildability study)",
+          [](Scene& scene, bool value) { scene.solver.wake_on_load = value; }, [](const Scene& scene) { return scene.solver.wake_on_load; });
+  number("solver", "load_wake_duration", Quantity::time, Limits::non_negative(),
+         "how long material woken by load is simulated at least; 0: until it rests again", M3DP_SOLVER_REAL(load_wake_duration));
+  number("solver", "rest_compression", Quantity::fraction, Limits::positive(),
+         "the compression (of the rest density) resting material may keep", M3DP_SOLVER_REAL(rest_compression));
+  keyword("solver", "surface_tension_model", {"akinci2013", "brackbill1992"},
+          "akinci2013 (cohesion and adhesion, robust, σ as a scale), brackbill1992 (continuum surface force, the physical σ on "
+          "resolved surfaces, walls wetted at 90°)",
+          "how the materials' <surface_tension> acts",
+          [](Scene& scene, std::size_t word) {
+            scene.solver.surface_tension_model = word == 0 ? sph::SurfaceTensionModel::akinci2013 : sph::SurfaceTensionModel::csf_brackbill1992;
+          },
+          [](const Scene& scene) { return std::size_t(scene.solver.surface_tension_model == sph::SurfaceTensionModel::akinci2013 ? 0 : 1); });
+  number("solver", "max_volume_error", Quantity::fraction, Limits{std::nullopt, 0.0, std::nullopt, 1.0},
+         "the compression the volume correction leaves after the viscosity solve; 0: none left", M3DP_SOLVER_REAL(volume_tolerance),
+         "volume_tolerance");
+  number("solver", "minimum_spacing", Quantity::plain_number, Limits::between(0, 1),
+         "the least distance of two particles the volume correction leaves, in particle diameters; 0: none kept",
+         M3DP_SOLVER_REAL(minimum_spacing));
+  number("solver", "shifting", Quantity::plain_number, Limits::between(0, 10),
+         "particle shifting of viscous materials' moving particles (Skillen et al.'s A, 1 to 6 there); 0: none",
+         M3DP_SOLVER_REAL(shifting_factor), "shifting_factor");
+  structure("solver", "max_particles",
+            "the most particles the scene may hold (> 0); default: what 80 % of this machine's memory holds at 2 kB a particle");
+#undef M3DP_SOLVER_REAL
+
+  // ---- <air> ----
+  boolean("air", "drag", "whether the air drags the material's surface (Gissler et al. 2017); on when the <air> block is there",
+          [](Scene& scene, bool value) { scene.solver.air_drag = value; }, [](const Scene&) { return true; });
+  number("air", "density", Quantity::density, Limits::positive(), "the air's density (dry air at 20 °C by default)",
+         [](Scene& scene, double value) { scene.solver.air_density = Real(value); },
+         [](const Scene& scene) { return number_text(scene.solver.air_density); }, "air.density");
+  number("air", "viscosity", Quantity::dynamic_viscosity, Limits::positive(), "the air's dynamic viscosity",
+         [](Scene& scene, double value) { scene.solver.air_viscosity = Real(value); },
+         [](const Scene& scene) { return number_text(scene.solver.air_viscosity); }, "air.viscosity");
+  structure("air", "velocity", "the wind (x y z, m/s); default still air");
+
+  // ---- <output> ----
+  number("output", "particles_period", Quantity::time, Limits::non_negative(),
+         "simulated time between particle frames (particles.pvd, world.pvd, run.mcap); 0: none; unset: 0.02 s for a run of up to "
+         "10 s, else the next 1, 2 or 5 × 10ⁿ s that keeps it to 500 frames",
+         [](Scene& scene, double value) { scene.output.particles_period = Real(value); },
+         [](const Scene& scene) {
+           return scene.output.particles_period ? number_text(*scene.output.particles_period) : std::string("chosen for the run's length");
+         });
+  boolean("output", "particles", "whether particle frames are written at all",
+          [](Scene& scene, bool value) { scene.output.write_particles = value; }, [](const Scene& scene) { return scene.output.write_particles; });
+  boolean("output", "mcap", "whether the run is recorded to run.mcap (also m3dp run --record)",
+          [](Scene& scene, bool value) { scene.output.mcap = value; }, [](const Scene& scene) { return scene.output.mcap; });
+  integer("output", "serve", Limits::between(0, 65535), "stream the run live on this TCP port (Foxglove WebSocket); 0: any free port",
+          [](Scene& scene, double value) { scene.output.serve_port = std::uint16_t(value); },
+          [](const Scene& scene) { return scene.output.serve_port ? std::to_string(*scene.output.serve_port) : std::string("none"); });
+  number("output", "checkpoint_period", Quantity::time, Limits::non_negative(),
+         "simulated time between checkpoints (m3dp run --resume); 0: none",
+         [](Scene& scene, double value) { scene.output.checkpoint_period = value; },
+         [](const Scene& scene) { return number_text(scene.output.checkpoint_period); });
+  number("output", "quality_period", Quantity::time, Limits::non_negative(),
+         "simulated time between the in-run quality report's looks at the printed height; 0: no in-run report",
+         [](Scene& scene, double value) { scene.output.quality_period = value; },
+         [](const Scene& scene) { return number_text(scene.output.quality_period); });
+
+  // ---- <meshing> ----
+  structure("meshing", "method", "the surface method: spherical, sph_blobby, zhu_bridson, anisotropic (Yu and Turk), …");
+  number("meshing", "period", Quantity::time, Limits::positive(), "simulated time between meshes of the material",
+         [](Scene& scene, double value) { scene.meshing.period = Real(value); },
+         [](const Scene& scene) { return number_text(scene.meshing.period); });
+  structure("meshing", "format", "the meshes' file format: ply, obj, stl, …");
+  structure("meshing", "material", "mesh only this material (its name); default all");
+  structure("meshing", "region", "mesh only the particles in this box (<min>, <max>, m)");
+  number("meshing", "voxel_size", Quantity::length, Limits::positive(), "the field's grid spacing; default the particle radius",
+         [](Scene& scene, double value) { scene.meshing.surface.voxel_size = Real(value); },
+         [](const Scene& scene) { return scene.meshing.surface.voxel_size > 0 ? number_text(scene.meshing.surface.voxel_size) : std::string("r"); });
+  number("meshing", "kernel_radius", Quantity::length, Limits::positive(), "the field kernel's support; default 4 particle radii",
+         [](Scene& scene, double value) { scene.meshing.surface.kernel_radius = Real(value); },
+         [](const Scene& scene) {
+           return scene.meshing.surface.kernel_radius > 0 ? number_text(scene.meshing.surface.kernel_radius) : std::string("4 r");
+         });
+  number("meshing", "iso_level", Quantity::fraction, Limits{0.0, std::nullopt, std::nullopt, 1.0},
+         "the volume fraction on the surface (sph_blobby, anisotropic)",
+         [](Scene& scene, double value) { scene.meshing.surface.iso_level = Real(value); },
+         [](const Scene& scene) { return number_text(scene.meshing.surface.iso_level); });
+  integer("meshing", "smoothing_iterations", Limits::non_negative(), "Laplacian smoothing passes over the mesh; 0: none",
+          [](Scene& scene, double value) { scene.meshing.surface.smoothing_iterations = int(value); },
+          [](const Scene& scene) { return std::to_string(scene.meshing.surface.smoothing_iterations); });
+
+  // ---- <coordinator> ----
+  number("coordinator", "period", Quantity::time, Limits::positive(), "simulated time between the coordinator's decisions",
+         [](Scene& scene, double value) { scene.coordinator.period = value; },
+         [](const Scene& scene) { return number_text(scene.coordinator.period); });
+  number("coordinator", "horizon", Quantity::time, Limits::positive(), "how far ahead it predicts the robots",
+         [](Scene& scene, double value) { scene.coordinator.horizon = value; },
+         [](const Scene& scene) { return number_text(scene.coordinator.horizon); });
+  integer("coordinator", "samples", Limits{std::nullopt, 1.0, std::nullopt, std::nullopt}, "predicted configurations over the horizon",
+          [](Scene& scene, double value) { scene.coordinator.samples = int(value); },
+          [](const Scene& scene) { return std::to_string(scene.coordinator.samples); });
+  number("coordinator", "robot_clearance", Quantity::length, Limits::non_negative(), "the least distance kept between two robots",
+         [](Scene& scene, double value) { scene.coordinator.robot_clearance = Real(value); },
+         [](const Scene& scene) { return number_text(scene.coordinator.robot_clearance); });
+  number("coordinator", "print_clearance", Quantity::length, Limits::non_negative(), "the least distance a robot keeps from the print",
+         [](Scene& scene, double value) { scene.coordinator.print_clearance = Real(value); },
+         [](const Scene& scene) { return number_text(scene.coordinator.print_clearance); });
+  structure("coordinator", "priority", "robot names, highest priority first; those not named follow in scene order");
+  return rows;
+}
+
+}  // namespace
+
+std::span<const SchemaRow> schema_rows() {
+  static const std::vector<SchemaRow> rows = make_rows();
+  return rows;
+}
+
+std::vector<const SchemaRow*> schema_block(std::string_view block) {
+  std::vector<const SchemaRow*> rows;
+  for (const SchemaRow& row : schema_rows())
+    if (row.block == block) rows.push_back(&row);
+  return rows;
+}
+
+std::span<const SchemaBlock> schema_blocks() {
+  static constexpr SchemaBlock kBlocks[] = {
+      {"solver", "<plugin><solver>", "The SPH solver (DFSPH): resolution, time steps, tolerances, rest detection. Required."},
+      {"air", "<plugin><air>", "The air around the print: its drag on the material's surface, on when the block is there."},
+      {"output", "<plugin><output>", "What a run writes beside summary.json and timing.csv."},
+      {"meshing", "<plugin><meshing>", "Surface meshes of the material during the run (also the printed body the world collides with)."},
+      {"coordinator", "<plugin><coordinator enabled=\"true\">", "Several robots sharing a workspace (Erdmann and Lozano-Pérez 1987)."},
+  };
+  return kBlocks;
+}
+
+/// `doc` with every <element> in it as code, so that Markdown shows it rather than taking it for HTML.
+std::string markdown_doc(std::string_view doc) {
+  std::string text;
+  for (std::size_t i = 0; i < doc.size(); ++i) {
+    const std::size_t close = doc[i] == '<' ? doc.find('>', i) : std::string_view::npos;
+    if (close == std::string_view::npos) {
+      text += doc[i];
+      continue;
+    }
+    text += fmt::format("`{}`", doc.substr(i, close - i + 1));
+    i = close;
+  }
+  return text;
+}
+
+std::string schema_reference() {
+  const Scene defaults;
+  std::string text =
+      "# Scene reference\n\n"
+      "Generated by `m3dp schema` from the scene reader's own table (src/m3dp/scene/schema.cpp); a test fails when this page\n"
+      "is stale (regenerate it with `build/apps/m3dp/m3dp schema > docs/scene_reference.md`). Every value is SI unless a\n"
+      "`unit=\"...\"` attribute says otherwise; the units each value takes are listed. Defaults are the engine's own.\n\n"
+      "The table covers these blocks of the `<plugin name=\"m3dp\">` element; materials, print heads, robots, cameras, fluid\n"
+      "blocks and paths are described in the README until their rows are added.\n";
+  for (const SchemaBlock& block : schema_blocks()) {
+    text += fmt::format("\n## `{}`\n\n{}\n\n| element | value | unit (also) | range | default | meaning |\n|---|---|---|---|---|---|\n",
+                        block.path, block.doc);
+    for (const SchemaRow* row : schema_block(block.name)) {
+      std::string value, units, range = "", shown = row->show ? row->show(defaults) : std::string();
+      switch (row->kind) {
+        case ValueKind::number: {
+          const QuantityInfo info = quantity_info(row->quantity);
+          value = std::string(info.name);
+          std::string also;
+          for (const Unit& unit : info.units)
+            if (unit.symbol != info.si_symbol) also += (also.empty() ? "" : ", ") + std::string(unit.symbol);
+          units = info.si_symbol.empty() ? (also.empty() ? "—" : fmt::format("({})", also))
+                                         : fmt::format("{}{}", info.si_symbol, also.empty() ? "" : fmt::format(" ({})", also));
+          range = row->limits.describe("");
+          break;
+        }
+        case ValueKind::integer: value = "whole number", units = "—", range = row->limits.describe(""); break;
+        case ValueKind::boolean: value = "true or false", units = "—", range = "—"; break;
+        case ValueKind::keyword: {
+          value = "one of: ";
+          for (std::size_t w = 0; w < row->words.size(); ++w) value += (w ? ", " : "") + fmt::format("`{}`", row->words[w]);
+          units = "—", range = "—";
+          break;
+        }
+        case ValueKind::structure: value = "see meaning", units = "—", range = "—"; break;
+      }
+      if (row->required) shown = "required";
+      if (shown.empty()) shown = "—";
+      text += fmt::format("| `<{}>` | {} | {} | {} | {} | {}{} |\n", row->name, value, units, range, shown, markdown_doc(row->doc),
+                          row->field.empty() ? "" : fmt::format(" (the engine's `{}`)", row->field));
+    }
+  }
+  return text;
+}
+
+}  // namespace m3dp::scene
