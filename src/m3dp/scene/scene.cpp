@@ -218,7 +218,8 @@ class SceneReader {
                       std::span<const std::string_view> repeatable);
   /// The schema's block `block` (schema.hpp) in `element`: its children checked against the rows,
   /// and every row with a setter read into the scene, its line recorded in `fields` under its field.
-  void read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields = nullptr);
+  void read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields = nullptr,
+                  material::Material* material = nullptr);
   /// Outside the plugin, an element SDF does not have where M3DP reads is a warning (not an error:
   /// the file may be for a newer SDF), naming the known element it is closest to: a typo such as
   /// <modle> would otherwise delete a model without a word.
@@ -299,11 +300,11 @@ class SceneReader {
   std::optional<material::Material> read_material_values(const pugi::xml_node& element, const material::Material* base,
                                                          FieldLocations& fields);
   std::optional<material::Rheology> read_rheology(const pugi::xml_node& element, const material::Rheology* base);
-  void read_ageing(const pugi::xml_node& element, material::Ageing& ageing);
-  void read_granular(const pugi::xml_node& element, material::Granular& granular, FieldLocations& fields);
+  void read_ageing(const pugi::xml_node& element, material::Material& material);
+  void read_granular(const pugi::xml_node& element, material::Material& material, FieldLocations& fields);
   void read_air(const pugi::xml_node& air);
-  void read_micropolar(const pugi::xml_node& element, material::Micropolar& micropolar);
-  void read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity, FieldLocations& fields);
+  void read_micropolar(const pugi::xml_node& element, material::Material& material);
+  void read_elasticity(const pugi::xml_node& element, material::Material& material, FieldLocations& fields);
   /// The presets of data/materials.xml, read on first use (their problems reported at that file's lines).
   const std::vector<MaterialEntry>& material_presets();
   void read_fluid_block(const pugi::xml_node& block);
@@ -403,7 +404,7 @@ void SceneReader::check_children(const pugi::xml_node& element, std::span<const 
   }
 }
 
-void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields) {
+void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields, material::Material* material) {
   const std::vector<const SchemaRow*> rows = schema_block(block);
   std::vector<std::string_view> names;
   for (const SchemaRow* row : rows) names.push_back(row->name);
@@ -411,7 +412,7 @@ void SceneReader::read_block(const pugi::xml_node& element, std::string_view blo
   for (const SchemaRow* row : rows) {
     const std::string name(row->name);
     const Presence presence = row->required ? Presence::required : Presence::optional;
-    if (!row->set) {
+    if (!row->set && !(row->set_material && material)) {
       if (row->required) (void)find_child(element, name.c_str(), presence);
       continue;
     }
@@ -439,7 +440,8 @@ void SceneReader::read_block(const pugi::xml_node& element, std::string_view blo
         break;
       case ValueKind::structure: break;
     }
-    if (value) row->set(scene_, *value);
+    if (value && row->set) row->set(scene_, *value);
+    if (value && row->set_material) row->set_material(*material, *value);
     if (fields) record_field(*fields, std::string(row->field.empty() ? row->name : row->field), element, name.c_str());
   }
 }
@@ -1534,17 +1536,11 @@ void SceneReader::read_material(const pugi::xml_node& element) {
 
 std::optional<material::Material> SceneReader::read_material_values(const pugi::xml_node& element,
                                                                    const material::Material* base, FieldLocations& fields) {
-  check_children(element, {"density", "viscosity", "rheology", "ageing", "boundary_viscosity", "nozzle_wall", "surface_tension",
-                           "adhesion", "granular", "micropolar", "elasticity", "source", "color"});
-  const Presence required = base ? Presence::optional : Presence::required;
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
-  if (const auto density = read_scalar(element, "density", Quantity::density, Limits::any(), required)) {
-    material.density = Real(*density);
-  } else if (!base) {
-    valid = false;
-  }
-  record_field(fields, "density", element, "density");
+  // The table's values (schema.cpp: density, nozzle_wall, surface_tension, adhesion), then what is special.
+  read_block(element, "material", &fields, &material);
+  if (!base && !find_child(element, "density", Presence::required)) valid = false;
   const pugi::xml_node viscosity = element.child("viscosity");
   const pugi::xml_node rheology = element.child("rheology");
   if (viscosity && rheology) {
@@ -1567,7 +1563,7 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
                                 describe(element)));
     valid = false;
   }
-  if (const pugi::xml_node ageing = element.child("ageing")) read_ageing(ageing, material.ageing);
+  if (const pugi::xml_node ageing = element.child("ageing")) read_ageing(ageing, material);
   // A viscosity in Pa·s (Navier slip: the wall carries μ_b × slip rate), or no_slip: the material sticks.
   if (const pugi::xml_node wall = element.child("boundary_viscosity")) {
     if (trim(wall.child_value()) == "no_slip") {
@@ -1579,26 +1575,9 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
       material.sticks_to_walls = false;
     }
   }
-  // The slip of a nozzle's bore: free_slip (the default) or no_slip.
-  if (const pugi::xml_node wall = element.child("nozzle_wall")) {
-    const std::string value(trim(wall.child_value()));
-    leaf_text(wall, {});
-    if (value == "no_slip") material.nozzle_no_slip = true;
-    else if (value == "free_slip") material.nozzle_no_slip = false;
-    else report(wall, fmt::format("<nozzle_wall> must be free_slip or no_slip, got '{}'", value));
-  }
-  // σ against air, and the work of adhesion σ(1 + cos θ) to walls (both N/m; adhesion with Akinci et al.
-  // 2013's model only).
-  if (const auto tension = read_scalar(element, "surface_tension", Quantity::surface_tension, Limits::non_negative(),
-                                       Presence::optional))
-    material.surface_tension = Real(*tension);
-  if (const auto adhesion = read_scalar(element, "adhesion", Quantity::surface_tension, Limits::non_negative(),
-                                        Presence::optional))
-    material.adhesion = Real(*adhesion);
-  record_field(fields, "adhesion", element, "adhesion");
-  if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material.granular, fields);
-  if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material.micropolar);
-  if (const pugi::xml_node elasticity = element.child("elasticity")) read_elasticity(elasticity, material.elasticity, fields);
+  if (const pugi::xml_node granular = element.child("granular")) read_granular(granular, material, fields);
+  if (const pugi::xml_node micropolar = element.child("micropolar")) read_micropolar(micropolar, material);
+  if (const pugi::xml_node elasticity = element.child("elasticity")) read_elasticity(elasticity, material, fields);
   if (const pugi::xml_node source = element.child("source")) leaf_text(source, {});
   if (!valid) return std::nullopt;
   return material;
@@ -1686,59 +1665,31 @@ std::optional<material::Rheology> SceneReader::read_rheology(const pugi::xml_nod
   return rheology;
 }
 
-void SceneReader::read_ageing(const pugi::xml_node& element, material::Ageing& ageing) {
+void SceneReader::read_ageing(const pugi::xml_node& element, material::Material& material) {
   check_attributes(element, {});
-  check_children(element, {"structuration_rate", "viscosity_growth"});
-  if (const auto rate = read_scalar(element, "structuration_rate", Quantity::stress_rate, Limits::non_negative(),
-                                    Presence::optional))
-    ageing.structuration_rate = Real(*rate);
-  if (const auto growth = read_scalar(element, "viscosity_growth", Quantity::rate, Limits::non_negative(), Presence::optional))
-    ageing.viscosity_growth = Real(*growth);
+  read_block(element, "ageing", nullptr, &material);
 }
 
-void SceneReader::read_granular(const pugi::xml_node& element, material::Granular& granular, FieldLocations& fields) {
+void SceneReader::read_granular(const pugi::xml_node& element, material::Material& material, FieldLocations& fields) {
   // <granular/> on its own switches the material to discrete spheres with the default contact law.
   check_attributes(element, {});
-  check_children(element, {"stiffness", "restitution", "friction"});
-  granular.enabled = true;
-  if (const auto stiffness = read_scalar(element, "stiffness", Quantity::stiffness, Limits::positive(), Presence::optional))
-    granular.stiffness = Real(*stiffness);
-  if (const auto restitution = read_scalar(element, "restitution", Quantity::plain_number, Limits::any(), Presence::optional))
-    granular.restitution = Real(*restitution);
+  material.granular.enabled = true;
   fields.emplace_back("granular", where(element));
-  record_field(fields, "granular.restitution", element, "restitution");
-  if (const auto friction = read_scalar(element, "friction", Quantity::plain_number, Limits::non_negative(), Presence::optional))
-    granular.friction = Real(*friction);
+  read_block(element, "granular", &fields, &material);
 }
 
-void SceneReader::read_micropolar(const pugi::xml_node& element, material::Micropolar& micropolar) {
+void SceneReader::read_micropolar(const pugi::xml_node& element, material::Material& material) {
   // <micropolar/> on its own turns the model on with its defaults.
   check_attributes(element, {});
-  check_children(element, {"vortex_viscosity", "microinertia", "angular_smoothing"});
-  micropolar.enabled = true;
-  if (const auto viscosity = read_scalar(element, "vortex_viscosity", Quantity::dynamic_viscosity, Limits::positive(),
-                                         Presence::optional))
-    micropolar.vortex_viscosity = Real(*viscosity);
-  if (const auto inertia = read_scalar(element, "microinertia", Quantity::area, Limits::positive(), Presence::optional))
-    micropolar.microinertia = Real(*inertia);
-  if (const auto smoothing = read_scalar(element, "angular_smoothing", Quantity::fraction, Limits{std::nullopt, 0.0, 1.0},
-                                         Presence::optional))
-    micropolar.angular_smoothing = Real(*smoothing);
+  material.micropolar.enabled = true;
+  read_block(element, "micropolar", nullptr, &material);
 }
 
-void SceneReader::read_elasticity(const pugi::xml_node& element, material::Elasticity& elasticity, FieldLocations& fields) {
+void SceneReader::read_elasticity(const pugi::xml_node& element, material::Material& material, FieldLocations& fields) {
   check_attributes(element, {});
-  check_children(element, {"shear_modulus", "poisson_ratio", "relaxation_time"});
-  elasticity.enabled = true;
-  if (const auto modulus = read_scalar(element, "shear_modulus", Quantity::stress, Limits::any(), Presence::required))
-    elasticity.shear_modulus = Real(*modulus);
-  if (const auto ratio = read_scalar(element, "poisson_ratio", Quantity::plain_number, Limits::any(), Presence::optional))
-    elasticity.poisson_ratio = Real(*ratio);
+  material.elasticity.enabled = true;
   fields.emplace_back("elasticity", where(element));
-  record_field(fields, "elasticity.shear_modulus", element, "shear_modulus");
-  record_field(fields, "elasticity.poisson_ratio", element, "poisson_ratio");
-  if (const auto relaxation = read_scalar(element, "relaxation_time", Quantity::time, Limits::non_negative(), Presence::optional))
-    elasticity.relaxation_time = Real(*relaxation);
+  read_block(element, "elasticity", &fields, &material);
 }
 
 const std::vector<MaterialEntry>& SceneReader::material_presets() {

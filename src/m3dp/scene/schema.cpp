@@ -6,6 +6,7 @@
 
 #include <algorithm>
 
+#include "m3dp/material/material.hpp"
 #include "m3dp/scene/scene.hpp"
 
 namespace m3dp::scene {
@@ -299,6 +300,76 @@ std::vector<SchemaRow> make_rows() {
          [](Scene& scene, double value) { scene.coordinator.print_clearance = Real(value); },
          [](const Scene& scene) { return number_text(scene.coordinator.print_clearance); });
   structure("coordinator", "priority", "robot names, highest priority first; those not named follow in scene order");
+  // ---- <material> and its parts: these fill a material (a preset's values under a scene's) ----
+  auto material_number = [&](std::string_view block, std::string_view name, Quantity quantity, Limits limits, std::string_view doc,
+                             std::function<void(material::Material&, double)> set,
+                             std::function<std::string(const material::Material&)> show, std::string_view field = {}) {
+    Row row;
+    row.block = block, row.name = name, row.kind = ValueKind::number, row.quantity = quantity, row.limits = limits, row.doc = doc;
+    row.set_material = std::move(set), row.show_material = std::move(show), row.field = field;
+    rows.push_back(std::move(row));
+    return &rows.back();
+  };
+#define M3DP_MATERIAL_REAL(member) \
+  [](material::Material& material, double value) { material.member = Real(value); }, \
+      [](const material::Material& material) { return number_text(material.member); }
+  material_number("material", "density", Quantity::density, Limits::positive(), "the material's density at rest",
+                  M3DP_MATERIAL_REAL(density))
+      ->show_material = [](const material::Material&) { return std::string("required unless a preset= gives it"); };
+  structure("material", "viscosity", "a Newtonian material's dynamic viscosity (Pa·s, ≥ 0); or give <rheology>");
+  structure("material", "rheology", "a non-Newtonian material: model= power_law, cross, carreau, bingham or herschel_bulkley, and its "
+                                    "parameters (README, \"Materials\")");
+  structure("material", "ageing", "structural build-up with age (Roussel 2006): the block below");
+  structure("material", "boundary_viscosity",
+            "friction against walls, bodies and the nozzle: a viscosity (Pa·s, Navier slip), or no_slip (the material sticks); "
+            "default 0, free slip");
+  {
+    Row row;
+    row.block = "material", row.name = "nozzle_wall", row.kind = ValueKind::keyword, row.words = {"free_slip", "no_slip"};
+    row.doc = "the slip of a nozzle's bore (El Abbaoui et al. 2024 found free slip matches printed concrete better)";
+    row.set_material = [](material::Material& material, double word) { material.nozzle_no_slip = word != 0; };
+    row.show_material = [](const material::Material& material) { return std::string(material.nozzle_no_slip ? "no_slip" : "free_slip"); };
+    rows.push_back(std::move(row));
+  }
+  material_number("material", "surface_tension", Quantity::surface_tension, Limits::non_negative(), "σ against air; 0: none",
+                  M3DP_MATERIAL_REAL(surface_tension));
+  material_number("material", "adhesion", Quantity::surface_tension, Limits::non_negative(),
+                  "the work of adhesion to walls, σ(1 + cos θ) (akinci2013 only); 0: none", M3DP_MATERIAL_REAL(adhesion));
+  structure("material", "granular", "discrete spheres instead of a fluid (Cundall and Strack 1979): the block below");
+  structure("material", "micropolar", "micro-rotation of the particles (Bender et al. 2017): the block below");
+  structure("material", "elasticity", "an elastic or viscoelastic solid (Peer et al. 2018): the block below");
+  structure("material", "source", "where the values come from (a paper, a data sheet): text, not read");
+  structure("material", "color", "the colour cameras see it in (r g b, 0 to 1)");
+
+  material_number("ageing", "structuration_rate", Quantity::stress_rate, Limits::non_negative(),
+                  "A_thix: the yield stress grows by this each second of a particle's age (Roussel 2006); 0: none",
+                  M3DP_MATERIAL_REAL(ageing.structuration_rate));
+  material_number("ageing", "viscosity_growth", Quantity::rate, Limits::non_negative(),
+                  "the viscosity parameter's relative growth per second of age; 0: none", M3DP_MATERIAL_REAL(ageing.viscosity_growth));
+
+  material_number("granular", "stiffness", Quantity::stiffness, Limits::positive(),
+                  "the contacts' normal spring; unset: derived from the particle size", M3DP_MATERIAL_REAL(granular.stiffness));
+  material_number("granular", "restitution", Quantity::plain_number, Limits{0.0, std::nullopt, 1.0, std::nullopt},
+                  "the normal coefficient of restitution of a binary collision", M3DP_MATERIAL_REAL(granular.restitution),
+                  "granular.restitution");
+  material_number("granular", "friction", Quantity::plain_number, Limits::non_negative(), "the Coulomb friction coefficient",
+                  M3DP_MATERIAL_REAL(granular.friction));
+
+  material_number("micropolar", "vortex_viscosity", Quantity::dynamic_viscosity, Limits::positive(),
+                  "μ_t, the coupling of micro-rotation and vorticity", M3DP_MATERIAL_REAL(micropolar.vortex_viscosity));
+  material_number("micropolar", "microinertia", Quantity::area, Limits::positive(),
+                  "Θ; unset: that of the sphere of one particle's volume, (2/5) R²", M3DP_MATERIAL_REAL(micropolar.microinertia));
+  material_number("micropolar", "angular_smoothing", Quantity::fraction, Limits::between(0, 1),
+                  "smoothing of the micro-rotation towards its neighbours' per step", M3DP_MATERIAL_REAL(micropolar.angular_smoothing));
+
+  material_number("elasticity", "shear_modulus", Quantity::stress, Limits::positive(), "G; Young's modulus is 2G(1 + ν)",
+                  M3DP_MATERIAL_REAL(elasticity.shear_modulus), "elasticity.shear_modulus")
+      ->required = true;
+  material_number("elasticity", "poisson_ratio", Quantity::plain_number, Limits::between(0, 0.49),
+                  "ν; soft pastes and gels are nearly incompressible", M3DP_MATERIAL_REAL(elasticity.poisson_ratio), "elasticity.poisson_ratio");
+  material_number("elasticity", "relaxation_time", Quantity::time, Limits::non_negative(),
+                  "τ of the stress relaxation (a Maxwell fluid); 0: none, an elastic solid", M3DP_MATERIAL_REAL(elasticity.relaxation_time));
+#undef M3DP_MATERIAL_REAL
   return rows;
 }
 
@@ -318,11 +389,16 @@ std::vector<const SchemaRow*> schema_block(std::string_view block) {
 
 std::span<const SchemaBlock> schema_blocks() {
   static constexpr SchemaBlock kBlocks[] = {
-      {"solver", "<plugin><solver>", "The SPH solver (DFSPH): resolution, time steps, tolerances, rest detection. Required."},
-      {"air", "<plugin><air>", "The air around the print: its drag on the material's surface, on when the block is there."},
-      {"output", "<plugin><output>", "What a run writes beside summary.json and timing.csv."},
-      {"meshing", "<plugin><meshing>", "Surface meshes of the material during the run (also the printed body the world collides with)."},
-      {"coordinator", "<plugin><coordinator enabled=\"true\">", "Several robots sharing a workspace (Erdmann and Lozano-Pérez 1987)."},
+      {"solver", "<plugin><solver>", "The SPH solver (DFSPH): resolution, time steps, tolerances, rest detection. Required.", "plugin"},
+      {"air", "<plugin><air>", "The air around the print: its drag on the material's surface, on when the block is there.", "plugin"},
+      {"output", "<plugin><output>", "What a run writes beside summary.json and timing.csv.", "plugin"},
+      {"meshing", "<plugin><meshing>", "Surface meshes of the material during the run (also the printed body the world collides with).", "plugin"},
+      {"coordinator", "<plugin><coordinator enabled=\"true\">", "Several robots sharing a workspace (Erdmann and Lozano-Pérez 1987).", "plugin"},
+      {"material", "<plugin><material name=\"…\" preset=\"…\">", "A material, from scratch or over a preset of data/materials.xml.", "plugin"},
+      {"ageing", "<material><ageing>", "Structural build-up of a printable mortar or concrete.", "material"},
+      {"granular", "<material><granular>", "Discrete spheres: every material of the scene granular, or none.", "material"},
+      {"micropolar", "<material><micropolar>", "Micro-rotation of the particles: their spin and the fluid's vorticity coupled.", "material"},
+      {"elasticity", "<material><elasticity>", "An elastic solid, or with a relaxation time a viscoelastic (Maxwell) fluid.", "material"},
   };
   return kBlocks;
 }
@@ -344,18 +420,21 @@ std::string markdown_doc(std::string_view doc) {
 
 std::string schema_reference() {
   const Scene defaults;
+  const material::Material material_defaults;
   std::string text =
       "# Scene reference\n\n"
       "Generated by `m3dp schema` from the scene reader's own table (src/m3dp/scene/schema.cpp); a test fails when this page\n"
       "is stale (regenerate it with `build/apps/m3dp/m3dp schema > docs/scene_reference.md`). Every value is SI unless a\n"
       "`unit=\"...\"` attribute says otherwise; the units each value takes are listed. Defaults are the engine's own.\n\n"
-      "The table covers these blocks of the `<plugin name=\"m3dp\">` element; materials, print heads, robots, cameras, fluid\n"
-      "blocks and paths are described in the README until their rows are added.\n";
+      "The table covers these blocks of the `<plugin name=\"m3dp\">` element; print heads, robots, cameras, fluid blocks,\n"
+      "paths and a material's rheology models (whose parameters depend on the model) are described in the README until\n"
+      "their rows are added.\n";
   for (const SchemaBlock& block : schema_blocks()) {
     text += fmt::format("\n## `{}`\n\n{}\n\n| element | value | unit (also) | range | default | meaning |\n|---|---|---|---|---|---|\n",
                         block.path, block.doc);
     for (const SchemaRow* row : schema_block(block.name)) {
-      std::string value, units, range = "", shown = row->show ? row->show(defaults) : std::string();
+      std::string value, units, range = "",
+                  shown = row->show ? row->show(defaults) : row->show_material ? row->show_material(material_defaults) : std::string();
       switch (row->kind) {
         case ValueKind::number: {
           const QuantityInfo info = quantity_info(row->quantity);

@@ -14,6 +14,10 @@
 #include <string_view>
 #include <vector>
 
+namespace m3dp::material {
+struct Material;
+}
+
 namespace m3dp::scene {
 
 struct Scene;
@@ -91,6 +95,10 @@ struct SchemaRow {
   std::function<void(Scene&, double)> set;
   /// The value in a scene, as the reference writes it (the default from a default Scene); null: none.
   std::function<std::string(const Scene&)> show;
+  /// A material's rows (blocks "material", "ageing", "granular", "micropolar", "elasticity") fill and
+  /// show a material instead (defaults from a default material::Material).
+  std::function<void(material::Material&, double)> set_material;
+  std::function<std::string(const material::Material&)> show_material;
 };
 
 /// Every row, block by block in the reference's order.
@@ -99,9 +107,10 @@ struct SchemaRow {
 [[nodiscard]] std::vector<const SchemaRow*> schema_block(std::string_view block);
 /// The blocks the table has, in order, with a line about each.
 struct SchemaBlock {
-  std::string_view name;  // "solver"
-  std::string_view path;  // where it is written: "<plugin><solver>"
+  std::string_view name;    // "solver"
+  std::string_view path;    // where it is written: "<plugin><solver>"
   std::string_view doc;
+  std::string_view parent;  // the block it sits in: "plugin", or "material" for a material's parts
 };
 [[nodiscard]] std::span<const SchemaBlock> schema_blocks();
 
