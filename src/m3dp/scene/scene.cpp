@@ -219,7 +219,7 @@ class SceneReader {
   /// The schema's block `block` (schema.hpp) in `element`: its children checked against the rows,
   /// and every row with a setter read into the scene, its line recorded in `fields` under its field.
   void read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields = nullptr,
-                  material::Material* material = nullptr);
+                  material::Material* material = nullptr, PrintHead* head = nullptr);
   /// Outside the plugin, an element SDF does not have where M3DP reads is a warning (not an error:
   /// the file may be for a newer SDF), naming the known element it is closest to: a typo such as
   /// <modle> would otherwise delete a model without a word.
@@ -404,7 +404,8 @@ void SceneReader::check_children(const pugi::xml_node& element, std::span<const 
   }
 }
 
-void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields, material::Material* material) {
+void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields, material::Material* material,
+                             PrintHead* head) {
   const std::vector<const SchemaRow*> rows = schema_block(block);
   std::vector<std::string_view> names;
   for (const SchemaRow* row : rows) names.push_back(row->name);
@@ -412,7 +413,7 @@ void SceneReader::read_block(const pugi::xml_node& element, std::string_view blo
   for (const SchemaRow* row : rows) {
     const std::string name(row->name);
     const Presence presence = row->required ? Presence::required : Presence::optional;
-    if (!row->set && !(row->set_material && material)) {
+    if (!row->set && !(row->set_material && material) && !(row->set_head && head)) {
       if (row->required) (void)find_child(element, name.c_str(), presence);
       continue;
     }
@@ -442,6 +443,7 @@ void SceneReader::read_block(const pugi::xml_node& element, std::string_view blo
     }
     if (value && row->set) row->set(scene_, *value);
     if (value && row->set_material) row->set_material(*material, *value);
+    if (value && row->set_head) row->set_head(*head, *value);
     if (fields) record_field(*fields, std::string(row->field.empty() ? row->name : row->field), element, name.c_str());
   }
 }
@@ -1781,29 +1783,18 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
 
   if (const pugi::xml_node nozzle = find_child(element, "nozzle", Presence::required)) {
     check_attributes(nozzle, {});
-    check_children(nozzle, {"inner_diameter", "exit_speed", "direction", "bore_length", "outer_diameter"});
-    if (const auto diameter =
-            read_scalar(nozzle, "inner_diameter", Quantity::length, Limits::positive(), Presence::required)) {
-      head.inner_diameter = Real(*diameter);
-      if (particle_radius_ && head.inner_diameter < 2 * *particle_radius_) {
-        report(nozzle.child("inner_diameter"),
-               fmt::format("the nozzle is narrower than one particle: <inner_diameter> {} m is below the particle "
-                           "diameter 2*<particle_radius> = {} m; widen the nozzle or use smaller particles",
-                           head.inner_diameter, 2 * *particle_radius_));
-      }
-    }
-    if (const auto speed = read_scalar(nozzle, "exit_speed", Quantity::speed, Limits::positive(), Presence::required)) {
-      head.exit_speed = Real(*speed);
+    // The table's values (schema.cpp), then the checks against the particles and each other.
+    read_block(nozzle, "nozzle", &head.nozzle_fields, nullptr, &head);
+    if (nozzle.child("inner_diameter") && particle_radius_ && head.inner_diameter < 2 * *particle_radius_) {
+      report(nozzle.child("inner_diameter"),
+             fmt::format("the nozzle is narrower than one particle: <inner_diameter> {} m is below the particle "
+                         "diameter 2*<particle_radius> = {} m; widen the nozzle or use smaller particles",
+                         head.inner_diameter, 2 * *particle_radius_));
     }
     if (const auto direction = read_direction(nozzle, "direction", Presence::optional)) head.direction = *direction;
-    // A nozzle with walls: the bore above the exit and the tip's lip (sph::NozzleSettings).
-    // The engine checks the bore against the particles (sph::check_parameters) at these elements' lines.
-    if (const auto length = read_scalar(nozzle, "bore_length", Quantity::length, Limits::non_negative(), Presence::optional))
-      head.bore_length = Real(*length);
-    record_field(head.nozzle_fields, "bore_length", nozzle, "bore_length");
-    record_field(head.nozzle_fields, "outer_diameter", nozzle, "outer_diameter");
-    if (const auto diameter = read_scalar(nozzle, "outer_diameter", Quantity::length, Limits::positive(), Presence::optional)) {
-      head.outer_diameter = Real(*diameter);
+    // A nozzle with walls: the bore above the exit and the tip's lip (sph::NozzleSettings); the engine
+    // checks the bore against the particles (sph::check_parameters) at these elements' lines.
+    if (nozzle.child("outer_diameter") && head.outer_diameter > 0) {
       if (head.outer_diameter <= head.inner_diameter)
         report(nozzle.child("outer_diameter"), fmt::format("<outer_diameter> {} m must be larger than <inner_diameter> {} m",
                                                            head.outer_diameter, head.inner_diameter));

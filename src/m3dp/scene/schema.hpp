@@ -21,6 +21,7 @@ struct Material;
 namespace m3dp::scene {
 
 struct Scene;
+struct PrintHead;
 
 // ---- units: every numeric element may say unit="..."; values are stored in SI ----
 enum class Quantity {
@@ -99,6 +100,9 @@ struct SchemaRow {
   /// show a material instead (defaults from a default material::Material).
   std::function<void(material::Material&, double)> set_material;
   std::function<std::string(const material::Material&)> show_material;
+  /// A print head's nozzle rows (block "nozzle") fill and show the head.
+  std::function<void(PrintHead&, double)> set_head;
+  std::function<std::string(const PrintHead&)> show_head;
 };
 
 /// Every row, block by block in the reference's order.
