@@ -35,6 +35,13 @@ fs::path fresh_directory(const std::string& name) {
   fs::remove_all(directory);
   return directory;
 }
+
+sim::RunSummary run_into(sim::Simulation& simulation, const fs::path& directory) {
+  sim::RunOptions options;
+  options.output_directory = directory;
+  options.show_progress = false;
+  return sim::run_simulation(simulation, options);
+}
 }  // namespace
 
 TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
@@ -45,10 +52,7 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   scene.output.particles_period = Real(0.025);
   sim::Simulation simulation(scene);
   const fs::path directory = fresh_directory("outputs");
-  sim::RunOptions options;
-  options.output_directory = directory;
-  options.show_progress = false;
-  const auto summary = sim::run_simulation(simulation, options);
+  const auto summary = run_into(simulation, directory);
   EXPECT_EQ(summary.status, sim::RunStatus::completed);
 
   // Frames at t = 0, 0.025, ..., 0.1.
@@ -97,12 +101,6 @@ scene::Scene meshed_tank(double end_time, Real period) {
   return scene;
 }
 
-sim::RunSummary run_into(sim::Simulation& simulation, const fs::path& directory) {
-  sim::RunOptions options;
-  options.output_directory = directory;
-  options.show_progress = false;
-  return sim::run_simulation(simulation, options);
-}
 }  // namespace
 
 TEST(Outputs, ParticleFramesKeepALongRunsFolderReasonableAndZeroSaysNone) {
@@ -125,10 +123,7 @@ TEST(Outputs, ParticleFramesKeepALongRunsFolderReasonableAndZeroSaysNone) {
     scene.output.particles_period = period;
     sim::Simulation simulation(scene);
     const fs::path directory = fresh_directory("frame_period");
-    sim::RunOptions options;
-    options.output_directory = directory;
-    options.show_progress = false;
-    const auto summary = sim::run_simulation(simulation, options);
+    const auto summary = run_into(simulation, directory);
     const std::string text = sim::format_summary(summary, directory);
     const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
     if (!period) {

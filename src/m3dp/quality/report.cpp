@@ -99,7 +99,8 @@ Design combined(const std::vector<HeadDesign>& designs) {
 
 PrintHeights::PrintHeights(const std::vector<HeadDesign>& designs, double particle_diameter)
     : whole_(combined(designs), particle_diameter) {
-  for (const HeadDesign& head : designs) heads_.emplace_back(head.design, particle_diameter);
+  if (designs.size() > 1)
+    for (const HeadDesign& head : designs) heads_.emplace_back(head.design, particle_diameter);
 }
 
 void PrintHeights::observe(double time, std::span<const Vec3> positions) {
@@ -110,9 +111,10 @@ void PrintHeights::observe(double time, std::span<const Vec3> positions) {
 void PrintHeights::fill_in(Report& report) const {
   report.heights = whole_.history();
   report.shortfall = whole_.shortfall();
-  for (std::size_t h = 0; h < heads_.size() && h < report.heads.size(); ++h) {
-    report.heads[h].heights = heads_[h].history();
-    report.heads[h].shortfall = heads_[h].shortfall();
+  for (std::size_t h = 0; h < report.heads.size(); ++h) {
+    const Buildability& part = heads_.empty() ? whole_ : heads_.at(h);
+    report.heads[h].heights = part.history();
+    report.heads[h].shortfall = part.shortfall();
   }
 }
 

@@ -61,8 +61,8 @@ struct Report {
 /// Every head's beads as one design (the fill, the surface's distance, the height).
 [[nodiscard]] Design combined(const std::vector<HeadDesign>& designs);
 
-/// The printed height against the design over time (Buildability) for the whole print and for each
-/// head's part of it, looked at together.
+/// The printed height against the design over time (Buildability) for the whole print and, with
+/// several heads, for each head's part of it, looked at together (one head's part is the whole).
 class PrintHeights {
  public:
   PrintHeights(const std::vector<HeadDesign>& designs, double particle_diameter);

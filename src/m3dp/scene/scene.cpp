@@ -52,7 +52,6 @@ namespace fs = std::filesystem;
 // Units: every numeric element may say `unit="..."`; values are stored in SI.
 // ---------------------------------------------------------------------------------------------
 
-constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 
 /// Users often have viscosities from tables in kinematic units; these get a message saying how to convert.
 bool is_kinematic_viscosity_unit(std::string_view symbol) {
@@ -1113,7 +1112,7 @@ bool SceneReader::read_camera_settings(const pugi::xml_node& named, const pugi::
   if (const auto rate = read_scalar(named, "update_rate", Quantity::rate, Limits::positive(), Presence::optional))
     settings.update_rate = *rate;
   if (!intrinsics) return valid;
-  if (const auto fov = read_scalar(intrinsics, "horizontal_fov", Quantity::angle, Limits{0.0, std::nullopt, 3.1}, Presence::optional))
+  if (const auto fov = read_scalar(intrinsics, "horizontal_fov", Quantity::angle, Limits::positive_up_to(3.1), Presence::optional))
     settings.horizontal_fov = *fov;
   if (const pugi::xml_node image = intrinsics.child("image")) {
     check_children(image, {"width", "height", "format", "anti_aliasing"});

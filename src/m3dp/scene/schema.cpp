@@ -11,10 +11,6 @@
 
 namespace m3dp::scene {
 
-namespace {
-constexpr double kRadiansPerDegreeHere = 3.14159265358979323846 / 180;
-}  // namespace
-
 QuantityInfo quantity_info(Quantity quantity) {
   static constexpr Unit kLength[] = {{"m", 1}, {"cm", 1e-2}, {"mm", 1e-3}};
   static constexpr Unit kTime[] = {{"s", 1}, {"ms", 1e-3}};
@@ -25,7 +21,7 @@ QuantityInfo quantity_info(Quantity quantity) {
                                                {"mPa*s", 1e-3},  {"mPa.s", 1e-3},  {"mPa·s", 1e-3},
                                                {"cP", 1e-3},     {"P", 0.1}};
   static constexpr Unit kFraction[] = {{"1", 1}, {"%", 1e-2}};
-  static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegreeHere}};
+  static constexpr Unit kAngle[] = {{"rad", 1}, {"deg", kRadiansPerDegree}};
   static constexpr Unit kMass[] = {{"kg", 1}, {"g", 1e-3}};
   static constexpr Unit kStress[] = {{"Pa", 1}, {"kPa", 1e3}};
   static constexpr Unit kStressRate[] = {{"Pa/s", 1}, {"Pa/min", 1.0 / 60}};

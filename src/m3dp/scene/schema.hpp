@@ -24,6 +24,7 @@ struct Scene;
 struct PrintHead;
 
 // ---- units: every numeric element may say unit="..."; values are stored in SI ----
+inline constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
 enum class Quantity {
   plain_number, length, time, speed, acceleration, density, dynamic_viscosity, fraction, angle, mass, stress, stress_rate, rate,
   consistency, surface_tension, stiffness, area

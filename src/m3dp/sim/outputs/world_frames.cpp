@@ -158,7 +158,6 @@ class WorldFrames final : public RunObserver {
 }  // namespace
 
 std::unique_ptr<RunObserver> make_world_frames(Simulation& simulation, const RunOptions& options) {
-  const auto& output = simulation.scene().output;
   const double period = frame_period(simulation, options);
   if (options.output_directory.empty() || !(period > 0)) return nullptr;
   return std::make_unique<WorldFrames>(options.output_directory, period);
