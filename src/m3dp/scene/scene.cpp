@@ -216,9 +216,14 @@ class SceneReader {
   void check_children(const pugi::xml_node& element, std::span<const std::string_view> allowed,
                       std::span<const std::string_view> repeatable);
   /// The schema's block `block` (schema.hpp) in `element`: its children checked against the rows,
-  /// and every row with a setter read into the scene, its line recorded in `fields` under its field.
-  void read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields = nullptr,
-                  material::Material* material = nullptr, PrintHead* head = nullptr);
+  /// and every row with a setter read into `target`, its line recorded in `fields` under its field.
+  /// `values_given`: the target holds every value already (a preset's), so none is required.
+  void read_block(const pugi::xml_node& element, std::string_view block, const SchemaTarget& target, FieldLocations* fields = nullptr,
+                  bool values_given = false);
+  /// One row of the table, read from `element` into `target` (a row outside its block's element, as a
+  /// <sensor>'s <update_rate> is).
+  void read_row(const pugi::xml_node& element, const SchemaRow& row, const SchemaTarget& target, FieldLocations* fields = nullptr,
+                bool values_given = false);
   /// Outside the plugin, an element SDF does not have where M3DP reads is a warning (not an error:
   /// the file may be for a newer SDF), naming the known element it is closest to: a typo such as
   /// <modle> would otherwise delete a model without a word.
@@ -403,48 +408,53 @@ void SceneReader::check_children(const pugi::xml_node& element, std::span<const 
   }
 }
 
-void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, FieldLocations* fields, material::Material* material,
-                             PrintHead* head) {
+void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, const SchemaTarget& target, FieldLocations* fields,
+                             bool values_given) {
   const std::vector<const SchemaRow*> rows = schema_block(block);
-  std::vector<std::string_view> names;
-  for (const SchemaRow* row : rows) names.push_back(row->name);
-  check_children(element, names, {});
+  std::vector<std::string_view> names, repeated;
   for (const SchemaRow* row : rows) {
-    const std::string name(row->name);
-    const Presence presence = row->required ? Presence::required : Presence::optional;
-    if (!row->set && !(row->set_material && material) && !(row->set_head && head)) {
-      if (row->required) (void)find_child(element, name.c_str(), presence);
-      continue;
-    }
-    std::optional<double> value;
-    switch (row->kind) {
-      case ValueKind::number: value = read_scalar(element, name.c_str(), row->quantity, row->limits, presence); break;
-      case ValueKind::integer:
-        if (const auto whole = read_int(element, name.c_str(), int(row->limits.at_least.value_or(-2147483648.0)))) {
-          if (row->limits.admits(*whole)) value = *whole;
-          else report(element.child(name.c_str()), fmt::format("<{}> must be a whole number {}, got {}", name, row->limits.describe(""), *whole));
-        }
-        break;
-      case ValueKind::boolean:
-        if (const auto flag = read_bool(element, name.c_str())) value = *flag ? 1 : 0;
-        break;
-      case ValueKind::keyword:
-        if (const pugi::xml_node child = element.child(name.c_str())) {
-          const std::string_view word = leaf_text(child, {});
-          const auto found = std::find(row->words.begin(), row->words.end(), word);
-          if (found != row->words.end())
-            value = double(found - row->words.begin());
-          else
-            report(child, fmt::format("<{}> must be one of: {}; got '{}'", name, row->hint.empty() ? join(row->words) : std::string(row->hint), word));
-        }
-        break;
-      case ValueKind::structure: break;
-    }
-    if (value && row->set) row->set(scene_, *value);
-    if (value && row->set_material) row->set_material(*material, *value);
-    if (value && row->set_head) row->set_head(*head, *value);
-    if (fields) record_field(*fields, std::string(row->field.empty() ? row->name : row->field), element, name.c_str());
+    names.push_back(row->name);
+    if (row->repeated) repeated.push_back(row->name);
   }
+  check_children(element, names, repeated);
+  for (const SchemaRow* row : rows) read_row(element, *row, target, fields, values_given);
+}
+
+void SceneReader::read_row(const pugi::xml_node& element, const SchemaRow& row, const SchemaTarget& target, FieldLocations* fields,
+                           bool values_given) {
+  const std::string name(row.name);
+  const Presence presence = row.required && !values_given ? Presence::required : Presence::optional;
+  if (!row.set) {
+    if (presence == Presence::required) (void)find_child(element, name.c_str(), presence);
+    return;
+  }
+  std::optional<double> value;
+  switch (row.kind) {
+    case ValueKind::number: value = read_scalar(element, name.c_str(), row.quantity, row.limits, presence); break;
+    case ValueKind::integer:
+      if (presence == Presence::required) (void)find_child(element, name.c_str(), presence);
+      if (const auto whole = read_int(element, name.c_str(), int(row.limits.at_least.value_or(-2147483648.0)))) {
+        if (row.limits.admits(*whole)) value = *whole;
+        else report(element.child(name.c_str()), fmt::format("<{}> must be a whole number {}, got {}", name, row.limits.describe(""), *whole));
+      }
+      break;
+    case ValueKind::boolean:
+      if (const auto flag = read_bool(element, name.c_str())) value = *flag ? 1 : 0;
+      break;
+    case ValueKind::keyword:
+      if (const pugi::xml_node child = element.child(name.c_str())) {
+        const std::string_view word = leaf_text(child, {});
+        const auto found = std::find(row.words.begin(), row.words.end(), word);
+        if (found != row.words.end())
+          value = double(found - row.words.begin());
+        else
+          report(child, fmt::format("<{}> must be one of: {}; got '{}'", name, row.hint.empty() ? join(row.words) : std::string(row.hint), word));
+      }
+      break;
+    case ValueKind::structure: break;
+  }
+  if (value) row.set(target, *value);
+  if (fields) record_field(*fields, std::string(row.field.empty() ? row.name : row.field), element, name.c_str());
 }
 
 void SceneReader::check_attributes(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed) {
@@ -995,7 +1005,17 @@ void SceneReader::read_include(const pugi::xml_node& include) {
 
 void SceneReader::read_robot_settings(const pugi::xml_node& element) {
   check_attributes(element, {"name"});
-  check_children(element, {"joint", "mobile_base"}, {"joint"});
+  read_block(element, "robot", &scene_);
+  // The mobile base's own values are checked whether or not the robot is found: every error at once.
+  const pugi::xml_node base = element.child("mobile_base");
+  MobileBase mobile;
+  const std::size_t problems_before = diagnostics_.size();
+  if (base) {
+    check_attributes(base, {});
+    read_block(base, "mobile_base", &mobile);
+    mobile.where = where(base);
+  }
+  bool base_valid = diagnostics_.size() == problems_before;
   const auto name = read_attribute(element, "name", Presence::required);
   if (!name) return;
   check_unique_name(element, *name, robot_setting_names_);
@@ -1008,10 +1028,13 @@ void SceneReader::read_robot_settings(const pugi::xml_node& element) {
                                               : fmt::format(" (robots: {})", fmt::join(names, ", "))));
     return;
   }
+  auto is_joint = [&](const std::string& joint) {
+    return std::find(robot->joint_names.begin(), robot->joint_names.end(), joint) != robot->joint_names.end();
+  };
   for (const auto& joint : child_elements(element, "joint")) {
     const auto joint_name = read_attribute(joint, "name", Presence::required);
     if (!joint_name) continue;
-    if (std::find(robot->joint_names.begin(), robot->joint_names.end(), *joint_name) == robot->joint_names.end()) {
+    if (!is_joint(*joint_name)) {
       report(joint, fmt::format("robot '{}' has no movable joint '{}'; its joints: {}", robot->name, *joint_name,
                                 fmt::join(robot->joint_names, ", ")));
       continue;
@@ -1021,51 +1044,32 @@ void SceneReader::read_robot_settings(const pugi::xml_node& element) {
     const auto value = parse_numbers(joint, text, 1, "an initial joint position (rad, or unit=\"deg\")");
     if (value && factor) robot->initial_joint_positions.emplace_back(*joint_name, value->front() * *factor);
   }
-  if (const pugi::xml_node base = element.child("mobile_base")) {
-    check_attributes(base, {});
-    check_children(base, {"left_wheel", "right_wheel", "wheel_radius", "wheel_separation", "path"});
-    MobileBase mobile;
-    mobile.where = where(base);
-    bool valid = true;
-    for (const auto& [tag, target] : {std::pair{"left_wheel", &mobile.left_wheel_joint}, std::pair{"right_wheel", &mobile.right_wheel_joint}}) {
-      const pugi::xml_node wheel = find_child(base, tag, Presence::required);
-      if (!wheel) {
-        valid = false;
-        continue;
-      }
-      *target = std::string(leaf_text(wheel, {}));
-      if (std::find(robot->joint_names.begin(), robot->joint_names.end(), *target) == robot->joint_names.end()) {
-        report(wheel, fmt::format("robot '{}' has no movable joint '{}' for a wheel; its joints: {}", robot->name, *target,
-                                  fmt::join(robot->joint_names, ", ")));
-        valid = false;
-      }
+  if (!base) return;
+  for (const auto& [tag, target] : {std::pair{"left_wheel", &mobile.left_wheel_joint}, std::pair{"right_wheel", &mobile.right_wheel_joint}}) {
+    const pugi::xml_node wheel = base.child(tag);
+    if (!wheel) continue;
+    *target = std::string(leaf_text(wheel, {}));
+    if (!is_joint(*target)) {
+      report(wheel, fmt::format("robot '{}' has no movable joint '{}' for a wheel; its joints: {}", robot->name, *target,
+                                fmt::join(robot->joint_names, ", ")));
+      base_valid = false;
     }
-    if (const auto radius = read_scalar(base, "wheel_radius", Quantity::length, Limits::positive(), Presence::required))
-      mobile.wheel_radius = Real(*radius);
-    else
-      valid = false;
-    if (const auto separation = read_scalar(base, "wheel_separation", Quantity::length, Limits::positive(), Presence::required))
-      mobile.wheel_separation = Real(*separation);
-    else
-      valid = false;
-    if (const pugi::xml_node path = base.child("path")) {
-      mobile.path = read_path(path);
-      if (!mobile.path) valid = false;
-    }
-    if (valid) robot->mobile_base = std::move(mobile);
   }
+  if (const pugi::xml_node path = base.child("path")) {
+    mobile.path = read_path(path);
+    if (!mobile.path) base_valid = false;
+  }
+  if (base_valid) robot->mobile_base = std::move(mobile);
 }
 
 std::optional<NozzleMount> SceneReader::read_mount(const pugi::xml_node& element) {
   check_attributes(element, {"robot", "link"});
-  check_children(element, {"pose", "barrel_radius"});
   NozzleMount mount;
+  read_block(element, "mount", &mount);
   mount.where = where(element);
   const auto robot_name = read_attribute(element, "robot", Presence::required);
   const auto link = read_attribute(element, "link", Presence::required);
   mount.offset = read_pose(element);
-  if (const auto radius = read_scalar(element, "barrel_radius", Quantity::length, Limits::non_negative(), Presence::optional))
-    mount.barrel_radius = Real(*radius);
   if (!robot_name || !link || !check_robot_link(element, *robot_name, *link)) return std::nullopt;
   mount.robot = *robot_name;
   mount.link = *link;
@@ -1109,44 +1113,28 @@ bool SceneReader::read_camera_settings(const pugi::xml_node& named, const pugi::
     if (!type.empty()) report(named, fmt::format("camera type '{}' is not one M3DP renders; expected camera, depth_camera or rgbd_camera", type));
     valid = false;
   }
-  if (const auto rate = read_scalar(named, "update_rate", Quantity::rate, Limits::positive(), Presence::optional))
-    settings.update_rate = *rate;
-  if (!intrinsics) return valid;
-  if (const auto fov = read_scalar(intrinsics, "horizontal_fov", Quantity::angle, Limits::positive_up_to(3.1), Presence::optional))
-    settings.horizontal_fov = *fov;
-  if (const pugi::xml_node image = intrinsics.child("image")) {
-    check_children(image, {"width", "height", "format", "anti_aliasing"});
-    if (const auto width = read_int(image, "width", 1)) settings.width = *width;
-    if (const auto height = read_int(image, "height", 1)) settings.height = *height;
-    for (const char* side : {"width", "height"})
-      if (const auto pixels = read_int(image, side, 1); pixels && *pixels > 8192) {
-        report(image.child(side), fmt::format("<{}> of a camera image is at most 8192 pixels, got {}", side, *pixels));
-        valid = false;
-      }
-  }
-  if (const pugi::xml_node clip = intrinsics.child("clip")) {
-    check_children(clip, {"near", "far"});
-    if (const auto near = read_scalar(clip, "near", Quantity::length, Limits::positive(), Presence::optional)) settings.near = *near;
-    if (const auto far = read_scalar(clip, "far", Quantity::length, Limits::positive(), Presence::optional)) settings.far = *far;
-    if (settings.far <= settings.near) {
-      report(clip, fmt::format("<far> ({} m) must be beyond <near> ({} m)", settings.far, settings.near));
-      valid = false;
+  // The table's values (schema.cpp). The plugin's <camera> has had its own rows read (read_block);
+  // SDF keeps <update_rate> on the <sensor> and <horizontal_fov> in its <camera>.
+  const std::size_t problems_before = diagnostics_.size();
+  if (named != intrinsics) read_row(named, schema_row("camera", "update_rate"), &settings);
+  if (intrinsics) {
+    if (named != intrinsics) read_row(intrinsics, schema_row("camera", "horizontal_fov"), &settings);
+    if (const pugi::xml_node image = intrinsics.child("image")) read_block(image, "image", &settings);
+    if (const pugi::xml_node clip = intrinsics.child("clip")) {
+      read_block(clip, "clip", &settings);
+      if (diagnostics_.size() == problems_before && settings.far <= settings.near)
+        report(clip, fmt::format("<far> ({} m) must be beyond <near> ({} m)", settings.far, settings.near));
+    }
+    if (const pugi::xml_node noise = intrinsics.child("noise")) {
+      check_attributes(noise, {"type"});
+      const std::string kind = noise.attribute("type") ? noise.attribute("type").value() : std::string(trim(noise.child_value("type")));
+      if (kind != "gaussian" && kind != "none") report(noise, fmt::format("camera noise '{}' is not simulated; expected gaussian (or none)", kind));
+      sensors::CameraSettings read = settings;
+      read_block(noise, "noise", &read);
+      if (kind == "gaussian") settings.noise = read.noise;
     }
   }
-  if (const pugi::xml_node noise = intrinsics.child("noise")) {
-    check_attributes(noise, {"type"});
-    check_children(noise, {"type", "mean", "stddev"});
-    const std::string kind = noise.attribute("type") ? noise.attribute("type").value() : std::string(trim(noise.child_value("type")));
-    if (kind != "gaussian" && kind != "none") {
-      report(noise, fmt::format("camera noise '{}' is not simulated; expected gaussian (or none)", kind));
-      valid = false;
-    } else if (kind == "gaussian") {
-      if (const auto mean = read_scalar(noise, "mean", Quantity::plain_number, Limits::any(), Presence::optional)) settings.noise.mean = *mean;
-      if (const auto stddev = read_scalar(noise, "stddev", Quantity::plain_number, Limits::non_negative(), Presence::optional))
-        settings.noise.stddev = *stddev;
-    }
-  }
-  return valid;
+  return valid && diagnostics_.size() == problems_before;
 }
 
 void SceneReader::read_sensor(const pugi::xml_node& sensor, const Pose& link_pose, const std::string& link_name) {
@@ -1173,11 +1161,12 @@ void SceneReader::read_sensor(const pugi::xml_node& sensor, const Pose& link_pos
 
 void SceneReader::read_plugin_camera(const pugi::xml_node& element) {
   check_attributes(element, {"name", "type"});
-  check_children(element, {"mount", "pose", "update_rate", "horizontal_fov", "image", "clip", "noise", "shadows", "point_cloud"});
   CameraEntry entry;
   entry.where = where(element);
-  bool valid = read_camera_settings(element, element, entry.settings);
-  if (const auto shadows = read_bool(element, "shadows")) entry.settings.shadows = *shadows;
+  // The table checks the children and reads <shadows>; read_camera_settings reads the rest.
+  const std::size_t problems_before = diagnostics_.size();
+  read_block(element, "camera", &entry.settings);
+  bool valid = read_camera_settings(element, element, entry.settings) && diagnostics_.size() == problems_before;
   if (const pugi::xml_node cloud = element.child("point_cloud")) {
     // <point_cloud frame="optical|world">true</point_cloud>
     const std::string_view text = leaf_text(cloud, {"frame"});
@@ -1199,7 +1188,7 @@ void SceneReader::read_plugin_camera(const pugi::xml_node& element) {
   }
   if (const pugi::xml_node mount = element.child("mount")) {
     check_attributes(mount, {"robot", "link"});
-    check_children(mount, {"pose"});
+    check_children(mount, {"pose"});  // the camera's mount: only its pose (a print head's <mount> has a barrel too)
     if (element.child("pose")) {
       report(element.child("pose"), "a mounted camera's <pose> goes inside its <mount> (in the link's frame)");
       valid = false;
@@ -1384,11 +1373,9 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
 // ---- the m3dp plugin ----
 
 void SceneReader::read_plugin(const pugi::xml_node& plugin) {
-  check_children(plugin, {"solver", "air", "material", "fluid_block", "print_head", "robot", "output", "meshing", "camera",
-                          "coordinator"},
-                 {"material", "fluid_block", "print_head", "robot", "camera"});
+  read_block(plugin, "plugin", &scene_);
   // The solver comes first: other checks need the particle radius and the bounds.
-  if (const pugi::xml_node solver = find_child(plugin, "solver", Presence::required)) read_solver(solver);
+  if (const pugi::xml_node solver = plugin.child("solver")) read_solver(solver);
   if (const pugi::xml_node air = plugin.child("air")) read_air(air);
   for (const auto& material : child_elements(plugin, "material")) read_material(material);
   for (const auto& block : child_elements(plugin, "fluid_block")) read_fluid_block(block);
@@ -1467,7 +1454,7 @@ void SceneReader::read_air(const pugi::xml_node& air) {
   // the block is there, unless <drag>false</drag>.
   check_attributes(air, {});
   scene_.solver.air_drag = true;
-  read_block(air, "air", &scene_.solver_fields);
+  read_block(air, "air", &scene_, &scene_.solver_fields);
   if (const auto velocity = read_vector(air, "velocity", Quantity::speed, Presence::optional)) scene_.solver.air_velocity = *velocity;
 }
 
@@ -1476,7 +1463,7 @@ void SceneReader::read_solver(const pugi::xml_node& solver) {
   sph::SolverSettings& settings = scene_.solver;
   scene_.solver_fields.emplace_back("", where(solver));  // for settings the file does not name
   // The table's values (schema.cpp), then what ties them together or is not a plain value.
-  read_block(solver, "solver", &scene_.solver_fields);
+  read_block(solver, "solver", &scene_, &scene_.solver_fields);
   if (solver.child("particle_radius") && settings.particle_radius > 0) particle_radius_ = settings.particle_radius;
   if (const auto limit = read_scalar(solver, "max_particles", Quantity::plain_number, Limits::positive(), Presence::optional))
     max_particles_ = *limit;
@@ -1540,7 +1527,7 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
   material::Material material = base ? *base : material::Material{};
   bool valid = true;
   // The table's values (schema.cpp: density, nozzle_wall, surface_tension, adhesion), then what is special.
-  read_block(element, "material", &fields, &material);
+  read_block(element, "material", &material, &fields);
   if (!base && !find_child(element, "density", Presence::required)) valid = false;
   const pugi::xml_node viscosity = element.child("viscosity");
   const pugi::xml_node rheology = element.child("rheology");
@@ -1610,65 +1597,23 @@ std::optional<material::Rheology> SceneReader::read_rheology(const pugi::xml_nod
   const bool over_base = base && base->model == *model;
   material::Rheology rheology = over_base ? *base : material::Rheology{};
   rheology.model = *model;
-  const Presence required = over_base ? Presence::optional : Presence::required;
-  const Limits positive = Limits::positive();
-  const Limits non_negative = Limits::non_negative();
-  bool valid = true;
-  auto read = [&](const char* name, Quantity quantity, const Limits& limits, Presence presence, Real& field) {
-    if (const auto value = read_scalar(element, name, quantity, limits, presence)) {
-      field = Real(*value);
-    } else if (presence == Presence::required || element.child(name)) {
-      valid = false;
-    }
-  };
-  switch (*model) {
-    case RheologyModel::newtonian:
-      check_children(element, {"viscosity"});
-      read("viscosity", Quantity::dynamic_viscosity, non_negative, required, rheology.viscosity);
-      break;
-    case RheologyModel::power_law:
-      check_children(element, {"consistency", "flow_index", "max_viscosity"});
-      read("consistency", Quantity::consistency, positive, required, rheology.consistency);
-      read("flow_index", Quantity::plain_number, Limits::positive_up_to(2), required, rheology.flow_index);
-      break;
-    case RheologyModel::cross:
-    case RheologyModel::carreau:
-      check_children(element, {"zero_shear_viscosity", "infinite_shear_viscosity", "time_constant", "flow_index", "max_viscosity"});
-      read("zero_shear_viscosity", Quantity::dynamic_viscosity, positive, required, rheology.viscosity);
-      read("infinite_shear_viscosity", Quantity::dynamic_viscosity, non_negative, Presence::optional,
-           rheology.infinite_shear_viscosity);
-      read("time_constant", Quantity::time, positive, required, rheology.time_constant);
-      read("flow_index", Quantity::plain_number, Limits::positive_up_to(2), required, rheology.flow_index);
-      if (valid && rheology.infinite_shear_viscosity > rheology.viscosity) {
-        report(element.child("infinite_shear_viscosity"),
-               fmt::format("<infinite_shear_viscosity> ({} Pa*s) must not exceed <zero_shear_viscosity> ({} Pa*s)",
-                           rheology.infinite_shear_viscosity, rheology.viscosity));
-        valid = false;
-      }
-      break;
-    case RheologyModel::bingham:
-      check_children(element, {"yield_stress", "plastic_viscosity", "regularization", "max_viscosity"});
-      read("yield_stress", Quantity::stress, non_negative, required, rheology.yield_stress);
-      read("plastic_viscosity", Quantity::dynamic_viscosity, positive, required, rheology.viscosity);
-      break;
-    case RheologyModel::herschel_bulkley:
-      check_children(element, {"yield_stress", "consistency", "flow_index", "regularization", "max_viscosity"});
-      read("yield_stress", Quantity::stress, non_negative, required, rheology.yield_stress);
-      read("consistency", Quantity::consistency, positive, required, rheology.consistency);
-      read("flow_index", Quantity::plain_number, Limits::positive_up_to(2), required, rheology.flow_index);
-      break;
+  // The model's parameters from its rows (schema.cpp), then what ties them together.
+  const std::size_t problems_before = diagnostics_.size();
+  read_block(element, fmt::format("rheology {}", material::to_string(*model)), &rheology, nullptr, over_base);
+  bool valid = diagnostics_.size() == problems_before;
+  if (valid && rheology.infinite_shear_viscosity > rheology.viscosity) {
+    report(element.child("infinite_shear_viscosity"),
+           fmt::format("<infinite_shear_viscosity> ({} Pa*s) must not exceed <zero_shear_viscosity> ({} Pa*s)",
+                       rheology.infinite_shear_viscosity, rheology.viscosity));
+    valid = false;
   }
-  if (material::has_yield_stress(*model))
-    read("regularization", Quantity::time, positive, Presence::optional, rheology.regularization);
-  if (*model != RheologyModel::newtonian)
-    read("max_viscosity", Quantity::dynamic_viscosity, positive, Presence::optional, rheology.max_viscosity);
   if (!valid) return std::nullopt;
   return rheology;
 }
 
 void SceneReader::read_ageing(const pugi::xml_node& element, material::Material& material) {
   check_attributes(element, {});
-  read_block(element, "ageing", nullptr, &material);
+  read_block(element, "ageing", &material);
 }
 
 void SceneReader::read_granular(const pugi::xml_node& element, material::Material& material, FieldLocations& fields) {
@@ -1676,21 +1621,21 @@ void SceneReader::read_granular(const pugi::xml_node& element, material::Materia
   check_attributes(element, {});
   material.granular.enabled = true;
   fields.emplace_back("granular", where(element));
-  read_block(element, "granular", &fields, &material);
+  read_block(element, "granular", &material, &fields);
 }
 
 void SceneReader::read_micropolar(const pugi::xml_node& element, material::Material& material) {
   // <micropolar/> on its own turns the model on with its defaults.
   check_attributes(element, {});
   material.micropolar.enabled = true;
-  read_block(element, "micropolar", nullptr, &material);
+  read_block(element, "micropolar", &material);
 }
 
 void SceneReader::read_elasticity(const pugi::xml_node& element, material::Material& material, FieldLocations& fields) {
   check_attributes(element, {});
   material.elasticity.enabled = true;
   fields.emplace_back("elasticity", where(element));
-  read_block(element, "elasticity", &fields, &material);
+  read_block(element, "elasticity", &material, &fields);
 }
 
 const std::vector<MaterialEntry>& SceneReader::material_presets() {
@@ -1732,8 +1677,8 @@ std::vector<MaterialEntry> SceneReader::read_material_library() {
 
 void SceneReader::read_fluid_block(const pugi::xml_node& element) {
   check_attributes(element, {"name", "material"});
-  check_children(element, {"min", "max", "velocity", "cylinder"});
   FluidBlock block;
+  read_block(element, "fluid_block", &block);
   block.name = read_attribute(element, "name", Presence::required).value_or("");
   block.material = read_attribute(element, "material", Presence::required).value_or("");
   block.where = where(element);
@@ -1747,13 +1692,12 @@ void SceneReader::read_fluid_block(const pugi::xml_node& element) {
       report(cylinder, fmt::format("{} has both <cylinder> and <min>/<max>; give one shape", describe(element)));
     }
     check_attributes(cylinder, {});
-    check_children(cylinder, {"base", "radius", "height"});
-    const auto base = read_vector(cylinder, "base", Quantity::length, Presence::required);
-    const auto radius = read_scalar(cylinder, "radius", Quantity::length, Limits::positive(), Presence::required);
-    const auto height = read_scalar(cylinder, "height", Quantity::length, Limits::positive(), Presence::required);
-    if (base && radius && height) {
-      box = Aabb{*base - Vec3(Real(*radius), Real(*radius), 0), *base + Vec3(Real(*radius), Real(*radius), Real(*height))};
-      block.cylinder_radius = Real(*radius);
+    const std::size_t problems_before = diagnostics_.size();
+    read_block(cylinder, "cylinder", &block);
+    const auto base = read_vector(cylinder, "base", Quantity::length, Presence::optional);
+    if (base && diagnostics_.size() == problems_before) {
+      const Real radius = *block.cylinder_radius;
+      box = Aabb{*base - Vec3(radius, radius, 0), *base + Vec3(radius, radius, block.cylinder_height)};
     }
   } else {
     box = read_box(element);
@@ -1772,18 +1716,18 @@ void SceneReader::read_fluid_block(const pugi::xml_node& element) {
 
 void SceneReader::read_print_head(const pugi::xml_node& element) {
   check_attributes(element, {"name", "material"});
-  check_children(element, {"nozzle", "path", "mount"});
   PrintHead head;
+  read_block(element, "print_head", &head);
   head.name = read_attribute(element, "name", Presence::required).value_or("");
   head.material = read_attribute(element, "material", Presence::required).value_or("");
   head.where = where(element);
   if (!head.name.empty()) check_unique_name(element, head.name, print_head_names_);
   if (!head.material.empty()) material_uses_.push_back(MaterialUse{head.material, describe(element), head.where});
 
-  if (const pugi::xml_node nozzle = find_child(element, "nozzle", Presence::required)) {
+  if (const pugi::xml_node nozzle = element.child("nozzle")) {
     check_attributes(nozzle, {});
     // The table's values (schema.cpp), then the checks against the particles and each other.
-    read_block(nozzle, "nozzle", &head.nozzle_fields, nullptr, &head);
+    read_block(nozzle, "nozzle", &head, &head.nozzle_fields);
     if (nozzle.child("inner_diameter") && particle_radius_ && head.inner_diameter < 2 * *particle_radius_) {
       report(nozzle.child("inner_diameter"),
              fmt::format("the nozzle is narrower than one particle: <inner_diameter> {} m is below the particle "
@@ -1799,7 +1743,7 @@ void SceneReader::read_print_head(const pugi::xml_node& element) {
                                                            head.outer_diameter, head.inner_diameter));
     }
   }
-  if (const pugi::xml_node path = find_child(element, "path", Presence::required)) {
+  if (const pugi::xml_node path = element.child("path")) {
     if (auto trajectory = read_path(path)) head.trajectory = std::move(*trajectory);
   }
   if (const pugi::xml_node mount = element.child("mount")) head.mount = read_mount(mount);
@@ -2024,12 +1968,12 @@ std::optional<toolpath::Curve> SceneReader::read_curve(const pugi::xml_node& ele
 
 void SceneReader::read_output(const pugi::xml_node& output) {
   check_attributes(output, {});
-  read_block(output, "output");
+  read_block(output, "output", &scene_);
 }
 
 void SceneReader::read_meshing(const pugi::xml_node& meshing) {
   check_attributes(meshing, {});
-  read_block(meshing, "meshing");
+  read_block(meshing, "meshing", &scene_);
   MeshingSettings& settings = scene_.meshing;
   settings.enabled = true;
   settings.where = where(meshing);
@@ -2061,7 +2005,7 @@ void SceneReader::read_meshing(const pugi::xml_node& meshing) {
 
 void SceneReader::read_coordinator(const pugi::xml_node& coordinator) {
   check_attributes(coordinator, {"enabled"});
-  read_block(coordinator, "coordinator");
+  read_block(coordinator, "coordinator", &scene_);
   CoordinatorSettings& settings = scene_.coordinator;
   settings.enabled = read_bool_attribute(coordinator, "enabled").value_or(true);
   settings.where = where(coordinator);

@@ -101,6 +101,7 @@ struct FluidBlock {
   std::string material;
   Aabb box;                            // m
   std::optional<Real> cylinder_radius; // m; the cylinder's axis is the box's vertical centre line
+  Real cylinder_height = 0;            // m, as read (the box holds it too)
   Vec3 initial_velocity = Vec3::Zero();  // m/s
   SourceLocation where;
 };

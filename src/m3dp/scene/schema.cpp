@@ -5,6 +5,8 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <stdexcept>
+#include <type_traits>
 
 #include "m3dp/material/material.hpp"
 #include "m3dp/scene/scene.hpp"
@@ -95,51 +97,99 @@ using Row = SchemaRow;
 std::string number_text(double value) { return fmt::format("{:g}", value); }
 std::string bool_text(bool value) { return value ? "true" : "false"; }
 
+/// The type a setter fills: its first parameter, without const and reference.
+template <class F>
+struct TargetOf : TargetOf<decltype(&F::operator())> {};
+template <class C, class R, class A, class... Rest>
+struct TargetOf<R (C::*)(A, Rest...) const> {
+  using type = std::remove_cvref_t<A>;
+};
+
+/// A row's setter and show from ones of the block's own target type.
+template <class Set>
+std::function<void(const SchemaTarget&, double)> bind_set(Set set) {
+  using Target = typename TargetOf<Set>::type;
+  return [set](const SchemaTarget& target, double value) { set(*std::get<Target*>(target), value); };
+}
+template <class Show>
+std::function<std::string(const SchemaTarget&)> bind_show(Show show) {
+  using Target = typename TargetOf<Show>::type;
+  return [show](const SchemaTarget& target) { return show(*std::get<Target*>(target)); };
+}
+/// Set and show of a plain number member (Real, double or int) of a block's target.
+template <class Target, class Value>
+auto member_set(Value Target::*member) {
+  return [member](Target& target, double value) { target.*member = Value(value); };
+}
+template <class Target, class Value>
+auto member_show(Value Target::*member) {
+  return [member](const Target& target) { return number_text(double(target.*member)); };
+}
+#define M3DP_MEMBER(Type, member) member_set(&Type::member), member_show(&Type::member)
+
 std::vector<SchemaRow> make_rows() {
   std::vector<SchemaRow> rows;
-  auto number = [&](std::string_view block, std::string_view name, Quantity quantity, Limits limits, std::string_view doc,
-                    std::function<void(Scene&, double)> set, std::function<std::string(const Scene&)> show, std::string_view field = {}) {
+  auto add = [&](std::string_view block, std::string_view name, ValueKind kind, std::string_view doc) -> Row& {
     Row row;
-    row.block = block, row.name = name, row.kind = ValueKind::number, row.quantity = quantity, row.limits = limits, row.doc = doc;
-    row.set = std::move(set), row.show = std::move(show), row.field = field;
+    row.block = block, row.name = name, row.kind = kind, row.doc = doc;
     rows.push_back(std::move(row));
-    return &rows.back();
+    return rows.back();
   };
-  auto integer = [&](std::string_view block, std::string_view name, Limits limits, std::string_view doc,
-                     std::function<void(Scene&, double)> set, std::function<std::string(const Scene&)> show) {
-    Row row;
-    row.block = block, row.name = name, row.kind = ValueKind::integer, row.limits = limits, row.doc = doc;
-    row.set = std::move(set), row.show = std::move(show);
-    rows.push_back(std::move(row));
+  auto number = [&](std::string_view block, std::string_view name, Quantity quantity, Limits limits, std::string_view doc, auto set,
+                    auto show, std::string_view field = {}) -> Row& {
+    Row& row = add(block, name, ValueKind::number, doc);
+    row.quantity = quantity, row.limits = limits, row.field = field;
+    row.set = bind_set(set), row.show = bind_show(show);
+    return row;
   };
-  auto boolean = [&](std::string_view block, std::string_view name, std::string_view doc, std::function<void(Scene&, bool)> set,
-                     std::function<bool(const Scene&)> get) {
-    Row row;
-    row.block = block, row.name = name, row.kind = ValueKind::boolean, row.doc = doc;
-    row.set = [set](Scene& scene, double value) { set(scene, value != 0); };
-    row.show = [get](const Scene& scene) { return bool_text(get(scene)); };
-    rows.push_back(std::move(row));
+  auto integer = [&](std::string_view block, std::string_view name, Limits limits, std::string_view doc, auto set, auto show) -> Row& {
+    Row& row = add(block, name, ValueKind::integer, doc);
+    row.limits = limits, row.set = bind_set(set), row.show = bind_show(show);
+    return row;
+  };
+  auto boolean = [&](std::string_view block, std::string_view name, std::string_view doc, auto set, auto get) -> Row& {
+    Row& row = add(block, name, ValueKind::boolean, doc);
+    row.set = bind_set([set](typename TargetOf<decltype(set)>::type& target, double value) { set(target, value != 0); });
+    row.show = bind_show([get](const typename TargetOf<decltype(get)>::type& target) { return bool_text(get(target)); });
+    return row;
   };
   auto keyword = [&](std::string_view block, std::string_view name, std::vector<std::string_view> words, std::string_view hint,
-                     std::string_view doc, std::function<void(Scene&, std::size_t)> set, std::function<std::size_t(const Scene&)> get) {
-    Row row;
-    row.block = block, row.name = name, row.kind = ValueKind::keyword, row.words = std::move(words), row.hint = hint, row.doc = doc;
-    row.set = [set](Scene& scene, double index) { set(scene, std::size_t(index)); };
-    row.show = [get, words = row.words](const Scene& scene) { return std::string(words[get(scene)]); };
-    rows.push_back(std::move(row));
+                     std::string_view doc, auto set, auto get) -> Row& {
+    Row& row = add(block, name, ValueKind::keyword, doc);
+    row.words = std::move(words), row.hint = hint;
+    row.set = bind_set([set](typename TargetOf<decltype(set)>::type& target, double index) { set(target, std::size_t(index)); });
+    row.show = bind_show([get, words = row.words](const typename TargetOf<decltype(get)>::type& target) {
+      return std::string(words[get(target)]);
+    });
+    return row;
   };
-  auto structure = [&](std::string_view block, std::string_view name, std::string_view doc, bool required = false) {
-    Row row;
-    row.block = block, row.name = name, row.kind = ValueKind::structure, row.doc = doc, row.required = required;
-    rows.push_back(std::move(row));
+  auto structure = [&](std::string_view block, std::string_view name, std::string_view doc, bool required = false,
+                       bool repeated = false) -> Row& {
+    Row& row = add(block, name, ValueKind::structure, doc);
+    row.required = required, row.repeated = repeated;
+    return row;
   };
+
+  // ---- <plugin name="m3dp">: its blocks ----
+  structure("plugin", "solver", "the SPH solver: the block below", true);
+  structure("plugin", "air", "the air around the print: the block below");
+  structure("plugin", "material", "a material, named, that fluid blocks and print heads use: the block below", false, true);
+  structure("plugin", "fluid_block", "material at the start, in a box or a cylinder: the block below", false, true);
+  structure("plugin", "print_head", "a nozzle moved along a path: the block below", false, true);
+  structure("plugin", "robot", "settings of a robot <include>d in the world (by its name): the block below", false, true);
+  structure("plugin", "output", "what a run writes: the block below");
+  structure("plugin", "meshing", "surface meshes of the material during the run: the block below");
+  structure("plugin", "camera", "a camera in the world or on a robot: the block below (SDF <sensor type=\"camera\"> in a static "
+                                "model's link works too)", false, true);
+  structure("plugin", "coordinator", "several robots sharing a workspace: the block below");
+
 #define M3DP_SOLVER_REAL(member) \
   [](Scene& scene, double value) { scene.solver.member = Real(value); }, [](const Scene& scene) { return number_text(scene.solver.member); }
 
   // ---- <solver> ----
   number("solver", "particle_radius", Quantity::length, Limits::positive(),
          "the particles' radius; their rest spacing is twice it, and the kernel's support four times it", M3DP_SOLVER_REAL(particle_radius))
-      ->required = true;
+      .required = true;
   keyword("solver", "kernel", {"cubic_spline", "wendland_c2"}, {}, "the SPH kernel",
           [](Scene& scene, std::size_t word) { scene.solver.kernel = word == 0 ? sph::KernelType::cubic_spline : sph::KernelType::wendland_c2; },
           [](const Scene& scene) { return std::size_t(scene.solver.kernel == sph::KernelType::cubic_spline ? 0 : 1); });
@@ -167,7 +217,7 @@ std::vector<SchemaRow> make_rows() {
   number("solver", "end_time", Quantity::time, Limits::positive(), "simulated time a run goes to (m3dp run --until overrides it)",
          [](Scene& scene, double value) { scene.end_time = value; }, [](const Scene& scene) { return number_text(scene.end_time); });
   structure("solver", "bounds",
-            "the box the simulation lives in (<min>x y z</min> <max>x y z</max>, m); material leaving it is removed and counted", true);
+            "the box the simulation lives in (`<min>x y z</min> <max>x y z</max>`, m); material leaving it is removed and counted", true);
   keyword("solver", "viscosity_solver", {"implicit", "explicit"},
           "implicit (Weiler et al. 2018, any viscosity), explicit (Morris et al. 1997, water-like fluids)", "how viscosity is solved",
           [](Scene& scene, std::size_t word) {
@@ -297,21 +347,12 @@ std::vector<SchemaRow> make_rows() {
          [](const Scene& scene) { return number_text(scene.coordinator.print_clearance); });
   structure("coordinator", "priority", "robot names, highest priority first; those not named follow in scene order");
   // ---- <material> and its parts: these fill a material (a preset's values under a scene's) ----
-  auto material_number = [&](std::string_view block, std::string_view name, Quantity quantity, Limits limits, std::string_view doc,
-                             std::function<void(material::Material&, double)> set,
-                             std::function<std::string(const material::Material&)> show, std::string_view field = {}) {
-    Row row;
-    row.block = block, row.name = name, row.kind = ValueKind::number, row.quantity = quantity, row.limits = limits, row.doc = doc;
-    row.set_material = std::move(set), row.show_material = std::move(show), row.field = field;
-    rows.push_back(std::move(row));
-    return &rows.back();
-  };
 #define M3DP_MATERIAL_REAL(member) \
   [](material::Material& material, double value) { material.member = Real(value); }, \
       [](const material::Material& material) { return number_text(material.member); }
-  material_number("material", "density", Quantity::density, Limits::positive(), "the material's density at rest",
+  number("material", "density", Quantity::density, Limits::positive(), "the material's density at rest",
                   M3DP_MATERIAL_REAL(density))
-      ->show_material = [](const material::Material&) { return std::string("required unless a preset= gives it"); };
+      .show = [](const SchemaTarget&) { return std::string("required unless a preset= gives it"); };
   structure("material", "viscosity", "a Newtonian material's dynamic viscosity (Pa·s, ≥ 0); or give <rheology>");
   structure("material", "rheology", "a non-Newtonian material: model= power_law, cross, carreau, bingham or herschel_bulkley, and its "
                                     "parameters (README, \"Materials\")");
@@ -319,17 +360,13 @@ std::vector<SchemaRow> make_rows() {
   structure("material", "boundary_viscosity",
             "friction against walls, bodies and the nozzle: a viscosity (Pa·s, Navier slip), or no_slip (the material sticks); "
             "default 0, free slip");
-  {
-    Row row;
-    row.block = "material", row.name = "nozzle_wall", row.kind = ValueKind::keyword, row.words = {"free_slip", "no_slip"};
-    row.doc = "the slip of a nozzle's bore (El Abbaoui et al. 2024 found free slip matches printed concrete better)";
-    row.set_material = [](material::Material& material, double word) { material.nozzle_no_slip = word != 0; };
-    row.show_material = [](const material::Material& material) { return std::string(material.nozzle_no_slip ? "no_slip" : "free_slip"); };
-    rows.push_back(std::move(row));
-  }
-  material_number("material", "surface_tension", Quantity::surface_tension, Limits::non_negative(), "σ against air; 0: none",
+  keyword("material", "nozzle_wall", {"free_slip", "no_slip"}, {},
+          "the slip of a nozzle's bore (El Abbaoui et al. 2024 found free slip matches printed concrete better)",
+          [](material::Material& material, std::size_t word) { material.nozzle_no_slip = word != 0; },
+          [](const material::Material& material) { return std::size_t(material.nozzle_no_slip ? 1 : 0); });
+  number("material", "surface_tension", Quantity::surface_tension, Limits::non_negative(), "σ against air; 0: none",
                   M3DP_MATERIAL_REAL(surface_tension));
-  material_number("material", "adhesion", Quantity::surface_tension, Limits::non_negative(),
+  number("material", "adhesion", Quantity::surface_tension, Limits::non_negative(),
                   "the work of adhesion to walls, σ(1 + cos θ) (akinci2013 only); 0: none", M3DP_MATERIAL_REAL(adhesion));
   structure("material", "granular", "discrete spheres instead of a fluid (Cundall and Strack 1979): the block below");
   structure("material", "micropolar", "micro-rotation of the particles (Bender et al. 2017): the block below");
@@ -337,55 +374,168 @@ std::vector<SchemaRow> make_rows() {
   structure("material", "source", "where the values come from (a paper, a data sheet): text, not read");
   structure("material", "color", "the colour cameras see it in (r g b, 0 to 1)");
 
-  material_number("ageing", "structuration_rate", Quantity::stress_rate, Limits::non_negative(),
+  number("ageing", "structuration_rate", Quantity::stress_rate, Limits::non_negative(),
                   "A_thix: the yield stress grows by this each second of a particle's age (Roussel 2006); 0: none",
                   M3DP_MATERIAL_REAL(ageing.structuration_rate));
-  material_number("ageing", "viscosity_growth", Quantity::rate, Limits::non_negative(),
+  number("ageing", "viscosity_growth", Quantity::rate, Limits::non_negative(),
                   "the viscosity parameter's relative growth per second of age; 0: none", M3DP_MATERIAL_REAL(ageing.viscosity_growth));
 
-  material_number("granular", "stiffness", Quantity::stiffness, Limits::positive(),
+  number("granular", "stiffness", Quantity::stiffness, Limits::positive(),
                   "the contacts' normal spring; unset: derived from the particle size", M3DP_MATERIAL_REAL(granular.stiffness));
-  material_number("granular", "restitution", Quantity::plain_number, Limits{0.0, std::nullopt, 1.0, std::nullopt},
+  number("granular", "restitution", Quantity::plain_number, Limits{0.0, std::nullopt, 1.0, std::nullopt},
                   "the normal coefficient of restitution of a binary collision", M3DP_MATERIAL_REAL(granular.restitution),
                   "granular.restitution");
-  material_number("granular", "friction", Quantity::plain_number, Limits::non_negative(), "the Coulomb friction coefficient",
+  number("granular", "friction", Quantity::plain_number, Limits::non_negative(), "the Coulomb friction coefficient",
                   M3DP_MATERIAL_REAL(granular.friction));
 
-  material_number("micropolar", "vortex_viscosity", Quantity::dynamic_viscosity, Limits::positive(),
+  number("micropolar", "vortex_viscosity", Quantity::dynamic_viscosity, Limits::positive(),
                   "μ_t, the coupling of micro-rotation and vorticity", M3DP_MATERIAL_REAL(micropolar.vortex_viscosity));
-  material_number("micropolar", "microinertia", Quantity::area, Limits::positive(),
+  number("micropolar", "microinertia", Quantity::area, Limits::positive(),
                   "Θ; unset: that of the sphere of one particle's volume, (2/5) R²", M3DP_MATERIAL_REAL(micropolar.microinertia));
-  material_number("micropolar", "angular_smoothing", Quantity::fraction, Limits::between(0, 1),
+  number("micropolar", "angular_smoothing", Quantity::fraction, Limits::between(0, 1),
                   "smoothing of the micro-rotation towards its neighbours' per step", M3DP_MATERIAL_REAL(micropolar.angular_smoothing));
 
-  material_number("elasticity", "shear_modulus", Quantity::stress, Limits::positive(), "G; Young's modulus is 2G(1 + ν)",
+  number("elasticity", "shear_modulus", Quantity::stress, Limits::positive(), "G; Young's modulus is 2G(1 + ν)",
                   M3DP_MATERIAL_REAL(elasticity.shear_modulus), "elasticity.shear_modulus")
-      ->required = true;
-  material_number("elasticity", "poisson_ratio", Quantity::plain_number, Limits::between(0, 0.49),
+      .required = true;
+  number("elasticity", "poisson_ratio", Quantity::plain_number, Limits::between(0, 0.49),
                   "ν; soft pastes and gels are nearly incompressible", M3DP_MATERIAL_REAL(elasticity.poisson_ratio), "elasticity.poisson_ratio");
-  material_number("elasticity", "relaxation_time", Quantity::time, Limits::non_negative(),
+  number("elasticity", "relaxation_time", Quantity::time, Limits::non_negative(),
                   "τ of the stress relaxation (a Maxwell fluid); 0: none, an elastic solid", M3DP_MATERIAL_REAL(elasticity.relaxation_time));
 #undef M3DP_MATERIAL_REAL
 
   // ---- <print_head><nozzle> ----
-  auto nozzle_number = [&](std::string_view name, Limits limits, std::string_view doc, Real PrintHead::*member) {
-    Row row;
-    row.block = "nozzle", row.name = name, row.kind = ValueKind::number, row.quantity = name == "exit_speed" ? Quantity::speed : Quantity::length;
-    row.limits = limits, row.doc = doc;
-    row.set_head = [member](PrintHead& head, double value) { head.*member = Real(value); };
-    row.show_head = [member](const PrintHead& head) { return number_text(head.*member); };
-    rows.push_back(std::move(row));
-    return &rows.back();
-  };
-  nozzle_number("inner_diameter", Limits::positive(), "the bore D (at least a particle diameter)", &PrintHead::inner_diameter)->required = true;
-  nozzle_number("exit_speed", Limits::positive(), "the material's mean speed U out of the exit: the flow is π D²/4 · U (a G-code's E replaces it)",
-                &PrintHead::exit_speed)
-      ->required = true;
+  number("nozzle", "inner_diameter", Quantity::length, Limits::positive(), "the bore D (at least a particle diameter)",
+         M3DP_MEMBER(PrintHead, inner_diameter))
+      .required = true;
+  number("nozzle", "exit_speed", Quantity::speed, Limits::positive(),
+         "the material's mean speed U out of the exit: the flow is π D²/4 · U (a G-code's E replaces it)", M3DP_MEMBER(PrintHead, exit_speed))
+      .required = true;
   structure("nozzle", "direction", "the unit vector the material leaves along (x y z); default straight down, 0 0 -1");
-  nozzle_number("bore_length", Limits::non_negative(), "the bore's walls above the exit (at least two diameters); 0: none, the exit is the inlet",
-                &PrintHead::bore_length);
-  nozzle_number("outer_diameter", Limits::positive(), "the tip's lip, an annulus from the bore out to this (more than <inner_diameter>); unset: "
-                "a wall one particle thick", &PrintHead::outer_diameter);
+  number("nozzle", "bore_length", Quantity::length, Limits::non_negative(),
+         "the bore's walls above the exit (at least two diameters); 0: none, the exit is the inlet", M3DP_MEMBER(PrintHead, bore_length));
+  number("nozzle", "outer_diameter", Quantity::length, Limits::positive(),
+         "the tip's lip, an annulus from the bore out to this (more than <inner_diameter>); unset: a wall one particle thick",
+         M3DP_MEMBER(PrintHead, outer_diameter));
+
+  // ---- <print_head>: its parts, and where it is carried ----
+  structure("print_head", "nozzle", "the nozzle: the block below", true);
+  structure("print_head", "path", "where it goes and when it extrudes: <line>, <polyline>, <circle>, <helix>, <wall>, <waypoints> or "
+                                  "<gcode> (README, \"Print paths\")", true);
+  structure("print_head", "mount", "on a robot: the block below; unset: an ideal gantry moves the nozzle exactly along the path");
+  structure("mount", "pose", "the nozzle exit's frame in the link's frame (x y z roll pitch yaw; z the way material leaves)");
+  number("mount", "barrel_radius", Quantity::length, Limits::non_negative(),
+         "a cylinder from the link to the exit that collides with and displaces the material; 0: none", M3DP_MEMBER(NozzleMount, barrel_radius));
+
+  // ---- <fluid_block> ----
+  structure("fluid_block", "min", "the box's lower corner (x y z, m); with <max>, or give <cylinder>");
+  structure("fluid_block", "max", "the box's upper corner (x y z, m)");
+  structure("fluid_block", "velocity", "the material's velocity at the start (x y z, m/s); default at rest");
+  structure("fluid_block", "cylinder", "a vertical cylinder instead of a box (a slump test's mould): the block below");
+  structure("cylinder", "base", "the centre of its bottom (x y z, m)", true);
+  number("cylinder", "radius", Quantity::length, Limits::positive(), "its radius",
+         [](FluidBlock& block, double value) { block.cylinder_radius = Real(value); },
+         [](const FluidBlock& block) { return block.cylinder_radius ? number_text(*block.cylinder_radius) : std::string("—"); })
+      .required = true;
+  number("cylinder", "height", Quantity::length, Limits::positive(), "its height", M3DP_MEMBER(FluidBlock, cylinder_height)).required = true;
+
+  // ---- <rheology model="...">: each model's parameters (Rheology, material/rheology/generalized_newtonian.hpp) ----
+  const Limits flow_index_limits = Limits::positive_up_to(2);
+  auto max_viscosity = [&](std::string_view block) {
+    number(block, "max_viscosity", Quantity::dynamic_viscosity, Limits::positive(),
+           "the cap of the viscosity (at rest, in the plug): the stiffest the solver sees", M3DP_MEMBER(material::Rheology, max_viscosity));
+  };
+  auto yield_stress = [&](std::string_view block) {
+    number(block, "yield_stress", Quantity::stress, Limits::non_negative(), "τ0: below it the material stands (before ageing raises it)",
+           M3DP_MEMBER(material::Rheology, yield_stress))
+        .required = true;
+  };
+  auto regularization = [&](std::string_view block) {
+    number(block, "regularization", Quantity::time, Limits::positive(),
+           "Papanastasiou's m: the unyielded material's viscosity is about τ0·m", M3DP_MEMBER(material::Rheology, regularization));
+  };
+  auto consistency = [&](std::string_view block) {
+    number(block, "consistency", Quantity::consistency, Limits::positive(), "K: the viscosity is K γ̇ⁿ⁻¹ (plus τ0/γ̇ with a yield stress)",
+           M3DP_MEMBER(material::Rheology, consistency))
+        .required = true;
+  };
+  auto flow_index = [&](std::string_view block) {
+    number(block, "flow_index", Quantity::plain_number, flow_index_limits, "n: below 1 shear-thinning, above 1 shear-thickening",
+           M3DP_MEMBER(material::Rheology, flow_index))
+        .required = true;
+  };
+  number("rheology newtonian", "viscosity", Quantity::dynamic_viscosity, Limits::non_negative(), "μ (the same as the material's <viscosity>)",
+         M3DP_MEMBER(material::Rheology, viscosity))
+      .required = true;
+  consistency("rheology power_law");
+  flow_index("rheology power_law");
+  max_viscosity("rheology power_law");
+  for (const std::string_view block : {"rheology cross", "rheology carreau"}) {
+    number(block, "zero_shear_viscosity", Quantity::dynamic_viscosity, Limits::positive(), "μ0, the viscosity at rest",
+           M3DP_MEMBER(material::Rheology, viscosity), "viscosity")
+        .required = true;
+    number(block, "infinite_shear_viscosity", Quantity::dynamic_viscosity, Limits::non_negative(),
+           "μ∞, the viscosity at high shear rates (at most μ0)", M3DP_MEMBER(material::Rheology, infinite_shear_viscosity));
+    number(block, "time_constant", Quantity::time, Limits::positive(), "λ: the thinning sets in near a shear rate of 1/λ",
+           M3DP_MEMBER(material::Rheology, time_constant))
+        .required = true;
+    flow_index(block);
+    max_viscosity(block);
+  }
+  yield_stress("rheology bingham");
+  number("rheology bingham", "plastic_viscosity", Quantity::dynamic_viscosity, Limits::positive(), "μp, the viscosity once yielded",
+         M3DP_MEMBER(material::Rheology, viscosity), "viscosity")
+      .required = true;
+  regularization("rheology bingham");
+  max_viscosity("rheology bingham");
+  yield_stress("rheology herschel_bulkley");
+  consistency("rheology herschel_bulkley");
+  flow_index("rheology herschel_bulkley");
+  regularization("rheology herschel_bulkley");
+  max_viscosity("rheology herschel_bulkley");
+
+  // ---- <robot name="..."> ----
+  structure("robot", "joint", "a joint's position at the start: `<joint name=\"…\">value</joint>`, rad or m (unit=\"deg\" too)", false, true);
+  structure("robot", "mobile_base", "a differential-drive base: the block below");
+  structure("mobile_base", "left_wheel", "the left wheel's joint (its name)", true);
+  structure("mobile_base", "right_wheel", "the right wheel's joint (its name)", true);
+  number("mobile_base", "wheel_radius", Quantity::length, Limits::positive(), "the wheels' radius", M3DP_MEMBER(MobileBase, wheel_radius))
+      .required = true;
+  number("mobile_base", "wheel_separation", Quantity::length, Limits::positive(), "the distance between the wheels' contact points",
+         M3DP_MEMBER(MobileBase, wheel_separation))
+      .required = true;
+  structure("mobile_base", "path", "a path for the base to follow, as a print head's (z ignored)");
+
+  // ---- <camera>, and the intrinsics it shares with SDF's <sensor><camera> ----
+  number("camera", "update_rate", Quantity::rate, Limits::positive(), "images per second of simulated time",
+         M3DP_MEMBER(sensors::CameraSettings, update_rate));
+  number("camera", "horizontal_fov", Quantity::angle, Limits::positive_up_to(3.1), "the horizontal field of view",
+         M3DP_MEMBER(sensors::CameraSettings, horizontal_fov));
+  structure("camera", "image", "the picture's size: the block below");
+  structure("camera", "clip", "what it sees: the block below");
+  structure("camera", "noise", "noise on its colour and depth: the block below");
+  boolean("camera", "shadows", "whether the key light casts shadows (one more ray a pixel)",
+          [](sensors::CameraSettings& camera, bool value) { camera.shadows = value; },
+          [](const sensors::CameraSettings& camera) { return camera.shadows; });
+  structure("camera", "point_cloud", "true: a point cloud of each depth image (a depth_camera or rgbd_camera), in frame=\"optical\" "
+                                     "(the default) or frame=\"world\" (a scan that adds up)");
+  structure("camera", "mount", "on a robot: <mount robot=\"…\" link=\"…\"> with the camera's <pose> in the link's frame inside it");
+  structure("camera", "pose", "where it is in the world, when not mounted (x y z roll pitch yaw; x forward, z up)");
+  const Limits pixels = Limits::between(1, 8192);
+  integer("image", "width", pixels, "pixels across", M3DP_MEMBER(sensors::CameraSettings, width));
+  integer("image", "height", pixels, "pixels down", M3DP_MEMBER(sensors::CameraSettings, height));
+  structure("image", "format", "accepted as SDF writes it; colour images are 8-bit RGB, depth 32-bit float (m)");
+  structure("image", "anti_aliasing", "accepted as SDF writes it; not used");
+  number("clip", "near", Quantity::length, Limits::positive(), "nothing nearer is seen", M3DP_MEMBER(sensors::CameraSettings, near));
+  number("clip", "far", Quantity::length, Limits::positive(), "nothing farther is seen (beyond <near>)",
+         M3DP_MEMBER(sensors::CameraSettings, far));
+  structure("noise", "type", "gaussian (or none); also as a type=\"…\" attribute");
+  number("noise", "mean", Quantity::plain_number, Limits::any(), "the noise's mean, in colour levels of 0 to 1 (and m of depth)",
+         [](sensors::CameraSettings& camera, double value) { camera.noise.mean = value; },
+         [](const sensors::CameraSettings& camera) { return number_text(camera.noise.mean); });
+  number("noise", "stddev", Quantity::plain_number, Limits::non_negative(), "its standard deviation, in the same units",
+         [](sensors::CameraSettings& camera, double value) { camera.noise.stddev = value; },
+         [](const sensors::CameraSettings& camera) { return number_text(camera.noise.stddev); });
   return rows;
 }
 
@@ -396,6 +546,12 @@ std::span<const SchemaRow> schema_rows() {
   return rows;
 }
 
+const SchemaRow& schema_row(std::string_view block, std::string_view name) {
+  for (const SchemaRow& row : schema_rows())
+    if (row.block == block && row.name == name) return row;
+  throw std::logic_error(fmt::format("the scene table has no <{}> in block '{}'", name, block));
+}
+
 std::vector<const SchemaRow*> schema_block(std::string_view block) {
   std::vector<const SchemaRow*> rows;
   for (const SchemaRow& row : schema_rows())
@@ -403,59 +559,103 @@ std::vector<const SchemaRow*> schema_block(std::string_view block) {
   return rows;
 }
 
+/// A default target of one kind, for the reference's defaults.
+template <class Target>
+SchemaTarget default_of() {
+  static Target target{};
+  return &target;
+}
+
 std::span<const SchemaBlock> schema_blocks() {
-  static constexpr SchemaBlock kBlocks[] = {
-      {"solver", "<plugin><solver>", "The SPH solver (DFSPH): resolution, time steps, tolerances, rest detection. Required.", "plugin"},
-      {"air", "<plugin><air>", "The air around the print: its drag on the material's surface, on when the block is there.", "plugin"},
-      {"output", "<plugin><output>", "What a run writes beside summary.json and timing.csv.", "plugin"},
-      {"meshing", "<plugin><meshing>", "Surface meshes of the material during the run (also the printed body the world collides with).", "plugin"},
-      {"coordinator", "<plugin><coordinator enabled=\"true\">", "Several robots sharing a workspace (Erdmann and Lozano-Pérez 1987).", "plugin"},
-      {"material", "<plugin><material name=\"…\" preset=\"…\">", "A material, from scratch or over a preset of data/materials.xml.", "plugin"},
-      {"nozzle", "<print_head name=\"…\" material=\"…\"><nozzle>", "A print head's nozzle (its path and mount are in the README).", "print_head"},
-      {"ageing", "<material><ageing>", "Structural build-up of a printable mortar or concrete.", "material"},
-      {"granular", "<material><granular>", "Discrete spheres: every material of the scene granular, or none.", "material"},
-      {"micropolar", "<material><micropolar>", "Micro-rotation of the particles: their spin and the fluid's vorticity coupled.", "material"},
-      {"elasticity", "<material><elasticity>", "An elastic solid, or with a relaxation time a viscoelastic (Maxwell) fluid.", "material"},
+  static const SchemaBlock kBlocks[] = {
+      {"plugin", "<plugin name=\"m3dp\" filename=\"m3dp\">", "Everything M3DP adds to an SDF world, in the world's plugin element.", "",
+       default_of<Scene>},
+      {"solver", "<plugin><solver>", "The SPH solver (DFSPH): resolution, time steps, tolerances, rest detection. Required.", "plugin",
+       default_of<Scene>},
+      {"air", "<plugin><air>", "The air around the print: its drag on the material's surface, on when the block is there.", "plugin",
+       default_of<Scene>},
+      {"output", "<plugin><output>", "What a run writes beside summary.json and timing.csv.", "plugin", default_of<Scene>},
+      {"meshing", "<plugin><meshing>", "Surface meshes of the material during the run (also the printed body the world collides with).",
+       "plugin", default_of<Scene>},
+      {"coordinator", "<plugin><coordinator enabled=\"true\">", "Several robots sharing a workspace (Erdmann and Lozano-Pérez 1987).",
+       "plugin", default_of<Scene>},
+      {"material", "<plugin><material name=\"…\" preset=\"…\">", "A material, from scratch or over a preset of data/materials.xml.",
+       "plugin", default_of<material::Material>},
+      {"rheology newtonian", "<material><rheology model=\"newtonian\">", "A Newtonian fluid: μ(γ̇) = μ.", "material",
+       default_of<material::Rheology>},
+      {"rheology power_law", "<material><rheology model=\"power_law\">", "A power-law fluid: μ = K γ̇ⁿ⁻¹, capped at rest.", "material",
+       default_of<material::Rheology>},
+      {"rheology cross", "<material><rheology model=\"cross\">", "Cross (1965): μ = μ∞ + (μ0 − μ∞) / (1 + (λγ̇)ⁿ).", "material",
+       default_of<material::Rheology>},
+      {"rheology carreau", "<material><rheology model=\"carreau\">", "Carreau (1972): μ = μ∞ + (μ0 − μ∞)(1 + (λγ̇)²)^((n−1)/2).",
+       "material", default_of<material::Rheology>},
+      {"rheology bingham", "<material><rheology model=\"bingham\">",
+       "A Bingham plastic (a fresh mortar): μ = μp + τ0 (1 − e^(−mγ̇))/γ̇ (Papanastasiou 1987).", "material", default_of<material::Rheology>},
+      {"rheology herschel_bulkley", "<material><rheology model=\"herschel_bulkley\">",
+       "Herschel–Bulkley: μ = K γ̇ⁿ⁻¹ + τ0 (1 − e^(−mγ̇))/γ̇; over a preset of the same model, every parameter is optional.", "material",
+       default_of<material::Rheology>},
+      {"ageing", "<material><ageing>", "Structural build-up of a printable mortar or concrete.", "material", default_of<material::Material>},
+      {"granular", "<material><granular>", "Discrete spheres: every material of the scene granular, or none.", "material",
+       default_of<material::Material>},
+      {"micropolar", "<material><micropolar>", "Micro-rotation of the particles: their spin and the fluid's vorticity coupled.", "material",
+       default_of<material::Material>},
+      {"elasticity", "<material><elasticity>", "An elastic solid, or with a relaxation time a viscoelastic (Maxwell) fluid.", "material",
+       default_of<material::Material>},
+      {"fluid_block", "<plugin><fluid_block name=\"…\" material=\"…\">", "Material at the start: a box, or a vertical cylinder.",
+       "plugin", default_of<FluidBlock>},
+      {"cylinder", "<fluid_block><cylinder>", "A vertical cylinder of material (a slump test's mould).", "fluid_block",
+       default_of<FluidBlock>},
+      {"print_head", "<plugin><print_head name=\"…\" material=\"…\">", "A nozzle moved along a path, extruding where the path says.",
+       "plugin", default_of<PrintHead>},
+      {"nozzle", "<print_head><nozzle>", "A print head's nozzle: a bore fed at the commanded flow.", "print_head", default_of<PrintHead>},
+      {"mount", "<print_head><mount robot=\"…\" link=\"…\">", "The nozzle carried on a robot's link.", "print_head",
+       default_of<NozzleMount>},
+      {"robot", "<plugin><robot name=\"…\">", "Settings of a robot the world includes (`<include><uri>model://…</uri></include>` of a URDF).",
+       "plugin", default_of<Scene>},
+      {"mobile_base", "<robot><mobile_base>", "A differential-drive base carrying the robot.", "robot", default_of<MobileBase>},
+      {"camera", "<plugin><camera name=\"…\" type=\"camera|depth_camera|rgbd_camera\">",
+       "A simulated camera (colour, depth or both), fixed in the world or on a robot's link.", "plugin",
+       default_of<sensors::CameraSettings>},
+      {"image", "<camera><image>", "The picture's size (also in SDF's <sensor><camera>).", "camera", default_of<sensors::CameraSettings>},
+      {"clip", "<camera><clip>", "The nearest and farthest a camera sees (also in SDF's <sensor><camera>).", "camera",
+       default_of<sensors::CameraSettings>},
+      {"noise", "<camera><noise>", "Gaussian noise on each colour channel and the depth (also in SDF's <sensor><camera>).", "camera",
+       default_of<sensors::CameraSettings>},
   };
   return kBlocks;
 }
 
-/// `doc` with every <element> in it as code, so that Markdown shows it rather than taking it for HTML.
+/// `doc` with every <element> in it as code, so that Markdown shows it rather than taking it for HTML;
+/// what the doc already puts in backticks (an example of several elements) is kept as it is.
 std::string markdown_doc(std::string_view doc) {
   std::string text;
   for (std::size_t i = 0; i < doc.size(); ++i) {
-    const std::size_t close = doc[i] == '<' ? doc.find('>', i) : std::string_view::npos;
+    const char closing = doc[i] == '<' ? '>' : doc[i] == '`' ? '`' : '\0';
+    const std::size_t close = closing ? doc.find(closing, i + 1) : std::string_view::npos;
     if (close == std::string_view::npos) {
       text += doc[i];
       continue;
     }
-    text += fmt::format("`{}`", doc.substr(i, close - i + 1));
+    text += closing == '`' ? std::string(doc.substr(i, close - i + 1)) : fmt::format("`{}`", doc.substr(i, close - i + 1));
     i = close;
   }
   return text;
 }
 
 std::string schema_reference() {
-  const Scene defaults;
-  const material::Material material_defaults;
-  const PrintHead head_defaults;
   std::string text =
       "# Scene reference\n\n"
       "Generated by `m3dp schema` from the scene reader's own table (src/m3dp/scene/schema.cpp); a test fails when this page\n"
       "is stale (regenerate it with `build/apps/m3dp/m3dp schema > docs/scene_reference.md`). Every value is SI unless a\n"
       "`unit=\"...\"` attribute says otherwise; the units each value takes are listed. Defaults are the engine's own.\n\n"
-      "The table covers these blocks of the `<plugin name=\"m3dp\">` element; robots, cameras, fluid blocks, print heads'\n"
-      "paths and mounts, and a material's rheology models (whose parameters depend on the model) are described in the README until\n"
-      "their rows are added.\n";
+      "The world itself (models, links, collisions, includes of URDF robots) is SDF's (sdformat.org); the print paths\n"
+      "(`<line>`, `<polyline>`, `<circle>`, `<helix>`, `<wall>`, `<waypoints>`, `<gcode>`) are described in the README.\n";
   for (const SchemaBlock& block : schema_blocks()) {
+    const SchemaTarget defaults = block.defaults();
     text += fmt::format("\n## `{}`\n\n{}\n\n| element | value | unit (also) | range | default | meaning |\n|---|---|---|---|---|---|\n",
-                        block.path, block.doc);
+                        block.path, markdown_doc(block.doc));
     for (const SchemaRow* row : schema_block(block.name)) {
-      std::string value, units, range = "",
-                  shown = row->show            ? row->show(defaults)
-                          : row->show_material ? row->show_material(material_defaults)
-                          : row->show_head     ? row->show_head(head_defaults)
-                                               : std::string();
+      std::string value, units, range = "", shown = row->show ? row->show(defaults) : std::string();
       switch (row->kind) {
         case ValueKind::number: {
           const QuantityInfo info = quantity_info(row->quantity);
@@ -476,7 +676,7 @@ std::string schema_reference() {
           units = "—", range = "—";
           break;
         }
-        case ValueKind::structure: value = "see meaning", units = "—", range = "—"; break;
+        case ValueKind::structure: value = row->repeated ? "see meaning; may repeat" : "see meaning", units = "—", range = "—"; break;
       }
       if (row->required) shown = "required";
       if (shown.empty()) shown = "—";

@@ -12,16 +12,29 @@
 #include <span>
 #include <string>
 #include <string_view>
+#include <variant>
 #include <vector>
 
 namespace m3dp::material {
 struct Material;
+struct Rheology;
+}  // namespace m3dp::material
+namespace m3dp::sensors {
+struct CameraSettings;
 }
 
 namespace m3dp::scene {
 
 struct Scene;
 struct PrintHead;
+struct FluidBlock;
+struct NozzleMount;
+struct MobileBase;
+
+/// What a block's rows fill: the scene, or the one thing in it the block describes (a material, a
+/// rheology, a print head, a camera, a fluid block, a nozzle mount, a mobile base).
+using SchemaTarget = std::variant<Scene*, material::Material*, material::Rheology*, PrintHead*, sensors::CameraSettings*, FluidBlock*,
+                                  NozzleMount*, MobileBase*>;
 
 // ---- units: every numeric element may say unit="..."; values are stored in SI ----
 inline constexpr double kRadiansPerDegree = 3.14159265358979323846 / 180;
@@ -82,32 +95,28 @@ enum class ValueKind {
 };
 
 struct SchemaRow {
-  std::string_view block;     // the element it sits in: "solver", "air", "output", "meshing", "coordinator"
+  std::string_view block;     // the block it sits in (schema_blocks): "solver", "camera", "rheology bingham"
   std::string_view name;      // the element's name as written
   ValueKind kind = ValueKind::number;
   Quantity quantity = Quantity::plain_number;
   Limits limits;
   bool required = false;
+  bool repeated = false;      // may be written more than once (a structure read by hand)
   std::string_view doc;       // one line: what it is, and what 0 means where that is special
   std::string_view field;     // the engine's name of what it fills, where that differs from `name`
   std::vector<std::string_view> words;  // a keyword's words; `set` gets the word's index
   std::string_view hint;      // a keyword's words explained, for its error message
-  /// Fills the scene from a valid value (SI for numbers, 0/1 for booleans, the word's index for
-  /// keywords); null for structure rows.
-  std::function<void(Scene&, double)> set;
-  /// The value in a scene, as the reference writes it (the default from a default Scene); null: none.
-  std::function<std::string(const Scene&)> show;
-  /// A material's rows (blocks "material", "ageing", "granular", "micropolar", "elasticity") fill and
-  /// show a material instead (defaults from a default material::Material).
-  std::function<void(material::Material&, double)> set_material;
-  std::function<std::string(const material::Material&)> show_material;
-  /// A print head's nozzle rows (block "nozzle") fill and show the head.
-  std::function<void(PrintHead&, double)> set_head;
-  std::function<std::string(const PrintHead&)> show_head;
+  /// Fills the block's target from a valid value (SI for numbers, 0/1 for booleans, the word's index
+  /// for keywords); null for structure rows.
+  std::function<void(const SchemaTarget&, double)> set;
+  /// The value in a target, as the reference writes it (the default from a default target); null: none.
+  std::function<std::string(const SchemaTarget&)> show;
 };
 
 /// Every row, block by block in the reference's order.
 [[nodiscard]] std::span<const SchemaRow> schema_rows();
+/// The row `name` of `block` (one the code knows is there).
+[[nodiscard]] const SchemaRow& schema_row(std::string_view block, std::string_view name);
 /// The rows of one block, in order.
 [[nodiscard]] std::vector<const SchemaRow*> schema_block(std::string_view block);
 /// The blocks the table has, in order, with a line about each.
@@ -116,6 +125,9 @@ struct SchemaBlock {
   std::string_view path;    // where it is written: "<plugin><solver>"
   std::string_view doc;
   std::string_view parent;  // the block it sits in: "plugin", or "material" for a material's parts
+  /// A default target of the block's kind (a default Scene, material, camera...): what the reference
+  /// shows as each row's default.
+  SchemaTarget (*defaults)();
 };
 [[nodiscard]] std::span<const SchemaBlock> schema_blocks();
 

@@ -197,60 +197,40 @@ ParameterError::ParameterError(std::vector<ParameterProblem> problems, const Par
       }()),
       problems_(std::move(problems)) {}
 
+// The rules that tie fields together (a model that needs a solver, a bore against the particle size,
+// every material granular or none). Each field's own range is the scene table's (scene/schema.cpp),
+// which every scene, preset and Python run is read through; only fields no scene element sets are
+// checked here alone.
 std::vector<ParameterProblem> check_parameters(const Parameters& parameters) {
   std::vector<ParameterProblem> problems;
   const auto& settings = parameters.settings;
-  if (!(settings.particle_radius > 0)) problems.push_back(settings_problem("particle_radius", fmt::format("must be > 0 m, got {}", settings.particle_radius)));
-  if (!(settings.volume_tolerance >= 0 && settings.volume_tolerance < 1))
-    problems.push_back(settings_problem("volume_tolerance", fmt::format("must be in [0, 1), got {}", settings.volume_tolerance)));
-  if (!(settings.minimum_spacing >= 0 && settings.minimum_spacing <= 1))
-    problems.push_back(settings_problem("minimum_spacing", fmt::format("must be in [0, 1] particle diameters, got {}", settings.minimum_spacing)));
-  if (!(settings.shifting_factor >= 0 && settings.shifting_factor <= 10))
-    problems.push_back(settings_problem("shifting_factor", fmt::format("must be in [0, 10], got {}", settings.shifting_factor)));
   if (!(settings.neighbor_skin >= 0)) problems.push_back(settings_problem("neighbor_skin", fmt::format("must be >= 0 (support radii), got {}", settings.neighbor_skin)));
-  if (settings.air_drag && !(settings.air_density > 0)) problems.push_back(settings_problem("air.density", fmt::format("must be > 0 kg/m^3, got {}", settings.air_density)));
-  if (settings.air_drag && !(settings.air_viscosity > 0)) problems.push_back(settings_problem("air.viscosity", fmt::format("must be > 0 Pa*s, got {}", settings.air_viscosity)));
   if (parameters.phases.empty()) problems.push_back(settings_problem("", "at least one material is needed"));
   const bool granular = !parameters.phases.empty() && parameters.phases.front().granular.enabled;
   for (std::size_t p = 0; p < parameters.phases.size(); ++p) {
     const FluidPhase& phase = parameters.phases[p];
-    if (!(phase.density > 0)) problems.push_back(phase_problem(p, "density", fmt::format("must be > 0 kg/m^3, got {}", phase.density)));
     // Akinci's adhesion pulls against Akinci's cohesion; without it the contact line sprays apart.
     if (phase.adhesion > 0 && settings.surface_tension_model == SurfaceTensionModel::csf_brackbill1992)
       problems.push_back(phase_problem(p, "adhesion", "needs the akinci2013 surface tension model: brackbill1992 wets walls "
                                                       "at 90° and has no adhesion"));
-    if (phase.elasticity.enabled) {
-      if (settings.viscosity_solver != ViscositySolver::implicit_weiler2018)
-        problems.push_back(phase_problem(p, "elasticity", "needs the implicit viscosity solver: an elastic material's "
-                                                          "stiffness is solved with its viscosity"));
-      if (!(phase.elasticity.shear_modulus > 0))
-        problems.push_back(phase_problem(p, "elasticity.shear_modulus", fmt::format("must be > 0 Pa, got {}", phase.elasticity.shear_modulus)));
-      if (!(phase.elasticity.poisson_ratio >= 0 && phase.elasticity.poisson_ratio <= Real(0.49)))
-        problems.push_back(
-            phase_problem(p, "elasticity.poisson_ratio", fmt::format("must be in [0, 0.49], got {}", phase.elasticity.poisson_ratio)));
-    }
+    if (phase.elasticity.enabled && settings.viscosity_solver != ViscositySolver::implicit_weiler2018)
+      problems.push_back(phase_problem(p, "elasticity", "needs the implicit viscosity solver: an elastic material's "
+                                                        "stiffness is solved with its viscosity"));
     // Granular mode: every phase or none (a fluid and discrete spheres do not interact yet).
     if (phase.granular.enabled != granular)
       problems.push_back(phase_problem(
           p, "", fmt::format("is {} but material '{}' is {}; one scene's materials are all fluids or all granular for now",
                              phase.granular.enabled ? "granular" : "a fluid", parameters.phases.front().name,
                              granular ? "granular" : "a fluid")));
-    if (phase.granular.enabled && !(phase.granular.restitution > 0 && phase.granular.restitution <= 1))
-      problems.push_back(
-          phase_problem(p, "granular.restitution", fmt::format("must be in (0, 1], got {}", phase.granular.restitution)));
   }
   for (std::size_t n = 0; n < parameters.nozzles.size(); ++n) {
     const NozzleSettings& nozzle = parameters.nozzles[n];
     if (nozzle.phase >= parameters.phases.size())
       problems.push_back({ParameterProblem::Subject::nozzle, n, "material", "names no material"});
-    if (!(nozzle.bore_length >= 0))
-      problems.push_back({ParameterProblem::Subject::nozzle, n, "bore_length", fmt::format("must be >= 0 m, got {}", nozzle.bore_length)});
-    else if (nozzle.bore_length > 0 && nozzle.bore_length < 2 * settings.particle_radius * 2)
+    if (nozzle.bore_length > 0 && nozzle.bore_length < 2 * settings.particle_radius * 2)
       problems.push_back({ParameterProblem::Subject::nozzle, n, "bore_length",
                           fmt::format("must be 0 (no bore) or at least two particle diameters ({} m), got {}; a bore of two nozzle "
                                       "diameters is usual", 4 * settings.particle_radius, nozzle.bore_length)});
-    if (!(nozzle.outer_diameter >= 0))
-      problems.push_back({ParameterProblem::Subject::nozzle, n, "outer_diameter", fmt::format("must be >= 0 m, got {}", nozzle.outer_diameter)});
   }
   return problems;
 }

@@ -64,7 +64,8 @@ struct ParameterProblem {
   [[nodiscard]] std::string str(const Parameters& parameters) const;  // "material 'clay': elasticity.poisson_ratio must be ..."
 };
 
-/// Every problem of the parameters (empty when they are fine).
+/// Every problem of the parameters that ties fields together (empty when they are fine); each field's
+/// own range is the scene table's (scene/schema.hpp), which every scene is read through.
 [[nodiscard]] std::vector<ParameterProblem> check_parameters(const Parameters& parameters);
 
 /// Thrown by compile_model for parameters check_parameters does not accept.
