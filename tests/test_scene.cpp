@@ -489,6 +489,12 @@ TEST(Scene, RobotIncludesAreReadAndChecked) {
   EXPECT_CONTAINS(error.what(), location_of(missing, "<uri>model://no_such_robot") +
                                     " error: 'model://no_such_robot' not found; looked for ");
   EXPECT_CONTAINS(error.what(), "no_such_robot/no_such_robot.urdf");
+  // A name the file system refuses (longer than NAME_MAX) is not found, not an exception past the reader.
+  const std::string long_name(300, 'r');
+  const std::string too_long = robot_scene("elbow_joint", "tool0", long_name + ".urdf");
+  expect_error_at(too_long, "<uri>" + long_name, "'" + long_name + ".urdf' not found (looked for ");
+  expect_error_at(robot_scene("elbow_joint", "tool0", "model://" + long_name), "<uri>model://",
+                  "'model://" + long_name + "' not found; looked for ");
   const std::string wheels = replaced(robot_scene(), "</robot>",
                                       "<mobile_base><left_wheel>wheel_left_joint</left_wheel><right_wheel>elbow_joint"
                                       "</right_wheel><wheel_radius unit=\"mm\">33</wheel_radius><wheel_separation>0.287"
@@ -1253,4 +1259,54 @@ TEST(Scene, EveryTableRowRefusesABadValueAtItsLineByItsOwnName) {
     ++checked;
   }
   EXPECT_GE(checked, 85u);
+}
+
+// ---- values replaced by their path (studies, the Python API) ----
+
+m3dp::scene::Scene load_with(const std::vector<m3dp::scene::SceneOverride>& overrides) {
+  const std::string text = valid_scene();
+  return load_scene_from_string(m3dp::scene::apply_overrides(text, "valid.sdf", overrides), "valid.sdf");
+}
+
+std::string override_error(const std::vector<m3dp::scene::SceneOverride>& overrides) {
+  try {
+    load_with(overrides);
+  } catch (const InputError& error) {
+    return error.what();
+  }
+  ADD_FAILURE() << "the overrides were accepted";
+  return {};
+}
+
+TEST(Scene, OverridesReplaceValuesByTheirPathCheckedAsIfWritten) {
+  // An element with a unit (5 mm: the unit goes, the value is SI), a material's by its name, an
+  // attribute (the path's speed), an element not written (added), a world element.
+  const auto scene = load_with({{"solver.particle_radius", "0.004"},
+                                {"material[water].density", "1100"},
+                                {"print_head[head].path.speed", "0.07"},
+                                {"solver.max_time_step", "0.004"},
+                                {"fluid_block[column].max", "0.1 0.1 0.3"},
+                                {"gravity", "0 0 -9.81"}});
+  EXPECT_FLOAT_EQ(scene.solver.particle_radius, 0.004f);
+  EXPECT_FLOAT_EQ(scene.materials[0].material.density, 1100.0f);
+  EXPECT_FLOAT_EQ(scene.solver.max_time_step, 0.004f);
+  EXPECT_FLOAT_EQ(scene.fluid_blocks[0].box.max.z(), 0.3f);
+  EXPECT_FLOAT_EQ(scene.solver.gravity.z(), -9.81f);
+  // Lines of the rest of the file stay where they were: an error later in it names its own line.
+  const std::string text = replaced(valid_scene(), "<exit_speed>0.1</exit_speed>", "<exit_speed>-1</exit_speed>");
+  try {
+    load_scene_from_string(m3dp::scene::apply_overrides(text, "valid.sdf", std::vector<m3dp::scene::SceneOverride>{{"solver.particle_radius", "0.004"}}),
+                           "valid.sdf");
+    ADD_FAILURE() << "a negative exit speed was accepted";
+  } catch (const InputError& error) {
+    EXPECT_CONTAINS(error.what(), replaced(location_of(text, "<exit_speed>-1"), "bad.sdf", "valid.sdf"));
+  }
+
+  // A value out of range is the reader's message for that element; a path that leads nowhere says where it stopped.
+  EXPECT_CONTAINS(override_error({{"solver.particle_radius", "-1"}}), "<particle_radius> must be > 0 m, got -1");
+  EXPECT_CONTAINS(override_error({{"material[mortar].density", "1"}}),
+                  "the value of 'material[mortar].density': <plugin name=\"m3dp\"> has no <material name=\"mortar\"> (its <material>: water)");
+  EXPECT_CONTAINS(override_error({{"solver.particle_radus", "0.1"}}), "unknown element <particle_radus> in <solver>; did you mean <particle_radius>?");
+  EXPECT_CONTAINS(override_error({{"solver.bounds", "1"}}), "the value of 'solver.bounds': <bounds> holds elements, not a value");
+  EXPECT_CONTAINS(override_error({{"solver..cfl_factor", "1"}}), "the value of 'solver..cfl_factor': an empty step at character 8");
 }

@@ -1,6 +1,7 @@
 #pragma once
 // Small helpers for the text file readers (scenes, meshes, G-code, waypoints): whole files, lines
 // with their numbers (for messages that name file:line), and words.
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
@@ -47,5 +48,23 @@ inline std::string read_text_file(const std::filesystem::path& file, std::string
   if (!stream) throw InputError(SourceLocation{file.string(), 0}, "cannot open the " + std::string(what) + " for reading");
   return std::string((std::istreambuf_iterator<char>(stream)), std::istreambuf_iterator<char>());
 }
+
+/// Maps byte offsets in a text (an XML document's offset_debug) to 1-based line numbers; 0 for none.
+class LineIndex {
+ public:
+  explicit LineIndex(std::string_view text) {
+    for (std::size_t offset = 0; offset < text.size(); ++offset) {
+      if (text[offset] == '\n') newline_offsets_.push_back(std::ptrdiff_t(offset));
+    }
+  }
+  [[nodiscard]] int line_at(std::ptrdiff_t offset) const {
+    if (offset < 0) return 0;
+    const auto newlines_before = std::lower_bound(newline_offsets_.begin(), newline_offsets_.end(), offset);
+    return int(newlines_before - newline_offsets_.begin()) + 1;
+  }
+
+ private:
+  std::vector<std::ptrdiff_t> newline_offsets_;
+};
 
 }  // namespace m3dp

@@ -39,6 +39,13 @@ constexpr std::size_t kBytesPerParticle = 2048;
 // Memory a path point takes (the polyline's point and the trajectory piece made of it), rounded up.
 constexpr std::size_t kBytesPerPathPoint = 128;
 
+// Whether a path the user wrote names something: a name the file system refuses (too long, say)
+// names nothing, rather than throwing filesystem_error past the reader's messages.
+bool path_exists(const std::filesystem::path& path) {
+  std::error_code error;
+  return std::filesystem::exists(path, error) && !error;
+}
+
 double physical_memory_bytes() {
   const long pages = ::sysconf(_SC_PHYS_PAGES), page_size = ::sysconf(_SC_PAGE_SIZE);
   return pages > 0 && page_size > 0 ? double(pages) * double(page_size) : 8e9;  // unknown: assume 8 GB
@@ -97,17 +104,6 @@ std::size_t edit_distance(std::string_view a, std::string_view b) {
   return row[b.size()];
 }
 
-/// The children SDF 1.9 gives the elements M3DP reads outside its plugin: what they may hold.
-constexpr std::string_view kWorldElements[] = {"audio", "wind", "include", "gravity", "magnetic_field", "atmosphere", "gui", "physics",
-                                               "scene", "light", "frame", "model", "actor", "plugin", "road", "spherical_coordinates",
-                                               "state", "population", "joint"};
-constexpr std::string_view kModelElements[] = {"static", "self_collide", "allow_auto_disable", "include", "model", "enable_wind", "frame",
-                                               "pose", "link", "joint", "plugin", "gripper"};
-constexpr std::string_view kLinkElements[] = {"gravity", "enable_wind", "self_collide", "kinematic", "must_be_base_link", "velocity_decay",
-                                              "pose", "inertial", "collision", "visual", "sensor", "projector", "audio_sink",
-                                              "audio_source", "battery", "light", "particle_emitter", "frame"};
-constexpr std::string_view kCollisionElements[] = {"laser_retro", "max_contacts", "pose", "geometry", "surface"};
-
 std::optional<bool> parse_bool(std::string_view word) {
   if (word == "true" || word == "1") return true;
   if (word == "false" || word == "0") return false;
@@ -147,24 +143,6 @@ bool is_m3dp_plugin(const pugi::xml_node& plugin) {
   return std::string_view(plugin.attribute("name").value()) == "m3dp" ||
          std::string_view(plugin.attribute("filename").value()) == "m3dp";
 }
-
-/// Maps byte offsets in the scene text to 1-based line numbers.
-class LineIndex {
- public:
-  explicit LineIndex(std::string_view text) {
-    for (std::size_t offset = 0; offset < text.size(); ++offset) {
-      if (text[offset] == '\n') newline_offsets_.push_back(std::ptrdiff_t(offset));
-    }
-  }
-  [[nodiscard]] int line_at(std::ptrdiff_t offset) const {
-    if (offset < 0) return 0;
-    const auto newlines_before = std::lower_bound(newline_offsets_.begin(), newline_offsets_.end(), offset);
-    return int(newlines_before - newline_offsets_.begin()) + 1;
-  }
-
- private:
-  std::vector<std::ptrdiff_t> newline_offsets_;
-};
 
 enum class Presence { required, optional };
 
@@ -227,7 +205,8 @@ class SceneReader {
   /// Outside the plugin, an element SDF does not have where M3DP reads is a warning (not an error:
   /// the file may be for a newer SDF), naming the known element it is closest to: a typo such as
   /// <modle> would otherwise delete a model without a word.
-  void warn_unknown_children(const pugi::xml_node& element, std::span<const std::string_view> known);
+  void warn_unknown_children(const pugi::xml_node& element, std::string_view block);
+  void check_block_children(const pugi::xml_node& element, std::string_view block);
   void check_attributes(const pugi::xml_node& element, std::initializer_list<std::string_view> allowed);
   pugi::xml_node find_child(const pugi::xml_node& parent, const char* name, Presence presence);
   std::optional<std::string> read_attribute(const pugi::xml_node& element, const char* name, Presence presence);
@@ -410,14 +389,18 @@ void SceneReader::check_children(const pugi::xml_node& element, std::span<const 
 
 void SceneReader::read_block(const pugi::xml_node& element, std::string_view block, const SchemaTarget& target, FieldLocations* fields,
                              bool values_given) {
-  const std::vector<const SchemaRow*> rows = schema_block(block);
+  check_block_children(element, block);
+  for (const SchemaRow* row : schema_block(block)) read_row(element, *row, target, fields, values_given);
+}
+
+/// Unknown and repeated children of `element`, by its block's rows: errors at their lines.
+void SceneReader::check_block_children(const pugi::xml_node& element, std::string_view block) {
   std::vector<std::string_view> names, repeated;
-  for (const SchemaRow* row : rows) {
+  for (const SchemaRow* row : schema_block(block)) {
     names.push_back(row->name);
     if (row->repeated) repeated.push_back(row->name);
   }
   check_children(element, names, repeated);
-  for (const SchemaRow* row : rows) read_row(element, *row, target, fields, values_given);
 }
 
 void SceneReader::read_row(const pugi::xml_node& element, const SchemaRow& row, const SchemaTarget& target, FieldLocations* fields,
@@ -778,7 +761,9 @@ Scene SceneReader::read() {
   return std::move(scene_);
 }
 
-void SceneReader::warn_unknown_children(const pugi::xml_node& element, std::span<const std::string_view> known) {
+void SceneReader::warn_unknown_children(const pugi::xml_node& element, std::string_view block) {
+  std::vector<std::string_view> known;
+  for (const SchemaRow* row : schema_block(block)) known.push_back(row->name);
   for (const auto& child : element.children()) {
     if (child.type() != pugi::node_element) continue;
     const std::string_view name = child.name();
@@ -792,7 +777,7 @@ void SceneReader::warn_unknown_children(const pugi::xml_node& element, std::span
 
 void SceneReader::read_world(const pugi::xml_node& world) {
   scene_.world_name = world.attribute("name").value();
-  warn_unknown_children(world, kWorldElements);
+  warn_unknown_children(world, "world");
   if (const auto gravity = read_vector(world, "gravity", Quantity::acceleration, Presence::optional)) {
     scene_.solver.gravity = *gravity;
   }
@@ -829,7 +814,7 @@ void SceneReader::read_model(const pugi::xml_node& model) {
   body.name = read_attribute(model, "name", Presence::required).value_or("");
   body.where = where(model);
   if (!body.name.empty()) check_unique_name(model, body.name, model_names_);
-  warn_unknown_children(model, kModelElements);
+  warn_unknown_children(model, "model");
   if (!read_bool(model, "static").value_or(false)) {
     read_dynamic_model(model, body.name);
     return;
@@ -865,7 +850,7 @@ void SceneReader::read_dynamic_model(const pugi::xml_node& model, const std::str
     if (child.type() == pugi::node_element && (std::string_view(child.name()) == "model" || std::string_view(child.name()) == "include"))
       report(child, fmt::format("<{}> inside a dynamic model is not supported", child.name()));
   const pugi::xml_node link = links.front();
-  warn_unknown_children(link, kLinkElements);
+  warn_unknown_children(link, "link");
   body.pose = read_pose(model) * read_pose(link);
   const pugi::xml_node inertial = link.child("inertial");
   if (!inertial) {
@@ -891,7 +876,7 @@ void SceneReader::read_dynamic_model(const pugi::xml_node& model, const std::str
     }
   }
   for (const auto& collision : child_elements(link, "collision")) {
-    warn_unknown_children(collision, kCollisionElements);
+    warn_unknown_children(collision, "collision");
     const std::string collision_name = read_attribute(collision, "name", Presence::required).value_or("");
     const pugi::xml_node geometry = find_child(collision, "geometry", Presence::required);
     if (!geometry) continue;
@@ -918,7 +903,10 @@ std::optional<fs::path> SceneReader::resolve_model_uri(const pugi::xml_node& uri
     std::vector<std::string> looked;
     for (const fs::path& folder : model_search_path(file_)) {
       for (const fs::path& candidate : {folder / name / (name + ".urdf"), folder / name / "model.urdf"}) {
-        if (fs::exists(candidate)) return candidate;
+        if (path_exists(candidate)) {
+          scene_.input_files.push_back(candidate);
+          return candidate;
+        }
         looked.push_back(candidate.string());
       }
     }
@@ -927,15 +915,16 @@ std::optional<fs::path> SceneReader::resolve_model_uri(const pugi::xml_node& uri
   }
   fs::path path(uri.starts_with(kFile) ? uri.substr(kFile.size()) : uri);
   if (path.is_relative()) path = file_.parent_path() / path;
-  if (!fs::exists(path)) {
+  if (!path_exists(path)) {
     report(uri_element, fmt::format("'{}' not found (looked for {})", uri, path.string()));
     return std::nullopt;
   }
+  scene_.input_files.push_back(path);
   return path;
 }
 
 void SceneReader::read_include(const pugi::xml_node& include) {
-  check_children(include, {"uri", "name", "pose", "static", "placement_frame", "plugin"}, {"plugin"});
+  check_block_children(include, "include");
   const pugi::xml_node uri_element = find_child(include, "uri", Presence::required);
   if (!uri_element) return;
   const auto file = resolve_model_uri(uri_element);
@@ -1225,9 +1214,9 @@ void SceneReader::read_link(const pugi::xml_node& link, const Pose& model_pose, 
                             StaticBody& body) {
   const std::string link_name = read_attribute(link, "name", Presence::required).value_or("");
   const Pose link_pose = model_pose * read_pose(link);
-  warn_unknown_children(link, kLinkElements);
+  warn_unknown_children(link, "link");
   for (const auto& collision : child_elements(link, "collision")) {
-    warn_unknown_children(collision, kCollisionElements);
+    warn_unknown_children(collision, "collision");
     const std::string collision_name = read_attribute(collision, "name", Presence::required).value_or("");
     const Pose collision_pose = link_pose * read_pose(collision);
     const pugi::xml_node geometry = find_child(collision, "geometry", Presence::required);
@@ -1338,6 +1327,7 @@ std::optional<MeshShape> SceneReader::read_mesh(const pugi::xml_node& mesh) {
     mesh_path = fs::path(std::string(uri));
   }
   if (mesh_path.is_relative()) mesh_path = file_.parent_path() / mesh_path;
+  scene_.input_files.push_back(mesh_path);
 
   Vec3 scale = Vec3::Ones();
   if (const pugi::xml_node scale_element = mesh.child("scale")) {
@@ -1834,10 +1824,11 @@ std::optional<fs::path> SceneReader::find_input_file(const pugi::xml_node& eleme
                                                      std::string_view what) {
   fs::path path(file);
   if (path.is_relative()) path = file_.parent_path() / path;  // relative to the scene file
-  if (!fs::exists(path)) {
+  if (!path_exists(path)) {
     report(element, fmt::format("{} '{}' not found (looked for {})", what, file, path.string()));
     return std::nullopt;
   }
+  scene_.input_files.push_back(path);
   return path;
 }
 
@@ -2152,6 +2143,11 @@ std::vector<MaterialEntry> load_material_presets() {
 
 Scene load_scene(const std::filesystem::path& file) {
   return load_scene_from_string(read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)"), file);
+}
+
+Scene load_scene(const std::filesystem::path& file, std::span<const SceneOverride> overrides) {
+  const std::string text = read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)");
+  return load_scene_from_string(apply_overrides(text, file, overrides), file);
 }
 
 Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name) {

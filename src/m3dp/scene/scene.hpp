@@ -4,6 +4,7 @@
 #include <array>
 #include <filesystem>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -186,6 +187,7 @@ struct Scene {
   CoordinatorSettings coordinator;
   std::vector<CameraEntry> cameras;
   std::vector<Diagnostic> warnings;  // not errors: e.g. G-code commands that were skipped (file:line)
+  std::vector<std::filesystem::path> input_files;  // the files it reads beside itself: URDF, G-code, waypoints, meshes
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
   /// The material's index (the engine's phase); 0 for a name the loader did not accept.
@@ -202,8 +204,24 @@ sph::Parameters solver_parameters(const Scene& scene);
 /// own models/ folder. NAME/NAME.urdf or NAME/model.urdf inside it is the robot.
 std::vector<std::filesystem::path> model_search_path(const std::filesystem::path& scene_file);
 
+/// A scene value replaced by its path: `material[mortar].rheology.yield_stress` is the <yield_stress>
+/// of the <rheology> of the <material name="mortar"> in M3DP's plugin; a first step the <world> has
+/// (model[floor], include[arm], gravity) starts at the world. A step's [key] picks its element by
+/// name="..." (or, all digits, by its index among its namesakes); a last step that is no child but an
+/// attribute the element has sets the attribute (print_head[head].path.speed: <path speed="...">).
+/// The value is text as written in the scene, SI (a unit attribute there is dropped).
+struct SceneOverride {
+  std::string path;
+  std::string value;
+};
+
 /// Loads and validates a scene. Throws InputError listing every problem found, each with file:line.
 Scene load_scene(const std::filesystem::path& file);
+/// Same, with values replaced (studies): each checked as if written in the file.
+Scene load_scene(const std::filesystem::path& file, std::span<const SceneOverride> overrides);
+/// The scene text with the overrides applied (an element not written is added where its path says;
+/// the reader then checks it belongs there). Throws InputError naming the path where it leads nowhere.
+std::string apply_overrides(const std::string& text, const std::filesystem::path& file_name, std::span<const SceneOverride> overrides);
 /// The material presets file: $M3DP_MATERIALS if set, else the project's data/materials.xml.
 std::filesystem::path material_presets_file();
 /// Every preset of that file, with its line (InputError naming the file and line if it is wrong).

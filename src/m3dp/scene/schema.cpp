@@ -170,6 +170,47 @@ std::vector<SchemaRow> make_rows() {
     return row;
   };
 
+  // Valid SDF 1.9 children of an element that M3DP accepts and leaves alone (an unknown one is a warning).
+  auto accepted = [&](std::string_view block, std::initializer_list<std::string_view> names) {
+    for (const std::string_view name : names) add(block, name, ValueKind::structure, "valid SDF, not used").ignored = true;
+  };
+
+  // ---- SDF (sdformat.org, 1.9): what M3DP reads of the world outside its plugin ----
+  structure("world", "gravity", "gravity (x y z, m/s²); default 0 0 −9.81");
+  structure("world", "model", "a body: `<static>true</static>` a wall, floor or mould; otherwise one link that the material pushes",
+            false, true);
+  structure("world", "include", "a URDF robot: the block below", false, true);
+  structure("world", "plugin",
+            "`<plugin name=\"m3dp\" filename=\"m3dp\">`, M3DP's own block (below; exactly one); other plugins are left alone", true,
+            true);
+  accepted("world", {"audio", "wind", "magnetic_field", "atmosphere", "gui", "physics", "scene", "light", "frame", "actor", "road",
+                     "spherical_coordinates", "state", "population", "joint"});
+  structure("include", "uri", "the URDF: model://NAME (NAME/NAME.urdf or NAME/model.urdf in M3DP_MODEL_PATH, then models/) or a path "
+            "(file:// or relative to the scene)", true);
+  structure("include", "name", "the robot's name (what <robot>, <mount> and cameras call it); default the URDF's <robot name>");
+  structure("include", "pose", "where its base stands (x y z roll pitch yaw; m, rad)");
+  accepted("include", {"static", "placement_frame", "plugin"});
+  rows.back().repeated = true;
+  structure("model", "static", "true: a fixed boundary of boxes, spheres, cylinders, planes and meshes; false (the default): a "
+            "rigid body of one link the material pushes and that pushes it");
+  structure("model", "pose", "the model's frame in the world (x y z roll pitch yaw; m, rad)");
+  structure("model", "link", "a link: the block below (a dynamic model has exactly one)", false, true);
+  structure("model", "include", "nested includes: not supported yet (an error)", false, true);
+  structure("model", "model", "nested models: not supported yet (an error)", false, true);
+  accepted("model", {"self_collide", "allow_auto_disable", "enable_wind", "frame", "joint", "plugin", "gripper"});
+  structure("link", "pose", "the link's frame in the model's (x y z roll pitch yaw; m, rad)");
+  structure("link", "inertial", "a dynamic link's `<mass>` (kg, required) and `<inertia>` (`<ixx>` … `<izz>`, kg·m² about the link "
+            "origin; default its first shape's at uniform density); the centre of mass is the link origin");
+  structure("link", "collision", "a shape the material and the world collide with: the block below", false, true);
+  structure("link", "sensor", "a camera on the link: `<sensor type=\"…\">` of type camera, depth_camera or rgbd_camera, with SDF's `<camera>` "
+            "(its <image>, <clip>, <noise>, <horizontal_fov> as in the camera block below) and `<update_rate>`", false, true);
+  accepted("link", {"gravity", "enable_wind", "self_collide", "kinematic", "must_be_base_link", "velocity_decay", "visual", "projector",
+                    "audio_sink", "audio_source", "battery", "light", "particle_emitter", "frame"});
+  structure("collision", "geometry", "one shape: `<box><size>` (x y z, m), `<sphere><radius>`, `<cylinder><radius><length>` (along "
+            "z), `<plane><normal><size>` (a finite patch; static only) or `<mesh><uri><scale>` (STL, OBJ or PLY)", true);
+  structure("collision", "pose", "the shape's frame in the link's (x y z roll pitch yaw; m, rad)");
+  accepted("collision", {"laser_retro", "max_contacts", "surface"});
+
   // ---- <plugin name="m3dp">: its blocks ----
   structure("plugin", "solver", "the SPH solver: the block below", true);
   structure("plugin", "air", "the air around the print: the block below");
@@ -568,7 +609,16 @@ SchemaTarget default_of() {
 
 std::span<const SchemaBlock> schema_blocks() {
   static const SchemaBlock kBlocks[] = {
-      {"plugin", "<plugin name=\"m3dp\" filename=\"m3dp\">", "Everything M3DP adds to an SDF world, in the world's plugin element.", "",
+      {"world", "<world name=\"…\">",
+       "An SDF world: what M3DP reads of it. The rest of SDF is accepted and left alone; an element SDF does not have there is a "
+       "warning with the closest name.",
+       "", default_of<Scene>},
+      {"include", "<world><include>", "A robot from a URDF file, by DART's URDF loader.", "world", default_of<Scene>},
+      {"model", "<world><model name=\"…\">", "A body of the world: a static boundary or a rigid body.", "world", default_of<Scene>},
+      {"link", "<model><link name=\"…\">", "A link of a model.", "model", default_of<Scene>},
+      {"collision", "<link><collision name=\"…\">", "A collision shape of a link.", "link", default_of<Scene>},
+      {"plugin", "<world><plugin name=\"m3dp\" filename=\"m3dp\">", "Everything M3DP adds to an SDF world, in the world's plugin element.",
+       "world",
        default_of<Scene>},
       {"solver", "<plugin><solver>", "The SPH solver (DFSPH): resolution, time steps, tolerances, rest detection. Required.", "plugin",
        default_of<Scene>},
@@ -648,13 +698,19 @@ std::string schema_reference() {
       "Generated by `m3dp schema` from the scene reader's own table (src/m3dp/scene/schema.cpp); a test fails when this page\n"
       "is stale (regenerate it with `build/apps/m3dp/m3dp schema > docs/scene_reference.md`). Every value is SI unless a\n"
       "`unit=\"...\"` attribute says otherwise; the units each value takes are listed. Defaults are the engine's own.\n\n"
-      "The world itself (models, links, collisions, includes of URDF robots) is SDF's (sdformat.org); the print paths\n"
-      "(`<line>`, `<polyline>`, `<circle>`, `<helix>`, `<wall>`, `<waypoints>`, `<gcode>`) are described in the README.\n";
+      "The world around the plugin (models, links, collisions, includes of URDF robots) is SDF's (sdformat.org): its first\n"
+      "blocks below say what M3DP reads of it. The print paths (`<line>`, `<polyline>`, `<circle>`, `<helix>`, `<wall>`,\n"
+      "`<waypoints>`, `<gcode>`) are described in the README.\n";
   for (const SchemaBlock& block : schema_blocks()) {
     const SchemaTarget defaults = block.defaults();
     text += fmt::format("\n## `{}`\n\n{}\n\n| element | value | unit (also) | range | default | meaning |\n|---|---|---|---|---|---|\n",
                         block.path, markdown_doc(block.doc));
+    std::string ignored;
     for (const SchemaRow* row : schema_block(block.name)) {
+      if (row->ignored) {
+        ignored += fmt::format("{}`<{}>`", ignored.empty() ? "" : ", ", row->name);
+        continue;
+      }
       std::string value, units, range = "", shown = row->show ? row->show(defaults) : std::string();
       switch (row->kind) {
         case ValueKind::number: {
@@ -683,6 +739,7 @@ std::string schema_reference() {
       text += fmt::format("| `<{}>` | {} | {} | {} | {} | {}{} |\n", row->name, value, units, range, shown, markdown_doc(row->doc),
                           row->field.empty() ? "" : fmt::format(" (the engine's `{}`)", row->field));
     }
+    if (!ignored.empty()) text += fmt::format("\nAlso valid SDF here, accepted and not used: {}.\n", ignored);
   }
   return text;
 }

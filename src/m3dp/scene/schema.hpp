@@ -85,7 +85,7 @@ struct Limits {
   [[nodiscard]] std::string describe(std::string_view unit) const;
 };
 
-// ---- the table ----
+// ---- the table: the SDF elements M3DP reads, then its plugin's ----
 enum class ValueKind {
   number,    // a real number in the row's quantity (unit="..." converts), within its limits
   integer,   // a whole number within its limits
@@ -102,6 +102,7 @@ struct SchemaRow {
   Limits limits;
   bool required = false;
   bool repeated = false;      // may be written more than once (a structure read by hand)
+  bool ignored = false;       // valid SDF that M3DP accepts and does not use (the SDF blocks' other children)
   std::string_view doc;       // one line: what it is, and what 0 means where that is special
   std::string_view field;     // the engine's name of what it fills, where that differs from `name`
   std::vector<std::string_view> words;  // a keyword's words; `set` gets the word's index
