@@ -21,6 +21,7 @@
 #include <vector>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/core/text.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/print_quality.hpp"
@@ -242,6 +243,22 @@ scene::PathSegments read_path(PySimulation& self, const std::string& path, const
   return scene::load_path_from_string(path, name ? *name : self.simulation().scene().file.parent_path() / "path.xml");
 }
 
+/// Scene overrides from Python's {path: value} (in order): numbers as Python writes them (the
+/// shortest text that reads back the same), booleans as true/false, text as it is.
+std::vector<scene::SceneOverride> overrides_from(const std::optional<py::dict>& values) {
+  std::vector<scene::SceneOverride> overrides;
+  if (!values) return overrides;
+  for (const auto& [path, value] : *values) {
+    std::string text;
+    if (py::isinstance<py::bool_>(value)) text = value.cast<bool>() ? "true" : "false";
+    else if (py::isinstance<py::int_>(value) || py::isinstance<py::float_>(value) || py::isinstance<py::str>(value)) text = py::str(value);
+    else throw Error(fmt::format("overrides['{}']: expected a number, a bool or text, got {}", py::str(path).cast<std::string>(),
+                                 py::str(py::type::of(value).attr("__name__")).cast<std::string>()));
+    overrides.push_back({py::str(path).cast<std::string>(), text});
+  }
+  return overrides;
+}
+
 /// m3dp.SceneWarning: what the scene reader warned of (an element ignored, a G-code command skipped).
 PyObject* scene_warning = nullptr;
 
@@ -291,9 +308,38 @@ PYBIND11_MODULE(m3dp, module) {
   module.doc() = "M3DP: a simulator for robotic and mobile 3D printing (SPH material, DART robots, cameras).";
   python::translate_errors(module);
 
+  module.def("resolve_scene", [](const fs::path& file, const std::optional<py::dict>& overrides) {
+    const std::string text = read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)");
+    const auto values = python::overrides_from(overrides);
+    std::string resolved = scene::apply_overrides(text, file, values);
+    const scene::Scene loaded = scene::load_scene_from_string(resolved, file);
+    py::dict result;
+    result["text"] = std::move(resolved);
+    std::vector<std::string> inputs;
+    for (const auto& input : loaded.input_files) inputs.push_back(input.string());
+    result["input_files"] = inputs;
+    result["end_time"] = loaded.end_time;
+    std::vector<std::string> heads;
+    for (const auto& head : loaded.print_heads) heads.push_back(head.name);
+    result["heads"] = heads;
+    std::vector<std::string> warnings;
+    for (const auto& warning : loaded.warnings) warnings.push_back(fmt::format("{}: {}", warning.location.str(), warning.message));
+    result["warnings"] = warnings;
+    return result;
+  }, py::arg("scene"), py::arg("overrides") = py::none(),
+     R"(Reads and checks a scene with values replaced by their path, without simulating it (InputError as
+Simulation raises it). A path is element names joined by '.', a [key] picking an element by its
+name="..." (or by index among its namesakes): material[mortar].rheology.yield_stress, print_head[head].
+path.line.speed, solver.particle_radius; a first step the <world> has (model[floor], gravity) starts
+at the world, any other at M3DP's plugin. An element not written is added where the path says.
+Returns {text: the scene as read, input_files: the files it reads (URDF, G-code, waypoints, meshes),
+end_time: s, heads: the print heads' names, warnings: [file:line: what]}.)");
+
   py::class_<PySimulation>(module, "Simulation", R"(A scene's simulation, stepped by the caller.
 
-Simulation(scene, threads=0): scene is an SDF world file (str or path); threads 0 uses every core.
+Simulation(scene, threads=0, overrides=None): scene is an SDF world file (str or path); threads 0
+uses every core; overrides replace scene values by their path, {"material[mortar].rheology.yield_stress":
+300} (SI; see m3dp.resolve_scene), each checked as if written in the file.
 Simulation.from_string(text, name="scene.sdf") reads the scene from a string (paths in it are
 relative to the current folder). Errors in the scene raise m3dp.InputError with .file and .line.
 
@@ -301,8 +347,10 @@ Arrays of the state (particles, camera images) are read-only snapshots of the st
 in: copied at the first read in a step (later reads in the step return the same array), they never
 change after; read them again after a step for the new state. Rows of the particle arrays read in
 one step belong together (ids tells which particle a row is: the order changes between steps).)")
-      .def(py::init([](const fs::path& file, int threads) { return python::simulation_of(scene::load_scene(file), threads); }),
-           py::arg("scene"), py::arg("threads") = 0)
+      .def(py::init([](const fs::path& file, int threads, const std::optional<py::dict>& overrides) {
+             return python::simulation_of(scene::load_scene(file, python::overrides_from(overrides)), threads);
+           }),
+           py::arg("scene"), py::arg("threads") = 0, py::arg("overrides") = py::none())
       .def_static("from_string",
                   [](const std::string& text, const std::string& name, int threads) {
                     return python::simulation_of(scene::load_scene_from_string(text, name), threads);
@@ -434,6 +482,11 @@ one step belong together (ids tells which particle a row is: the order changes b
          "(per head and layer: designed and measured width, height, area, offsets; the fill's designed, printed, over "
          "and under volumes, m³), and per head section_arrays, numpy arrays of every section every `spacing` m along the "
          "beads (layer, at_m, width_m, height_m, area_m2, offset_across_m, offset_up_m, particles: 0 where nothing is).")
+      .def_property_readonly("head_names", [](PySimulation& self) {
+        std::vector<std::string> names;
+        for (const auto& head : self.simulation().scene().print_heads) names.push_back(head.name);
+        return names;
+      }, "The scene's print heads, by name, in scene order.")
       .def_property_readonly("material_names", [](PySimulation& self) {
         std::vector<std::string> names;
         for (const auto& entry : self.simulation().scene().materials) names.push_back(entry.material.name);

@@ -29,8 +29,11 @@ packages=(
   chromium
   # Real slicers with their printer profiles: the G-code reader's test slices with both.
   prusa-slicer slic3r
-  # Plots of studies (scripts/plot_deposition.py) with a real plotting library.
+  # Plots of studies (scripts/plot_deposition.py, m3dp study) with a real plotting library.
   python3-matplotlib
+  # Studies of many runs (m3dp study): Dask's local and remote clusters, SciPy's Latin hypercube and
+  # Sobol samples, results in HDF5, and a progress bar.
+  python3-dask python3-distributed python3-scipy python3-h5py python3-tqdm
   # The readers fuzzed with libFuzzer under AddressSanitizer and UndefinedBehaviorSanitizer (scripts/fuzz.sh).
   clang libclang-rt-14-dev
 )

@@ -7,13 +7,21 @@
 //   m3dp render RUN_DIR [--time T] [--camera NAME | --eye X Y Z --target X Y Z] -o image.png
 //   m3dp view RUN_DIR [--port N]
 //   m3dp quality RUN_DIR [--spacing M]
+//   m3dp study FILE -o DIR [--scheduler tcp://host:8786] [--workers N] [--report]
 #include <CLI/CLI.hpp>
 #include <fmt/format.h>
 
 #include <atomic>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <cerrno>
 #include <filesystem>
+#include <string>
+#include <vector>
+
+#include <unistd.h>
 
 #include "bench_command.hpp"
 #include "mesh_command.hpp"
@@ -38,6 +46,26 @@ namespace {
 std::atomic<bool> g_stop_requested{false};
 
 extern "C" void request_stop(int) { g_stop_requested.store(true); }
+
+/// m3dp study: the study runner is Python (Dask is), so this hands its arguments to Debian's python3
+/// (or $M3DP_PYTHON) running m3dp_study, from the build tree's python/ when there, else installed.
+int study_command(const std::vector<std::string>& arguments) {
+  const char* chosen = std::getenv("M3DP_PYTHON");
+  const std::string python = chosen && *chosen ? chosen : "/usr/bin/python3";
+  if (std::filesystem::exists(M3DP_BUILD_PYTHON "/m3dp_study")) {
+    const char* path = std::getenv("PYTHONPATH");
+    const std::string joined = std::string(M3DP_BUILD_PYTHON) + (path && *path ? std::string(":") + path : "");
+    ::setenv("PYTHONPATH", joined.c_str(), 1);
+  }
+  std::vector<std::string> words{python, "-m", "m3dp_study"};
+  words.insert(words.end(), arguments.begin(), arguments.end());
+  std::vector<char*> argv;
+  for (std::string& word : words) argv.push_back(word.data());
+  argv.push_back(nullptr);
+  ::execv(python.c_str(), argv.data());
+  fmt::print(stderr, "m3dp: error: study: cannot start {} (set M3DP_PYTHON to a Python 3 with Dask): {}\n", python, std::strerror(errno));
+  return 1;
+}
 
 /// `m3dp run`: `options` holds what the command line set (until, progress, record, live stream, pace).
 /// `coordinate`: none as the scene says; false switches its <coordinator> off (`--no-coordinator`).
@@ -171,7 +199,15 @@ int main(int argc, char** argv) {
   auto* schema = app.add_subcommand("schema", "Print the scene reference (Markdown): every element the table has, its unit, range, default "
                                               "and meaning, as docs/scene_reference.md holds it");
 
+  auto* study = app.add_subcommand("study", "Run a study of many runs (a TOML file: values to vary, figures to collect) on a local or "
+                                            "remote Dask cluster; m3dp study --help for its options");
+  // Everything after `study` is the study runner's (its own --help included).
+  study->prefix_command();
+  study->allow_extras();
+  study->set_help_flag();
+
   CLI11_PARSE(app, argc, argv);
+  if (study->parsed()) return study_command(study->remaining());
   try {
     if (run->parsed()) {
       run_options.show_progress = !quiet;

@@ -1,0 +1,281 @@
+"""A study's runs on Dask: planned and checked in full before any starts, each keyed by a hash of
+what it reads (the resolved scene, its input files, the controller, the time and seed), run in its own
+process on a worker, and collected into one table as they finish. A run whose folder already holds a
+result is not run again; a run whose worker dies is run again on another (Dask's own retry)."""
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from .spec import FLOW_SCALE, Study, StudyError, file_digest
+
+STATUS_OK = "ok"
+
+
+def _overrides_and_scales(point: dict):
+    overrides, scales = {}, {}
+    for name, value in point.items():
+        match = FLOW_SCALE.match(name)
+        if match:
+            scales[match.group("head") or ""] = value
+        else:
+            overrides[name] = value
+    return overrides, scales
+
+
+def _reader_message(problem) -> str:
+    """The scene reader's problems without its file:line prefixes (the study's line is the one that matters)."""
+    lines = []
+    for line in str(problem).splitlines():
+        _, _, message = line.partition(" error: ")
+        lines.append(message or line)
+    return "; ".join(lines)
+
+
+def plan_runs(study: Study, out_dir: Path) -> list[dict]:
+    """Every run of the study, each checked by the scene reader with its values (so that a bad path or
+    a value out of the scene's range fails here, at the study's line) and keyed by what it reads."""
+    import m3dp
+
+    try:
+        base = m3dp.resolve_scene(str(study.scene))
+    except m3dp.InputError as problem:
+        raise StudyError(study.file, _scene_line(study), f"the scene does not load:\n{problem}") from None
+    controller = None
+    if study.controller is not None:
+        controller = {"module": study.controller.module, "function": study.controller.function, "period": study.controller.period}
+    controller_identity = dict(controller or {})
+    if controller and controller["module"].endswith(".py"):
+        controller_identity["module"] = file_digest(controller["module"])
+
+    runs = []
+    resolved_by_point = {}
+    for point in study.points:
+        overrides, scales = _overrides_and_scales(point)
+        for head, scale in scales.items():
+            name = f"flow_scale[{head}]" if head else "flow_scale"
+            if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not scale > 0:
+                raise StudyError(study.file, study.line_of(name), f"{name} = {scale!r}: a flow scale is a number > 0")
+            if head and head not in base["heads"]:
+                raise StudyError(study.file, study.line_of(name), f"{name}: the scene has no print head '{head}' (its heads: {', '.join(base['heads'])})")
+        identity_key = json.dumps(overrides, sort_keys=True, default=str)
+        if identity_key not in resolved_by_point:
+            try:
+                resolved_by_point[identity_key] = m3dp.resolve_scene(str(study.scene), overrides)
+            except m3dp.InputError as problem:
+                culprit = _culprit(m3dp, study, overrides)
+                raise StudyError(study.file, study.line_of(culprit), f"parameter '{culprit}' = {overrides[culprit]!r}: {_reader_message(problem)}") from None
+        resolved = resolved_by_point[identity_key]
+        inputs = {path: file_digest(path) for path in resolved["input_files"]}
+        end_time = study.end_time if study.end_time is not None else resolved["end_time"]
+        for repeat in range(study.repeats):
+            seed = study.seed + repeat
+            identity = {"scene": resolved["text"], "scene_file": str(study.scene), "inputs": inputs, "flow_scales": scales,
+                        "end_time": end_time, "seed": seed, "threads": study.threads, "figures": list(study.figures),
+                        "quality_spacing": study.quality_spacing, "record": study.record, "controller": controller_identity}
+            key = hashlib.sha256(json.dumps(identity, sort_keys=True, default=str).encode()).hexdigest()[:16]
+            runs.append({
+                "key": key,
+                "folder": str(out_dir / "runs" / key),
+                "parameters": point,
+                "repeat": repeat,
+                "seed": seed,
+                "timeout": study.timeout,
+                "spec": {"scene": str(study.scene), "overrides": overrides, "flow_scales": scales, "end_time": end_time, "seed": seed,
+                         "threads": study.threads, "figures": list(study.figures), "quality_spacing": study.quality_spacing,
+                         "record": study.record, "controller": controller, "parameters": point},
+            })
+    return runs
+
+
+def _scene_line(study: Study) -> int:
+    from .spec import _line
+    return _line(study.text, "study", "scene")
+
+
+def _culprit(m3dp, study: Study, overrides: dict) -> str:
+    """The parameter whose value the scene refuses: each tried alone, in the study's order."""
+    for name, value in overrides.items():
+        try:
+            m3dp.resolve_scene(str(study.scene), {name: value})
+        except m3dp.InputError:
+            return name
+    return next(iter(overrides))
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+        return get_worker().address
+    except (ImportError, ValueError):
+        return f"local:{os.getpid()}"
+
+
+def _row(run: dict, result: dict, wall_time: float, worker: str, attempts: int) -> dict:
+    row = {"run": run["key"], "status": result.get("status", "failed"), "reason": result.get("reason", "")}
+    row.update(run["parameters"])
+    row.update({"repeat": run["repeat"], "seed": run["seed"]})
+    row.update(result.get("figures", {}))
+    row.update({"wall_time_s": wall_time, "worker": worker, "attempts": attempts, "folder": run["folder"]})
+    return row
+
+
+def finished_row(run: dict) -> dict | None:
+    """The row of a run whose folder holds its result (an earlier invocation's), else None."""
+    folder = Path(run["folder"])
+    try:
+        result = json.loads((folder / "result.json").read_text())
+        meta = json.loads((folder / "row.json").read_text())
+    except (OSError, ValueError):
+        return None
+    return _row(run, result, meta.get("wall_time_s", 0.0), meta.get("worker", ""), meta.get("attempts", 1))
+
+
+def execute(run: dict) -> dict:
+    """One run, on a worker: its own process (python3 -m m3dp_study.run_one), its row back."""
+    folder = Path(run["folder"])
+    done = finished_row(run)
+    if done is not None:
+        return done
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "run.json").write_text(json.dumps(run["spec"], indent=1, default=float))
+    worker = _worker_name()
+    with open(folder / "attempts.jsonl", "a") as attempts_log:
+        attempts_log.write(json.dumps({"worker": worker, "pid": os.getpid(), "started": time.time()}) + "\n")
+    attempts = sum(1 for _ in open(folder / "attempts.jsonl"))
+    started = time.time()
+    reason = ""
+    with open(folder / "run.log", "w") as log:
+        process = subprocess.Popen([sys.executable, "-m", "m3dp_study.run_one", str(folder), str(os.getpid())], stdout=log,
+                                   stderr=subprocess.STDOUT)
+        try:
+            code = process.wait(timeout=run["timeout"])
+        except subprocess.TimeoutExpired:
+            process.kill()
+            process.wait()
+            code, reason = None, f"timed out after {run['timeout']:g} s of wall time"
+    wall_time = time.time() - started
+    result_file = folder / "result.json"
+    if not result_file.exists():
+        if not reason:
+            died = f"signal {signal.Signals(-code).name}" if code is not None and code < 0 else f"exit code {code}"
+            tail = (folder / "run.log").read_text(errors="replace").strip().splitlines()[-3:]
+            reason = f"the run's process died ({died})" + (f": {' | '.join(tail)}" if tail else "")
+        result_file.write_text(json.dumps({"status": "failed", "reason": reason, "figures": {}}))
+    result = json.loads(result_file.read_text())
+    (folder / "row.json").write_text(json.dumps({"wall_time_s": wall_time, "worker": worker, "attempts": attempts}))
+    return _row(run, result, wall_time, worker, attempts)
+
+
+def _client(scheduler: str | None, workers: int | None, threads: int):
+    """A Dask client: a local cluster of processes sized to the machine (workers x threads <= cores),
+    or the scheduler at `scheduler` (tcp://host:8786)."""
+    from distributed import Client, LocalCluster
+
+    if scheduler in (None, "local"):
+        cores = os.cpu_count() or 1
+        count = workers or max(1, cores // threads)
+        if count * threads > cores:
+            raise StudyError("--workers", 0, f"{count} workers x {threads} threads a run is more than this machine's {cores} cores")
+        cluster = LocalCluster(n_workers=count, threads_per_worker=1, processes=True, dashboard_address=None, memory_limit=0)
+        return Client(cluster), cluster, count
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError) as problem:
+        raise StudyError("--scheduler", 0, f"cannot reach the Dask scheduler at {scheduler}: {problem}") from None
+    slots = sum(info.get("nthreads", 1) for info in client.scheduler_info().get("workers", {}).values())
+    return client, None, max(1, slots)
+
+
+class _Progress:
+    """Runs done, running, failed and the ETA, on one line (tqdm's bar)."""
+
+    def __init__(self, total: int, already: int, slots: int, enabled: bool):
+        from tqdm import tqdm
+
+        self.slots, self.failed = slots, 0
+        self.bar = tqdm(total=total, initial=already, unit="run", desc="study", disable=not enabled, dynamic_ncols=True,
+                        file=sys.stderr, smoothing=0)
+        self._update_running()
+
+    def _update_running(self):
+        remaining = self.bar.total - self.bar.n
+        self.bar.set_postfix_str(f"running {min(self.slots, remaining)}, failed {self.failed}", refresh=True)
+
+    def done(self, row: dict):
+        if row["status"] != STATUS_OK:
+            self.failed += 1
+        self.bar.update(1)
+        self._update_running()
+
+    def close(self):
+        self.bar.close()
+
+
+def run_study(study: Study, out_dir, scheduler: str | None = None, workers: int | None = None, progress: bool = True,
+              rerun_failed: bool = False) -> list[dict]:
+    """Runs every run of `study` not already in `out_dir` and writes the table and plots. `scheduler`:
+    None or "local" (a local Dask cluster), "inprocess" (one after another in this process, no
+    Dask), or a Dask scheduler's address. Returns the rows in the study's order."""
+    from .report import write_results
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    runs = plan_runs(study, out)
+    rows: dict[str, dict] = {}
+    for run in runs:
+        row = finished_row(run)
+        if row is not None and (row["status"] == STATUS_OK or not rerun_failed):
+            rows[run["key"]] = row
+        elif row is not None:
+            for name in ("result.json", "row.json"):
+                (Path(run["folder"]) / name).unlink(missing_ok=True)
+    pending = [run for run in runs if run["key"] not in rows]
+    (out / "study.toml").write_text(study.text)
+
+    if pending and scheduler == "inprocess":
+        bar = _Progress(len(runs), len(rows), 1, progress)
+        for run in pending:
+            rows[run["key"]] = execute(run)
+            bar.done(rows[run["key"]])
+            write_results(out, study, [rows[r["key"]] for r in runs if r["key"] in rows], plots=False)
+        bar.close()
+    elif pending:
+        from distributed import as_completed
+
+        client, cluster, slots = _client(scheduler, workers, study.threads)
+        try:
+            bar = _Progress(len(runs), len(rows), slots, progress)
+            futures = {client.submit(execute, run, key=f"m3dp-run-{run['key']}", pure=False): run for run in pending}
+            for future in as_completed(futures):
+                run = futures[future]
+                try:
+                    row = future.result()
+                except Exception as problem:  # the worker died each time it ran it (KilledWorker), or could not run it
+                    row = _row(run, {"status": "failed", "reason": f"{type(problem).__name__}: {problem}"}, 0.0, "", 0)
+                rows[run["key"]] = row
+                bar.done(row)
+                write_results(out, study, [rows[r["key"]] for r in runs if r["key"] in rows], plots=False)
+            bar.close()
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    ordered = [rows[run["key"]] for run in runs]
+    write_results(out, study, ordered, plots=True)
+    return ordered
+
+
+def remake_report(study: Study, out_dir) -> list[dict]:
+    """The plots again from results.csv alone (m3dp study FILE -o DIR --report)."""
+    from .report import read_results, write_plots
+
+    rows = read_results(Path(out_dir))
+    write_plots(Path(out_dir), study, rows)
+    return rows

@@ -1,0 +1,230 @@
+"""m3dp study (issue 40): sweeps of a scene's values on Dask, their table, plots, resumption, failures
+and the study file's errors. Runs the real command (m3dp study = python3 -m m3dp_study), on real
+local Dask clusters and, once, on a `dask scheduler` and a `dask worker` started as processes."""
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import pytest
+from PIL import Image
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENE = ROOT / "tests" / "data" / "strand_study.sdf"
+SPEED = "print_head[head].path.speed"
+YIELD = "material[paste].rheology.yield_stress"
+
+
+def study_file(folder: Path, body: str, name="study.toml") -> Path:
+    path = folder / name
+    path.write_text(f'[study]\nscene = "{SCENE}"\n' + body)
+    return path
+
+
+def run_study(*arguments, check=True, timeout=900):
+    process = subprocess.run([sys.executable, "-m", "m3dp_study", *map(str, arguments), "-q"], capture_output=True, text=True,
+                             timeout=timeout)
+    if check:
+        assert process.returncode == 0, process.stderr
+    return process
+
+
+def read_csv(folder: Path):
+    with open(folder / "results.csv", newline="") as stream:
+        return list(csv.DictReader(stream))
+
+
+SWEEP = f"""end_time = 0.8
+figures = ["quality", "summary"]
+
+[parameters]
+"{SPEED}" = [0.05, 0.1, 0.2]
+"{YIELD}" = {{ from = 100, to = 400, steps = 4 }}
+"""
+
+
+def test_a_sweep_on_two_workers_is_the_table_of_the_same_runs_in_process(tmp_path):
+    study = study_file(tmp_path, SWEEP)
+    run_study(study, "-o", tmp_path / "dask", "--workers", "2")
+    run_study(study, "-o", tmp_path / "inprocess", "--scheduler", "inprocess")
+    on_dask, in_process = read_csv(tmp_path / "dask"), read_csv(tmp_path / "inprocess")
+    assert len(on_dask) == 12
+    assert {row["status"] for row in on_dask} == {"ok"}, [row["reason"] for row in on_dask]
+    assert len({row["worker"] for row in on_dask}) == 2  # both workers ran some
+    # Deterministic runs: every figure the same, whichever worker or process ran them.
+    figures = [key for key in on_dask[0] if key.startswith(("quality.", "summary.")) and "wall_time" not in key
+               and "per_second" not in key and "real_time" not in key]
+    assert "quality.width_m" in figures and "summary.particles" in figures
+    for a, b in zip(on_dask, in_process):
+        assert a["run"] == b["run"]
+        for key in figures:
+            assert a[key] == b[key], (key, a[key], b[key])
+    # The bead widens as the nozzle slows (V/U falls), at every yield stress; its section follows U/V.
+    for stress in {row[YIELD] for row in on_dask}:
+        line = sorted((float(row[SPEED]), float(row["quality.width_m"]), float(row["quality.area_m2"])) for row in on_dask if row[YIELD] == stress)
+        widths = [width for _, width, _ in line]
+        assert widths[0] > widths[1] > widths[2], (stress, line)
+        areas = [area for _, _, area in line]
+        assert areas[0] > 1.6 * areas[1] > 2.56 * areas[2], (stress, line)
+    # The same table in HDF5, read by h5py; plots PIL opens, a map over both parameters among them.
+    with h5py.File(tmp_path / "dask" / "results.h5") as file:
+        runs = file["runs"]
+        assert list(runs.attrs["parameters"]) == [SPEED, YIELD]
+        assert [value.decode() for value in runs["run"][:]] == [row["run"] for row in on_dask]
+        assert runs["quality.width_m"][:].tolist() == [float(row["quality.width_m"]) for row in on_dask]
+    plots = sorted(path.name for path in (tmp_path / "dask" / "plots").glob("*.png"))
+    assert "map_status.png" in plots and "map_quality.width_m.png" in plots
+    assert f"quality.width_m_vs_{SPEED}.png".replace("[", "_").replace("]", "_") in plots
+    with Image.open(tmp_path / "dask" / "plots" / "map_quality.width_m.png") as image:
+        assert image.size[0] > 300
+    # --report remakes the plots from results.csv alone.
+    for plot in (tmp_path / "dask" / "plots").glob("*.png"):
+        plot.unlink()
+    run_study(study, "-o", tmp_path / "dask", "--report")
+    assert sorted(path.name for path in (tmp_path / "dask" / "plots").glob("*.png")) == plots
+
+
+FAILING_CONTROLLER = """
+import os
+
+def control(simulation, run):
+    mode = run["parameters"]["flow_scale"]
+    if mode == 0.5 and simulation.time > 0.05:
+        raise ValueError("the controller gave up")
+    if mode == 0.75 and simulation.time > 0.05:
+        os.abort()  # a crash of the run's process
+"""
+
+
+def test_failed_runs_are_rows_with_their_reason_and_a_second_invocation_skips_finished_runs(tmp_path):
+    (tmp_path / "controller.py").write_text(FAILING_CONTROLLER)
+    study = study_file(tmp_path, f"""end_time = 0.3
+figures = ["summary"]
+
+[parameters]
+flow_scale = [0.5, 0.75, 1.0]
+"solver.bounds.min" = ["-0.05 -0.04 -0.02", "-0.05 -0.04 0.005"]
+
+[controller]
+module = "controller.py"
+function = "control"
+period = 0.05
+""")
+    out = tmp_path / "out"
+    run_study(study, "-o", out, "--workers", "2")
+    rows = read_csv(out)
+    assert len(rows) == 6
+    by = {(row["flow_scale"], row["solver.bounds.min"]): row for row in rows}
+    assert by[("1.0", "-0.05 -0.04 -0.02")]["status"] == "ok"
+    assert "ValueError: the controller gave up" in by[("0.5", "-0.05 -0.04 -0.02")]["reason"]
+    assert "the run's process died (signal SIGABRT)" in by[("0.75", "-0.05 -0.04 -0.02")]["reason"]
+    # Bounds above the bed: the material falls out of them, the simulation's own error, a failed row.
+    blown = by[("1.0", "-0.05 -0.04 0.005")]
+    assert blown["status"] == "failed" and "SimulationError: simulation blew up" in blown["reason"], blown
+    attempts = {row["run"]: (out / "runs" / row["run"] / "attempts.jsonl").read_text() for row in rows}
+    # Again: nothing runs (no new attempt anywhere), the table is the same.
+    run_study(study, "-o", out, "--workers", "2")
+    assert read_csv(out) == rows
+    assert {run: (out / "runs" / run / "attempts.jsonl").read_text() for run in attempts} == attempts
+
+
+def test_a_killed_worker_loses_no_run(tmp_path):
+    study = study_file(tmp_path, f"""end_time = 0.8
+figures = ["summary"]
+
+[parameters]
+"{SPEED}" = [0.05, 0.1, 0.15, 0.2]
+""")
+    out = tmp_path / "out"
+    process = subprocess.Popen([sys.executable, "-m", "m3dp_study", str(study), "-o", str(out), "--workers", "2", "-q"],
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # The first run that starts: kill its worker (the process that runs Dask's task, not the run's own).
+    deadline = time.time() + 120
+    victim = None
+    while victim is None and time.time() < deadline:
+        for attempts in out.glob("runs/*/attempts.jsonl"):
+            text = attempts.read_text().strip()
+            if text:
+                victim = (attempts.parent.name, json.loads(text.splitlines()[0])["pid"])
+                break
+        time.sleep(0.05)
+    assert victim is not None, "no run started"
+    os.kill(victim[1], signal.SIGKILL)
+    stdout, stderr = process.communicate(timeout=600)
+    assert process.returncode == 0, stderr
+    rows = read_csv(out)
+    assert len(rows) == 4 and {row["status"] for row in rows} == {"ok"}, rows
+    retried = next(row for row in rows if row["run"] == victim[0])
+    assert int(retried["attempts"]) == 2
+
+
+def free_port():
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
+def test_a_study_runs_on_a_dask_scheduler_and_worker_started_as_processes(tmp_path):
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    environment = dict(os.environ)
+    scheduler = subprocess.Popen(["dask", "scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard"],
+                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=environment)
+    worker = subprocess.Popen(["dask", "worker", address, "--nworkers", "1", "--nthreads", "1", "--no-dashboard", "--memory-limit", "0"],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=environment)
+    try:
+        study = study_file(tmp_path, f"""end_time = 0.4
+figures = ["summary"]
+
+[parameters]
+"{SPEED}" = [0.1, 0.2]
+""")
+        deadline = time.time() + 60
+        while time.time() < deadline:  # the worker has joined
+            probe = subprocess.run([sys.executable, "-c", f"from distributed import Client; c = Client('{address}', timeout='5s'); "
+                                    "print(len(c.scheduler_info()['workers']))"], capture_output=True, text=True)
+            if probe.stdout.strip() == "1":
+                break
+            time.sleep(0.5)
+        run_study(study, "-o", tmp_path / "out", "--scheduler", address)
+        rows = read_csv(tmp_path / "out")
+        assert [row["status"] for row in rows] == ["ok", "ok"]
+        assert {row["worker"] for row in rows} != {""} and all(row["worker"].startswith("tcp://127.0.0.1:") for row in rows)
+    finally:
+        for process in (worker, scheduler):
+            process.terminate()
+            process.wait(timeout=30)
+
+
+@pytest.mark.parametrize("body, line, message", [
+    (f'[parameters]\n"print_head[head].path.sped" = [0.1]\n', 4,
+     "parameter 'print_head[head].path.sped' = 0.1: unknown element <sped> in <path>"),
+    (f'[parameters]\n"{SPEED}" = [0.1]\n"{YIELD}" = [150, -5]\n', 5,
+     f"parameter '{YIELD}' = -5: <yield_stress> must be"),
+    (f'[parameters]\n"material[mortar].density" = [1000]\n', 4,
+     "has no <material name=\"mortar\"> (its <material>: paste)"),
+    (f'[sampling]\nmethod = "sobol"\nsamples = 0\n[parameters]\n"{YIELD}" = {{ from = 100, to = 200 }}\n', 5,
+     "samples must be at least 1, got 0"),
+    (f'end_tme = 1\n[parameters]\n"{YIELD}" = [100]\n', 3, "unknown key 'end_tme' in [study]; did you mean 'end_time'?"),
+])
+def test_a_bad_study_file_fails_before_any_run_at_its_line(tmp_path, body, line, message):
+    study = study_file(tmp_path, body)
+    process = run_study(study, "-o", tmp_path / "out", check=False)
+    assert process.returncode == 2, process.stderr
+    assert f"{study}:{line}: error: " in process.stderr, process.stderr
+    assert message in process.stderr, process.stderr
+    assert not (tmp_path / "out" / "runs").exists()
+
+
+def test_an_unreachable_scheduler_fails_before_any_run(tmp_path):
+    study = study_file(tmp_path, f'[parameters]\n"{SPEED}" = [0.1]\n')
+    process = run_study(study, "-o", tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{free_port()}", check=False)
+    assert process.returncode == 2
+    assert "cannot reach the Dask scheduler at tcp://127.0.0.1:" in process.stderr
+    assert not (tmp_path / "out" / "runs").exists()
