@@ -135,6 +135,15 @@ TEST(Gcode, ArcsRelativeModesAndUnits) {
   EXPECT_NEAR(big.moves[1].end.x(), 0.2, 1e-6);
   EXPECT_NEAR(big.material_volume / small.material_volume, 1000.0, 1e-6);
   EXPECT_NEAR(big.duration, small.duration, 1e-12);
+
+  // A printer's overrides (M220 speed, M221 flow): the same path, moves 1.25x faster, 0.85x the material.
+  GcodeSettings overridden;
+  overridden.speed_scale = Real(1.25);
+  overridden.flow_scale = Real(0.85);
+  const auto scaled = parse("G1 X10 F600\nG1 X20 E1\n", overridden);
+  EXPECT_NEAR(scaled.moves[1].end.x(), small.moves[1].end.x(), 1e-9);
+  EXPECT_NEAR(scaled.duration, small.duration / 1.25, 1e-6);
+  EXPECT_NEAR(scaled.material_volume / small.material_volume, 0.85, 1e-6);
 }
 
 TEST(Gcode, CuraCommentsDwellRetractionAndPlacement) {

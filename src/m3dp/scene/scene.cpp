@@ -1793,7 +1793,7 @@ std::optional<PathSegments> SceneReader::read_path_segments(const pugi::xml_node
 
 std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segments(const pugi::xml_node& element) {
   check_attributes(element, {"file"});
-  check_children(element, {"pose", "scale", "filament_diameter", "volumetric_extrusion"});
+  check_children(element, {"pose", "scale", "filament_diameter", "volumetric_extrusion", "speed_scale", "flow_scale"});
   const auto file = read_attribute(element, "file", Presence::required);
   if (!file) return std::nullopt;
   toolpath::GcodeSettings settings;
@@ -1804,6 +1804,11 @@ std::optional<std::vector<toolpath::PathSegment>> SceneReader::read_gcode_segmen
   if (const auto volumetric = read_bool(element, "volumetric_extrusion")) settings.volumetric_extrusion = *volumetric;
   if (const auto scale = read_scalar(element, "scale", Quantity::plain_number, Limits::positive(), Presence::optional))
     settings.geometry_scale = Real(*scale);
+  // A printer's speed and flow overrides (M220, M221), as a study varies them.
+  if (const auto scale = read_scalar(element, "speed_scale", Quantity::plain_number, Limits::positive(), Presence::optional))
+    settings.speed_scale = Real(*scale);
+  if (const auto scale = read_scalar(element, "flow_scale", Quantity::plain_number, Limits::positive(), Presence::optional))
+    settings.flow_scale = Real(*scale);
   const auto gcode_path = find_input_file(element, *file, "G-code file");
   if (!gcode_path) return std::nullopt;
   try {

@@ -392,9 +392,9 @@ class Parser {
     move.feature = feature_;
     // Time at the feed rate; an E-only move (retraction) runs the filament at that rate in place.
     const double travel_mm = length_mm > 0 ? length_mm : std::abs(extrusion);
-    move.duration = travel_mm / feed_rate_ * 60;
+    move.duration = travel_mm / (feed_rate_ * settings_.speed_scale) * 60;
     move.dwell = length_mm == 0;
-    move.material_volume = volume_of(laid_by(extrusion, length_mm > 0));
+    move.material_volume = volume_of(laid_by(extrusion, length_mm > 0)) * settings_.flow_scale;
     if (diameter_assumed_ && move.material_volume > 0) {
       diameter_assumed_ = false;  // said once, at the first move that lays material
       program_.warnings.push_back(Diagnostic{
@@ -546,9 +546,9 @@ std::vector<PathSegment> GcodeProgram::path_segments() const {
 GcodeProgram parse_gcode(std::string_view text, const fs::path& file, const GcodeSettings& settings) {
   if (!(settings.length_scale > 0) || (settings.filament_diameter && !(*settings.filament_diameter > 0)) ||
       !(settings.default_feed_rate > 0) ||
-      !(settings.arc_segment_length > 0) || !(settings.geometry_scale > 0))
-    throw Error("G-code settings: length_scale, geometry_scale, filament_diameter, default_feed_rate and arc_segment_length "
-                "must be > 0");
+      !(settings.arc_segment_length > 0) || !(settings.geometry_scale > 0) || !(settings.speed_scale > 0) || !(settings.flow_scale > 0))
+    throw Error("G-code settings: length_scale, geometry_scale, filament_diameter, default_feed_rate, arc_segment_length, speed_scale "
+                "and flow_scale must be > 0");
   return Parser(file, settings).parse(text);
 }
 

@@ -30,6 +30,8 @@ struct GcodeSettings {
   Real geometry_scale = 1;                 // enlarges the part: lengths and speeds × s, volumes × s³
                                            // (a desktop slicer's G-code printed at construction scale)
   Real default_feed_rate = Real(0.025);    // m/s until the first F word (1500 mm/min)
+  Real speed_scale = 1;                    // every feed rate × this (a printer's M220 override): moves take 1/s the time
+  Real flow_scale = 1;                     // material laid × this (a printer's M221 override)
   Real arc_segment_length = Real(0.5e-3);  // m, longest chord when arcs are split into lines
   // Moves (lines, arc pieces, dwells) a file may make, about 100 bytes each: more is refused at the
   // line that passes it, before it is allocated (a construction print is 10⁵–10⁶ moves).
