@@ -19,10 +19,15 @@ def main(argv=None) -> int:
     parser.add_argument("--workers", type=int, default=None, help="workers of the local cluster (default: cores / threads a run)")
     parser.add_argument("--report", action="store_true", help="remake the plots from results.csv alone; runs nothing")
     parser.add_argument("--rerun-failed", action="store_true", help="run again the runs that failed before (finished ones are skipped)")
+    parser.add_argument("--dataset", action="store_true",
+                        help="write each run's camera frames with per-pixel labels into DIR/dataset (COCO-style annotations.json); "
+                             "the study file's [dataset] table says when and which cameras (default: every camera at the end)")
     parser.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     arguments = parser.parse_args(argv)
     try:
         study = load_study(arguments.file)
+        if arguments.dataset and study.dataset is None:
+            study.dataset = {"every": None, "cameras": None}
         if arguments.report:
             from .study import remake_report
 

@@ -77,6 +77,44 @@ def _controller(spec):
     return getattr(module, spec["function"])
 
 
+# Depth images are 16-bit PNGs of depth × 5000 (0.2 mm a unit, 13 m at most; 0: nothing seen), as
+# the TUM RGB-D benchmark writes them.
+DEPTH_UNITS_PER_METRE = 5000
+
+
+def capture(simulation, folder: Path, cameras, index: int) -> list[dict]:
+    """Each camera's picture now with its labels: rgb, segment ids (uint16, legend in the entry),
+    print layer + 1 per pixel (0: not printed material), depth. Returns the frames' entries."""
+    import numpy as np
+    from PIL import Image
+
+    frames = []
+    legend = {int(key): value for key, value in simulation.camera_legend().items()}
+    layer_of = np.zeros(max(legend) + 1 if legend else 1, dtype=np.uint16)
+    for segment, entry in legend.items():
+        if "layer" in entry:
+            layer_of[segment] = entry["layer"] + 1
+    for camera in cameras:
+        images = simulation.camera(camera)
+        stem = f"{camera}_{index:04d}"
+        entry = {"camera": camera, "time_s": simulation.time, "index": index, "rgb": f"{stem}.png"}
+        Image.fromarray(np.ascontiguousarray(images["rgb"])).save(folder / entry["rgb"])
+        if "segmentation" in images:
+            segments = np.asarray(images["segmentation"], dtype=np.uint16)
+            entry["segment"], entry["layer"] = f"{stem}_segment.png", f"{stem}_layer.png"
+            Image.fromarray(segments).save(folder / entry["segment"])
+            Image.fromarray(layer_of[np.minimum(segments, len(layer_of) - 1)]).save(folder / entry["layer"])
+            entry["legend"] = {str(segment): legend[int(segment)] for segment in np.unique(segments) if int(segment) in legend}
+        if "depth" in images:
+            depth = np.asarray(images["depth"], dtype=np.float64)
+            units = np.where(np.isfinite(depth), np.round(depth * DEPTH_UNITS_PER_METRE), 0)
+            entry["depth"] = f"{stem}_depth.png"
+            Image.fromarray(np.clip(units, 0, 65535).astype(np.uint16)).save(folder / entry["depth"])
+        entry["height"], entry["width"] = images["rgb"].shape[:2]
+        frames.append(entry)
+    return frames
+
+
 def run(folder: Path) -> dict:
     import m3dp  # here, so that a broken install is this run's reported failure
 
@@ -93,13 +131,31 @@ def run(folder: Path) -> dict:
                 simulation.set_extrusion(name, flow_scale=scale)
         end_time = spec["end_time"] if spec["end_time"] is not None else simulation.end_time
         control = _controller(spec["controller"])
-        if control is None:
-            simulation.step_to(end_time)
-        else:
-            period = spec["controller"]["period"]
-            while simulation.time < end_time - 1e-12:
+        period = spec["controller"]["period"] if control is not None else math.inf
+        dataset = spec.get("dataset")
+        frames, captures = [], []
+        if dataset is not None:
+            cameras = dataset["cameras"] or simulation.cameras
+            missing = [name for name in cameras if name not in simulation.cameras]
+            if not cameras or missing:
+                raise ValueError(f"the dataset's cameras {missing or '(none)'}: the scene's cameras are {simulation.cameras or 'none'}")
+            (folder / "dataset").mkdir(exist_ok=True)
+            every = dataset["every"]
+            count = int(math.floor(end_time / every + 1e-9)) if every else 0
+            captures = [every * (k + 1) for k in range(count) if every * (k + 1) < end_time - 1e-9] + [end_time]
+        next_control = 0.0 if control is not None else math.inf
+        while True:
+            if control is not None and simulation.time >= next_control - 1e-12 and simulation.time < end_time - 1e-12:
                 control(simulation, {"seed": spec["seed"], "parameters": spec["parameters"]})
-                simulation.step_to(min(end_time, simulation.time + period))
+                next_control += period
+            while captures and simulation.time >= captures[0] - 1e-12:
+                frames += capture(simulation, folder / "dataset", cameras, len(frames) // len(cameras))
+                captures.pop(0)
+            if simulation.time >= end_time - 1e-12:
+                break
+            simulation.step_to(min(end_time, next_control, captures[0] if captures else math.inf))
+        if dataset is not None:
+            (folder / "dataset" / "frames.json").write_text(json.dumps(frames, indent=1))
         figures = {}
         if "quality" in spec["figures"]:
             figures.update(quality_figures(simulation.quality(spec["quality_spacing"])))

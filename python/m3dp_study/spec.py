@@ -32,6 +32,7 @@ STUDY_KEYS = {
 SAMPLING_KEYS = ("method", "samples", "seed")
 PARAMETER_TABLE_KEYS = ("from", "to", "steps", "scale")
 CONTROLLER_KEYS = ("module", "function", "period")
+DATASET_KEYS = ("every", "cameras")
 # Parameters that are not scene values: the heads' flow scale (all heads, or one by name).
 FLOW_SCALE = re.compile(r"^flow_scale(\[(?P<head>[^\]]+)\])?$")
 
@@ -88,6 +89,7 @@ class Study:
     samples: int = 0
     sampling_seed: int = 0
     controller: Controller | None = None
+    dataset: dict | None = None  # {"every": s or None, "cameras": [names] or None}: labelled camera frames
     points: list[dict] = field(default_factory=list)  # each point's {parameter: value}
 
     def line_of(self, parameter_name: str) -> int:
@@ -155,8 +157,8 @@ def load_study(path) -> Study:
         message = re.sub(r"\s*\(at line \d+, column \d+\)", "", str(problem))
         raise StudyError(study_file, int(found.group(1)) if found else 0, f"not valid TOML: {message}") from None
 
-    _unknown_keys(study_file, text, None, data.keys(), ("study", "parameters", "sampling", "controller"))
-    for table in ("study", "parameters", "sampling", "controller"):
+    _unknown_keys(study_file, text, None, data.keys(), ("study", "parameters", "sampling", "controller", "dataset"))
+    for table in ("study", "parameters", "sampling", "controller", "dataset"):
         if table in data and not isinstance(data[table], dict):
             raise StudyError(study_file, _line(text, None, table), f"'{table}' must be a table: [{table}]")
     settings = data.get("study")
@@ -274,6 +276,17 @@ def load_study(path) -> Study:
                 raise StudyError(study_file, _line(text, "controller", "module"), f"controller module '{module}' not found (looked for {module_path})")
             module = str(module_path)
         study.controller = Controller(module, controller["function"], period, _line(text, "controller"))
+
+    dataset = data.get("dataset")
+    if dataset is not None:
+        _unknown_keys(study_file, text, "dataset", dataset.keys(), DATASET_KEYS)
+        every = None
+        if "every" in dataset:
+            every = float(_number(study_file, _line(text, "dataset", "every"), "every", dataset["every"], positive=True))
+        cameras = dataset.get("cameras")
+        if cameras is not None and (not isinstance(cameras, list) or not all(isinstance(name, str) for name in cameras) or not cameras):
+            raise StudyError(study_file, _line(text, "dataset", "cameras"), "cameras must be a list of the scene's camera names")
+        study.dataset = {"every": every, "cameras": cameras}
 
     study.points = _points(study)
     return study

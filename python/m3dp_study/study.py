@@ -78,7 +78,8 @@ def plan_runs(study: Study, out_dir: Path) -> list[dict]:
             seed = study.seed + repeat
             identity = {"scene": resolved["text"], "scene_file": str(study.scene), "inputs": inputs, "flow_scales": scales,
                         "end_time": end_time, "seed": seed, "threads": study.threads, "figures": list(study.figures),
-                        "quality_spacing": study.quality_spacing, "record": study.record, "controller": controller_identity}
+                        "quality_spacing": study.quality_spacing, "record": study.record, "controller": controller_identity,
+                        "dataset": study.dataset}
             key = hashlib.sha256(json.dumps(identity, sort_keys=True, default=str).encode()).hexdigest()[:16]
             runs.append({
                 "key": key,
@@ -89,7 +90,7 @@ def plan_runs(study: Study, out_dir: Path) -> list[dict]:
                 "timeout": study.timeout,
                 "spec": {"scene": str(study.scene), "overrides": overrides, "flow_scales": scales, "end_time": end_time, "seed": seed,
                          "threads": study.threads, "figures": list(study.figures), "quality_spacing": study.quality_spacing,
-                         "record": study.record, "controller": controller, "parameters": point},
+                         "record": study.record, "controller": controller, "parameters": point, "dataset": study.dataset},
             })
     return runs
 
@@ -269,6 +270,10 @@ def run_study(study: Study, out_dir, scheduler: str | None = None, workers: int 
                 cluster.close()
     ordered = [rows[run["key"]] for run in runs]
     write_results(out, study, ordered, plots=True)
+    if study.dataset is not None:
+        from .dataset import write_dataset
+
+        write_dataset(out, study, runs, ordered)
     return ordered
 
 

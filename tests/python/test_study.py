@@ -228,3 +228,70 @@ def test_an_unreachable_scheduler_fails_before_any_run(tmp_path):
     assert process.returncode == 2
     assert "cannot reach the Dask scheduler at tcp://127.0.0.1:" in process.stderr
     assert not (tmp_path / "out" / "runs").exists()
+
+
+def decode_rle(segmentation):
+    """COCO's uncompressed RLE back to a mask (written here from the format's definition)."""
+    import numpy as np
+    height, width = segmentation["size"]
+    flat = np.zeros(height * width, dtype=bool)
+    position, value = 0, False
+    for count in segmentation["counts"]:
+        flat[position:position + count] = value
+        position += count
+        value = not value
+    return flat.reshape((width, height)).T
+
+
+def test_a_dataset_of_labelled_camera_frames(tmp_path):
+    import numpy as np
+    study = study_file(tmp_path, f"""end_time = 0.6
+figures = ["summary"]
+
+[parameters]
+"{SPEED}" = [0.05, 0.2]
+
+[dataset]
+every = 0.3
+""")
+    out = tmp_path / "out"
+    run_study(study, "-o", out, "--workers", "2", "--dataset")
+    index = json.loads((out / "dataset" / "annotations.json").read_text())
+    manifest = json.loads((out / "dataset" / "manifest.json").read_text())
+    assert manifest["parameters"] == [SPEED] and len(manifest["runs"]) == 2
+    assert len(index["images"]) == 4  # two runs, at 0.3 s and at the end
+    categories = {entry["id"]: entry["name"] for entry in index["categories"]}
+    for image in index["images"]:
+        with Image.open(out / "dataset" / image["file_name"]) as picture:
+            assert picture.mode == "RGB" and picture.size == (160, 120)
+        with Image.open(out / "dataset" / image["segment_file"]) as picture:
+            segments = np.array(picture)
+        with Image.open(out / "dataset" / image["layer_file"]) as picture:
+            layers = np.array(picture)
+        with Image.open(out / "dataset" / image["depth_file"]) as picture:
+            depth = np.array(picture) / 5000.0
+        assert segments.shape == (120, 160)
+        # Every id in the mask is in the legend; the layer mask is layer + 1 exactly where layered material is.
+        legend = {int(key): value for key, value in image["legend"].items()}
+        assert set(np.unique(segments).tolist()) <= set(legend)
+        layered = [segment for segment, entry in legend.items() if "layer" in entry]
+        assert layered, legend  # the strand is seen
+        for segment in layered:
+            assert (layers[segments == segment] == legend[segment]["layer"] + 1).all()
+        assert (layers[~np.isin(segments, layered)] == 0).all()
+        # The camera is 0.12 m above the bed, the strand about 1 cm high under it.
+        strand = np.isin(segments, layered)
+        assert 0.10 < np.median(depth[strand]) < 0.118
+        # Each annotation's RLE is its segment's pixels.
+        mine = [entry for entry in index["annotations"] if entry["image_id"] == image["id"]]
+        assert {entry["segment_id"] for entry in mine} == {segment for segment in legend if legend[segment]["kind"] != "background"} & set(np.unique(segments).tolist())
+        for entry in mine:
+            mask = decode_rle(entry["segmentation"])
+            assert (mask == (segments == entry["segment_id"])).all()
+            assert entry["area"] == int(mask.sum())
+            assert categories[entry["category_id"]] == legend[entry["segment_id"]]["kind"]
+    # The slower nozzle lays a wider bead: more strand pixels in its last picture.
+    last = {image["parameters"][SPEED]: image for image in index["images"] if image["time_s"] > 0.55}
+    def strand_pixels(image):
+        return sum(entry["area"] for entry in index["annotations"] if entry["image_id"] == image["id"] and "layer" in entry)
+    assert strand_pixels(last[0.05]) > strand_pixels(last[0.2])
