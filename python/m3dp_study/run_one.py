@@ -144,9 +144,13 @@ def run(folder: Path) -> dict:
             count = int(math.floor(end_time / every + 1e-9)) if every else 0
             captures = [every * (k + 1) for k in range(count) if every * (k + 1) < end_time - 1e-9] + [end_time]
         next_control = 0.0 if control is not None else math.inf
+        controller_figures = {}
         while True:
             if control is not None and simulation.time >= next_control - 1e-12 and simulation.time < end_time - 1e-12:
-                control(simulation, {"seed": spec["seed"], "parameters": spec["parameters"]})
+                said = control(simulation, {"seed": spec["seed"], "parameters": spec["parameters"]})
+                if isinstance(said, dict):  # the controller's own figures (a score): the last it gave
+                    controller_figures = {f"controller.{key}": value for key, value in said.items()
+                                          if isinstance(value, (int, float)) and not isinstance(value, bool)}
                 next_control += period
             while captures and simulation.time >= captures[0] - 1e-12:
                 frames += capture(simulation, folder / "dataset", cameras, len(frames) // len(cameras))
@@ -156,7 +160,7 @@ def run(folder: Path) -> dict:
             simulation.step_to(min(end_time, next_control, captures[0] if captures else math.inf))
         if dataset is not None:
             (folder / "dataset" / "frames.json").write_text(json.dumps(frames, indent=1))
-        figures = {}
+        figures = dict(controller_figures)
         if "quality" in spec["figures"]:
             figures.update(quality_figures(simulation.quality(spec["quality_spacing"])))
         summary = simulation.close()

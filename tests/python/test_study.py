@@ -99,6 +99,7 @@ def control(simulation, run):
         raise ValueError("the controller gave up")
     if mode == 0.75 and simulation.time > 0.05:
         os.abort()  # a crash of the run's process
+    return {"emitted_cm3": simulation.volume_m3["emitted"] * 1e6, "seed": run["seed"]}
 """
 
 
@@ -122,6 +123,9 @@ period = 0.05
     assert len(rows) == 6
     by = {(row["flow_scale"], row["solver.bounds.min"]): row for row in rows}
     assert by[("1.0", "-0.05 -0.04 -0.02")]["status"] == "ok"
+    # The controller's own figures: the last dict it returned.
+    ok = by[("1.0", "-0.05 -0.04 -0.02")]
+    assert float(ok["controller.emitted_cm3"]) > 0 and ok["controller.seed"] == "0"
     assert "ValueError: the controller gave up" in by[("0.5", "-0.05 -0.04 -0.02")]["reason"]
     assert "the run's process died (signal SIGABRT)" in by[("0.75", "-0.05 -0.04 -0.02")]["reason"]
     # Bounds above the bed: the material falls out of them, the simulation's own error, a failed row.
