@@ -138,6 +138,55 @@ def finished_row(run: dict) -> dict | None:
     return _row(run, result, meta.get("wall_time_s", 0.0), meta.get("worker", ""), meta.get("attempts", 1))
 
 
+def _run_process(folder: Path, timeout: float):
+    """Runs m3dp_study.run_one on `folder` in a process of its own, its output in run.log: forked from
+    this one, which has M3DP and numpy loaded already (0.01 s against 0.3 s for a new interpreter),
+    or started afresh where there is no fork. Returns (exit status or None, why it was stopped)."""
+    parent = os.getpid()
+    if not hasattr(os, "fork"):
+        with open(folder / "run.log", "w") as log:
+            process = subprocess.Popen([sys.executable, "-m", "m3dp_study.run_one", str(folder), str(parent)], stdout=log,
+                                       stderr=subprocess.STDOUT)
+            try:
+                return process.wait(timeout=timeout), ""
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+                return None, f"timed out after {timeout:g} s of wall time"
+    import m3dp  # noqa: F401  (loaded once a worker, inherited by each run's process)
+    from . import run_one
+
+    log = os.open(folder / "run.log", os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    child = os.fork()
+    if child == 0:  # the run's process: never returns into the worker's code
+        code = 1
+        try:
+            os.dup2(log, 1)
+            os.dup2(log, 2)
+            code = run_one.main(["run_one", str(folder), str(parent)])
+        except BaseException:
+            import traceback
+
+            traceback.print_exc()
+        finally:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
+    os.close(log)
+    deadline = time.time() + timeout
+    pause = 0.001
+    while True:
+        done, status = os.waitpid(child, os.WNOHANG)
+        if done:
+            return os.waitstatus_to_exitcode(status), ""
+        if time.time() > deadline:
+            os.kill(child, signal.SIGKILL)
+            os.waitpid(child, 0)
+            return None, f"timed out after {timeout:g} s of wall time"
+        time.sleep(pause)
+        pause = min(0.02, pause * 2)
+
+
 def execute(run: dict) -> dict:
     """One run, on a worker: its own process (python3 -m m3dp_study.run_one), its row back."""
     folder = Path(run["folder"])
@@ -151,16 +200,7 @@ def execute(run: dict) -> dict:
         attempts_log.write(json.dumps({"worker": worker, "pid": os.getpid(), "started": time.time()}) + "\n")
     attempts = sum(1 for _ in open(folder / "attempts.jsonl"))
     started = time.time()
-    reason = ""
-    with open(folder / "run.log", "w") as log:
-        process = subprocess.Popen([sys.executable, "-m", "m3dp_study.run_one", str(folder), str(os.getpid())], stdout=log,
-                                   stderr=subprocess.STDOUT)
-        try:
-            code = process.wait(timeout=run["timeout"])
-        except subprocess.TimeoutExpired:
-            process.kill()
-            process.wait()
-            code, reason = None, f"timed out after {run['timeout']:g} s of wall time"
+    code, reason = _run_process(folder, run["timeout"])
     wall_time = time.time() - started
     result_file = folder / "result.json"
     if not result_file.exists():
@@ -238,6 +278,7 @@ def run_study(study: Study, out_dir, scheduler: str | None = None, workers: int 
             for name in ("result.json", "row.json"):
                 (Path(run["folder"]) / name).unlink(missing_ok=True)
     pending = [run for run in runs if run["key"] not in rows]
+    written = time.time()  # when the table was last written while runs finish
     (out / "study.toml").write_text(study.text)
 
     if pending and scheduler == "inprocess":
@@ -245,7 +286,9 @@ def run_study(study: Study, out_dir, scheduler: str | None = None, workers: int 
         for run in pending:
             rows[run["key"]] = execute(run)
             bar.done(rows[run["key"]])
-            write_results(out, study, [rows[r["key"]] for r in runs if r["key"] in rows], plots=False)
+            if time.time() - written > 5:
+                write_results(out, study, [rows[r["key"]] for r in runs if r["key"] in rows], plots=False)
+                written = time.time()
         bar.close()
     elif pending:
         from distributed import as_completed
@@ -262,7 +305,9 @@ def run_study(study: Study, out_dir, scheduler: str | None = None, workers: int 
                     row = _row(run, {"status": "failed", "reason": f"{type(problem).__name__}: {problem}"}, 0.0, "", 0)
                 rows[run["key"]] = row
                 bar.done(row)
-                write_results(out, study, [rows[r["key"]] for r in runs if r["key"] in rows], plots=False)
+                if time.time() - written > 5:  # the table so far, for a look while the study runs
+                    write_results(out, study, [rows[r["key"]] for r in runs if r["key"] in rows], plots=False)
+                    written = time.time()
             bar.close()
         finally:
             client.close()
