@@ -299,3 +299,14 @@ every = 0.3
     def strand_pixels(image):
         return sum(entry["area"] for entry in index["annotations"] if entry["image_id"] == image["id"] and "layer" in entry)
     assert strand_pixels(last[0.05]) > strand_pixels(last[0.2])
+
+
+def test_the_m3dp_program_runs_a_study(tmp_path):
+    import m3dp
+    program = Path(m3dp.__file__).resolve().parent.parent / "apps" / "m3dp" / "m3dp"  # beside the module in the build tree
+    study = study_file(tmp_path, f'end_time = 0.3\nfigures = ["summary"]\n[parameters]\n"{SPEED}" = [0.1, 0.2]\n')
+    process = subprocess.run([str(program), "study", str(study), "-o", str(tmp_path / "out"), "--scheduler", "inprocess", "-q"],
+                             capture_output=True, text=True, timeout=300)
+    assert process.returncode == 0, process.stderr
+    assert "m3dp study: 2 runs, 2 completed, 0 failed" in process.stdout
+    assert [row["status"] for row in read_csv(tmp_path / "out")] == ["ok", "ok"]
