@@ -27,10 +27,12 @@ void add_bench_options(CLI::App& command, BenchOptions& options) {
                      "dam_break (the solver alone), ur10_wall (robot printing, everything) or clay_print (a "
                      "Herschel-Bulkley clay at up to --max-viscosity, implicit viscosity) or wall_layers (a clay wall "
                      "of --layers layers: the cost of a step at the top layer against the second) or strand (a pressed "
-                     "and a free mortar strand from a nozzle with a bore, and from the exit-plane inlet)")
-      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers", "strand"}))
+                     "and a free mortar strand from a nozzle with a bore, and from the exit-plane inlet) or nozzle (a 5,000 Pa*s "
+                     "paste from a 0.3 m nozzle onto a floor, as compared with SPlisHSPlasH) or plate (a short print on a 10 x 10 m "
+                     "floor: setup time, boundary particles, memory)")
+      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers", "strand", "nozzle", "plate"}))
       ->capture_default_str();
-  command.add_option("--scene", options.scene_file, "ur10_wall: scene file to run instead of the project's");
+  command.add_option("--scene", options.scene_file, "ur10_wall, nozzle, plate: scene file to run instead of the project's");
   command.add_option("--particles", options.particles, "Fluid particles in the dam-break column or the clay slab")
       ->capture_default_str();
   command.add_option("--record", options.record, "ur10_wall: record run.mcap as the scene says (scene), or on, or off")
@@ -94,6 +96,59 @@ int bench_ur10_wall(const BenchOptions& options) {
   return summary.status == sim::RunStatus::completed ? 0 : 1;
 }
 }  // namespace
+
+/// Resident memory now and at its peak (MB), from /proc/self/status.
+std::pair<double, double> resident_megabytes() {
+  std::ifstream status("/proc/self/status");
+  std::string line;
+  double now = 0, peak = 0;
+  while (std::getline(status, line)) {
+    if (line.starts_with("VmRSS:")) now = std::atof(line.c_str() + 6) / 1024;
+    if (line.starts_with("VmHWM:")) peak = std::atof(line.c_str() + 6) / 1024;
+  }
+  return {now, peak};
+}
+
+/// A scene of bench/scenes run to its end (issue 41's cases): setup time, boundary particles and
+/// memory, then the loop's time, steps, iterations a step and stage times, for comparison with a peer.
+int bench_scene(const std::string& name, const BenchOptions& options) {
+  const std::filesystem::path file = options.scene_file.empty()
+                                         ? std::filesystem::path(M3DP_PROJECT_ROOT) / "bench" / "scenes" / (name + ".sdf")
+                                         : std::filesystem::path(options.scene_file);
+  const auto memory_before = resident_megabytes();
+  const auto setup_start = std::chrono::steady_clock::now();
+  scene::Scene scene = scene::load_scene(file);
+  scene.output.write_particles = false;
+  sim::Simulation simulation(scene);
+  const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
+  const auto memory_after = resident_megabytes();
+  const auto& state = simulation.solver().state();
+  fmt::print("{}: {} ({} threads), {:.2f} s simulated, particle radius {:.4g} m\n", name, file.string(), ThreadLimit::active_threads(),
+             scene.end_time, double(scene.solver.particle_radius));
+  fmt::print("setup: {:.3f} s, {} boundary particles, resident memory {:.0f} MB (+{:.0f} MB for the scene)\n", setup_seconds,
+             state.boundary.size(), memory_after.first, memory_after.first - memory_before.first);
+  sph::StageTimes sum;
+  double density = 0, divergence = 0, viscosity = 0;
+  std::uint64_t steps = 0;
+  const auto start = std::chrono::steady_clock::now();
+  while (simulation.time() < scene.end_time - 1e-12) {
+    const auto& stats = simulation.step();
+    sum += stats.stage_ms;
+    density += stats.density_iterations;
+    divergence += stats.divergence_iterations;
+    viscosity += stats.viscosity_iterations;
+    ++steps;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  const double n = double(std::max<std::uint64_t>(1, steps));
+  fmt::print("loop: {:.3f} s for {} steps ({:.2f} ms/step, mean dt {:.3g} ms), {} particles at the end, peak resident memory {:.0f} MB\n",
+             seconds, steps, 1e3 * seconds / n, 1e3 * simulation.time() / n, simulation.solver().fluid().size(),
+             resident_megabytes().second);
+  fmt::print("iterations per step: density {:.2f}, divergence {:.2f}, viscosity {:.2f}\n", density / n, divergence / n, viscosity / n);
+  fmt::print("stage,ms_per_step\n");
+  for (std::size_t s = 0; s < sph::kStageCount; ++s) fmt::print("{},{:.3f}\n", sph::kStageNames[s], sum.ms[s] / n);
+  return 0;
+}
 
 /// Times `options.steps` steps after the warm-up and prints throughput, iterations and stage times.
 void time_steps(sim::Simulation& simulation, const BenchOptions& options) {
@@ -232,6 +287,7 @@ int bench_command(const BenchOptions& options) {
   if (options.scenario == "ur10_wall") return bench_ur10_wall(options);
   if (options.scenario == "clay_print") return bench_clay_print(options);
   if (options.scenario == "strand") return bench_strand(options);
+  if (options.scenario == "nozzle" || options.scenario == "plate") return bench_scene(options.scenario, options);
   sim::DamBreakSetup setup;
   setup.column_width = Real(0.5);
   setup.depth = Real(0.25);
