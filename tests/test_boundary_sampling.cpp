@@ -36,6 +36,32 @@ TEST(BoundarySampling, BoxPointsLieOnTheSurfaceAtAboutTheSpacing) {
   EXPECT_NEAR(points.size(), area / (spacing * spacing), 0.4 * area / (spacing * spacing));
 }
 
+TEST(BoundarySampling, EachPointOfABoxSurfaceOnceWhereItsFacesMeet) {
+  // Each face a lattice with its border; faces share edges, corners are on three: the surface holds
+  // sum(faces) - 4 (a + b + c) + 8 points (a, b, c the points along x, y, z). Boxes whose sides all
+  // exceed the spacing compare only the faces' borders; a thinner one (its two faces nearly one over
+  // the other) compares every point, and keeps one of each close pair.
+  const Real spacing = Real(0.01);
+  for (const Vec3& size : {Vec3(0.1f, 0.06f, 0.04f), Vec3(0.537f, 0.3f, 0.0134f), Vec3(2.0f, 1.5f, 0.05f)}) {
+    const auto samples = sample_box_surface(BoxShape{size}, spacing);
+    const auto along = [&](Real length) { return std::max(1, int(std::ceil(length / spacing - Real(1e-4)))) + 1; };
+    const long a = along(size.x()), b = along(size.y()), c = along(size.z());
+    EXPECT_EQ(long(samples.points.size()), 2 * (a * b + b * c + a * c) - 4 * (a + b + c) + 8) << size.transpose();
+    // No two points closer than a quarter spacing (the grid finds every close pair).
+    SpatialHashGrid grid;
+    grid.build(samples.points, spacing / 4);
+    std::size_t close = 0;
+    for (std::size_t i = 0; i < samples.points.size(); ++i)
+      grid.for_each_candidate(samples.points[i], [&](Index j, const Vec3& other) {
+        close += j != i && (samples.points[i] - other).norm() < spacing / 4;
+      });
+    EXPECT_EQ(close, 0u) << size.transpose();
+  }
+  const auto thin = sample_box_surface(BoxShape{Vec3(0.1f, 0.1f, 0.002f)}, spacing);
+  // A plate 0.2 spacings thick: one layer of 11 x 11, its bottom and sides within a quarter spacing of it.
+  EXPECT_EQ(thin.points.size(), 11u * 11u);
+}
+
 TEST(BoundarySampling, SphereAndCylinderPointsLieOnTheSurface) {
   const auto sphere = sample_sphere_surface(SphereShape{0.05f}, 0.005f);
   for (std::size_t i = 0; i < sphere.points.size(); ++i) {

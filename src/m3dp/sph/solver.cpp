@@ -5,6 +5,7 @@
 #include <chrono>
 
 #include "m3dp/core/error.hpp"
+#include "m3dp/core/parallel.hpp"
 
 namespace m3dp::sph {
 
@@ -70,6 +71,9 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
   state_.bodies.push_back(body);
 
   auto& boundary = state_.boundary;
+  const std::size_t total = boundary.size() + local_points.size();
+  boundary.local_position.reserve(total), boundary.position.reserve(total), boundary.velocity.reserve(total);
+  boundary.body.reserve(total), boundary.nozzle_bore.reserve(total);
   for (const Vec3& local : local_points) {
     boundary.local_position.push_back(local);
     boundary.position.push_back(pose.apply(local));
@@ -90,12 +94,13 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
   boundary.volume.resize(boundary.size());
   SpatialHashGrid grid;
   grid.build(points, support);
+  // Each particle's own sum, in the grid's order: the same on any number of threads.
   with_kernel(model_.settings.kernel, support, [&](const auto& kernel) {
-    for (std::size_t m = 0; m < members.size(); ++m) {
+    parallel_for_each_index(members.size(), [&](std::size_t m) {
       Real sum = 0;
       grid.for_each_candidate(points[m], [&](Index, const Vec3& other) { sum += kernel.W((points[m] - other).norm()); });
       boundary.volume[members[m]] = model_.boundary_volume_scale / sum;
-    }
+    }, 4096);
   });
   workspace_.static_boundary_dirty = true;
   workspace_.static_boundary_indices.reserve(boundary.size());
