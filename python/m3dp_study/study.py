@@ -138,12 +138,14 @@ def finished_row(run: dict) -> dict | None:
     return _row(run, result, meta.get("wall_time_s", 0.0), meta.get("worker", ""), meta.get("attempts", 1))
 
 
-def _run_process(folder: Path, timeout: float):
+def _run_process(folder: Path, timeout: float, fork: bool = True):
     """Runs m3dp_study.run_one on `folder` in a process of its own, its output in run.log: forked from
     this one, which has M3DP and numpy loaded already (0.01 s against 0.3 s for a new interpreter),
-    or started afresh where there is no fork. Returns (exit status or None, why it was stopped)."""
+    or started afresh where there is no fork or this process may have run M3DP's threads (TBB's are
+    not fork-safe: a study run in process has read every scene). Returns (exit status or None, why
+    it was stopped)."""
     parent = os.getpid()
-    if not hasattr(os, "fork"):
+    if not fork or not hasattr(os, "fork"):
         with open(folder / "run.log", "w") as log:
             process = subprocess.Popen([sys.executable, "-m", "m3dp_study.run_one", str(folder), str(parent)], stdout=log,
                                        stderr=subprocess.STDOUT)
@@ -200,7 +202,7 @@ def execute(run: dict) -> dict:
         attempts_log.write(json.dumps({"worker": worker, "pid": os.getpid(), "started": time.time()}) + "\n")
     attempts = sum(1 for _ in open(folder / "attempts.jsonl"))
     started = time.time()
-    code, reason = _run_process(folder, run["timeout"])
+    code, reason = _run_process(folder, run["timeout"], fork=run.get("fork", True))
     wall_time = time.time() - started
     result_file = folder / "result.json"
     if not result_file.exists():
@@ -284,6 +286,7 @@ def run_study(study: Study, out_dir, scheduler: str | None = None, workers: int 
     if pending and scheduler == "inprocess":
         bar = _Progress(len(runs), len(rows), 1, progress)
         for run in pending:
+            run["fork"] = False
             rows[run["key"]] = execute(run)
             bar.done(rows[run["key"]])
             if time.time() - written > 5:
