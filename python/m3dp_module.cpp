@@ -322,6 +322,10 @@ PYBIND11_MODULE(m3dp, module) {
     std::vector<std::string> heads;
     for (const auto& head : loaded.print_heads) heads.push_back(head.name);
     result["heads"] = heads;
+    std::vector<std::string> noise_seeds;  // the paths of the plugin's noisy cameras' seeds, for a study's repeats
+    for (const auto& camera : loaded.cameras)
+      if (camera.in_plugin && camera.settings.noise.enabled()) noise_seeds.push_back(fmt::format("camera[{}].noise.seed", camera.settings.name));
+    result["noise_seeds"] = noise_seeds;
     std::vector<std::string> warnings;
     for (const auto& warning : loaded.warnings) warnings.push_back(fmt::format("{}: {}", warning.location.str(), warning.message));
     result["warnings"] = warnings;
@@ -333,7 +337,8 @@ name="..." (or by index among its namesakes): material[mortar].rheology.yield_st
 path.line.speed, solver.particle_radius; a first step the <world> has (model[floor], gravity) starts
 at the world, any other at M3DP's plugin. An element not written is added where the path says.
 Returns {text: the scene as read, input_files: the files it reads (URDF, G-code, waypoints, meshes),
-end_time: s, heads: the print heads' names, warnings: [file:line: what]}.)");
+end_time: s, heads: the print heads' names, noise_seeds: the paths of the seeds of the plugin's noisy
+cameras, warnings: [file:line: what]}.)");
 
   py::class_<PySimulation>(module, "Simulation", R"(A scene's simulation, stepped by the caller.
 

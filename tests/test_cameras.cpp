@@ -142,6 +142,33 @@ TEST(Cameras, BodiesMoveWithTheirPoses) {
   }
 }
 
+TEST(Cameras, ANoisesSeedPicksItsNumbers) {
+  // The same seed, the same noise (a run is repeatable); another seed, another noise (a study's repeats).
+  auto render_with = [](std::uint64_t seed) {
+    CameraSettings settings = camera(40, 30);
+    settings.noise = {0.0, 0.02, seed};
+    Renderer renderer;
+    renderer.set_palette({Rgb{}, Rgb{0.5f, 0.5f, 0.5f}});
+    TriangleMesh floor_mesh;
+    Pose floor;
+    floor.position = Vec3(0, 0, -0.3f);
+    append_transformed(tessellate(PlaneShape{Vec3::UnitZ(), 10, 10}), floor, floor_mesh);
+    renderer.add_static(floor_mesh, 1);
+    Pose camera_pose;
+    camera_pose.orientation = Quat(Eigen::AngleAxis<Real>(Real(0.6), Vec3::UnitY()));
+    CameraImage image;
+    renderer.render(settings, camera_pose, 7, image);
+    return image;
+  };
+  const CameraImage first = render_with(0), again = render_with(0), other = render_with(1);
+  EXPECT_EQ(first.rgb, again.rgb);
+  EXPECT_NE(first.rgb, other.rgb);
+  EXPECT_EQ(first.segment, other.segment);  // the noise is on colour and depth only
+  std::size_t differing = 0;
+  for (std::size_t k = 0; k < first.depth.size(); ++k) differing += first.depth[k] != other.depth[k];
+  EXPECT_GT(differing, first.depth.size() / 2);
+}
+
 TEST(Cameras, TheSameImageOnOneAndTwoThreads) {
   CameraSettings settings = camera(200, 150);
   settings.shadows = true;

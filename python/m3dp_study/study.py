@@ -71,11 +71,18 @@ def plan_runs(study: Study, out_dir: Path) -> list[dict]:
             except m3dp.InputError as problem:
                 culprit = _culprit(m3dp, study, overrides)
                 raise StudyError(study.file, study.line_of(culprit), f"parameter '{culprit}' = {overrides[culprit]!r}: {_reader_message(problem)}") from None
-        resolved = resolved_by_point[identity_key]
-        inputs = {path: file_digest(path) for path in resolved["input_files"]}
-        end_time = study.end_time if study.end_time is not None else resolved["end_time"]
+        point_resolved = resolved_by_point[identity_key]
+        inputs = {path: file_digest(path) for path in point_resolved["input_files"]}
+        end_time = study.end_time if study.end_time is not None else point_resolved["end_time"]
+        # Repeats differ by their seed: the controller gets it, and the scene's noisy cameras draw their
+        # noise from it (a seed the study varies itself is left to it).
+        seeded = [path for path in point_resolved["noise_seeds"] if path not in overrides] if study.repeats > 1 or study.seed else []
         for repeat in range(study.repeats):
             seed = study.seed + repeat
+            run_overrides, resolved = overrides, point_resolved
+            if seeded:
+                run_overrides = {**overrides, **{path: seed for path in seeded}}
+                resolved = m3dp.resolve_scene(str(study.scene), run_overrides)
             identity = {"scene": resolved["text"], "scene_file": str(study.scene), "inputs": inputs, "flow_scales": scales,
                         "end_time": end_time, "seed": seed, "threads": study.threads, "figures": list(study.figures),
                         "quality_spacing": study.quality_spacing, "record": study.record, "controller": controller_identity,
@@ -88,7 +95,7 @@ def plan_runs(study: Study, out_dir: Path) -> list[dict]:
                 "repeat": repeat,
                 "seed": seed,
                 "timeout": study.timeout,
-                "spec": {"scene": str(study.scene), "overrides": overrides, "flow_scales": scales, "end_time": end_time, "seed": seed,
+                "spec": {"scene": str(study.scene), "overrides": run_overrides, "flow_scales": scales, "end_time": end_time, "seed": seed,
                          "threads": study.threads, "figures": list(study.figures), "quality_spacing": study.quality_spacing,
                          "record": study.record, "controller": controller, "parameters": point, "dataset": study.dataset},
             })

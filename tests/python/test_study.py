@@ -310,3 +310,29 @@ def test_the_m3dp_program_runs_a_study(tmp_path):
     assert process.returncode == 0, process.stderr
     assert "m3dp study: 2 runs, 2 completed, 0 failed" in process.stdout
     assert [row["status"] for row in read_csv(tmp_path / "out")] == ["ok", "ok"]
+
+
+def test_repeats_draw_the_cameras_noise_from_their_seeds(tmp_path):
+    import numpy as np
+    study = study_file(tmp_path, f"""end_time = 0.3
+figures = ["summary"]
+repeats = 2
+
+[parameters]
+"camera[top].noise.type" = ["gaussian"]
+"camera[top].noise.stddev" = [0.05]
+
+[dataset]
+""")
+    out = tmp_path / "out"
+    run_study(study, "-o", out, "--scheduler", "inprocess")
+    rows = read_csv(out)
+    assert [row["seed"] for row in rows] == ["0", "1"] and rows[0]["run"] != rows[1]["run"]
+    # The same material in both (the noise is only the camera's), other noise on its picture.
+    assert rows[0]["summary.particles"] == rows[1]["summary.particles"]
+    index = json.loads((out / "dataset" / "annotations.json").read_text())
+    pictures = [np.array(Image.open(out / "dataset" / image["file_name"])) for image in index["images"]]
+    masks = [np.array(Image.open(out / "dataset" / image["segment_file"])) for image in index["images"]]
+    assert len(pictures) == 2 and (masks[0] == masks[1]).all() and (pictures[0] != pictures[1]).any()
+    run = json.loads((out / "runs" / rows[1]["run"] / "run.json").read_text())
+    assert run["overrides"]["camera[top].noise.seed"] == 1

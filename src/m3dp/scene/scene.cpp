@@ -1191,6 +1191,7 @@ void SceneReader::read_plugin_camera(const pugi::xml_node& element) {
   } else {
     entry.settings.pose = read_pose(element);
   }
+  entry.in_plugin = true;
   if (valid) scene_.cameras.push_back(std::move(entry));
 }
 

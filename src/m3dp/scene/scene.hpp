@@ -93,6 +93,7 @@ struct MaterialEntry {
 struct CameraEntry {
   sensors::CameraSettings settings;
   SourceLocation where;
+  bool in_plugin = false;  // a <camera> of M3DP's plugin (its values have paths: camera[NAME]...), not an SDF <sensor>
 };
 
 /// Particles on a lattice of spacing 2·particle_radius filling a box [min, max] or, when `cylinder_radius`

@@ -577,6 +577,10 @@ std::vector<SchemaRow> make_rows() {
   number("noise", "stddev", Quantity::plain_number, Limits::non_negative(), "its standard deviation, in the same units",
          [](sensors::CameraSettings& camera, double value) { camera.noise.stddev = value; },
          [](const sensors::CameraSettings& camera) { return number_text(camera.noise.stddev); });
+  integer("noise", "seed", Limits::between(0, 9007199254740991.0),
+          "which noise: two seeds give two independent noises (a study's repeats set it); the same seed, the same noise",
+          [](sensors::CameraSettings& camera, double value) { camera.noise.seed = std::uint64_t(value); },
+          [](const sensors::CameraSettings& camera) { return std::to_string(camera.noise.seed); });
   return rows;
 }
 

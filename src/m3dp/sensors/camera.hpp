@@ -21,6 +21,7 @@ enum class CameraType { camera, depth_camera, rgbd_camera };
 struct GaussianNoise {
   double mean = 0;
   double stddev = 0;
+  std::uint64_t seed = 0;  // which noise: with the frame and the pixel, it picks each number
   [[nodiscard]] bool enabled() const { return stddev > 0 || mean != 0; }
 };
 

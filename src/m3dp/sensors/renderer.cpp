@@ -270,6 +270,8 @@ void Renderer::set_palette(std::vector<Rgb> colors) { impl_->palette = std::move
 
 void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, std::uint64_t frame, CameraImage& image) {
   Impl& impl = *impl_;
+  // The noise's numbers by frame, pixel and channel; another seed, other numbers (seed 0: the frame's own).
+  const std::uint64_t noise_frame = frame + settings.noise.seed * 0x9E3779B97F4A7C15ull;
   const auto build_start = Clock::now();
   if (impl.static_changed) {
     rtcCommitScene(impl.static_scene);
@@ -403,7 +405,7 @@ void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, s
         if (depth && hit) image.depth[pixel] = hits.ray.tfar[k];
         // SDF's Gaussian noise: on each colour channel (0 to 1) and on the depth (m).
         if (depth && hit && settings.noise.enabled())
-          image.depth[pixel] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(frame, pixel, 3));
+          image.depth[pixel] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(noise_frame, pixel, 3));
         if (!color) continue;
         Rgb shade = kSky;
         if (hit) {
@@ -415,7 +417,7 @@ void Renderer::render(const CameraSettings& settings, const Pose& camera_pose, s
         }
         float channels[3] = {shade.r, shade.g, shade.b};
         for (int c = 0; c < 3; ++c) {
-          if (settings.noise.enabled()) channels[c] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(frame, pixel, c));
+          if (settings.noise.enabled()) channels[c] += static_cast<float>(settings.noise.mean + settings.noise.stddev * gaussian(noise_frame, pixel, c));
           image.rgb[3 * pixel + c] = srgb_byte(channels[c]);
         }
       }
