@@ -144,6 +144,14 @@ TEST(Gcode, ArcsRelativeModesAndUnits) {
   EXPECT_NEAR(scaled.moves[1].end.x(), small.moves[1].end.x(), 1e-9);
   EXPECT_NEAR(scaled.duration, small.duration / 1.25, 1e-6);
   EXPECT_NEAR(scaled.material_volume / small.material_volume, 0.85, 1e-6);
+  // The same overrides written in the file (Marlin's M220 and M221, percent), and with the scene's on top.
+  const auto in_file = parse("M220 S125\nM221 S85\nG1 X10 F600\nG1 X20 E1\n");
+  EXPECT_NEAR(in_file.duration, small.duration / 1.25, 1e-6);
+  EXPECT_NEAR(in_file.material_volume / small.material_volume, 0.85, 1e-6);
+  const auto both = parse("M221 S50\nG1 X10 F600\nG1 X20 E1\n", overridden);
+  EXPECT_NEAR(both.material_volume / small.material_volume, 0.85 * 0.5, 1e-6);
+  EXPECT_NE(error_of("M221 S0\nG1 X10 E1\n").find("test.gcode:1: error: M221 S0: the flow factor must be in (0, 1000] %"), std::string::npos)
+      << error_of("M221 S0\nG1 X10 E1\n");
 }
 
 TEST(Gcode, CuraCommentsDwellRetractionAndPlacement) {
@@ -268,7 +276,17 @@ TEST(Gcode, RealPrinterProfilesLoadWithTheSlicersMaterial) {
     const double filament_mm = std::stod(match[1]);
     ASSERT_TRUE(std::regex_search(text, match, std::regex(R"(; filament_diameter = ([0-9.]+))")));
     const double diameter_mm = std::stod(match[1]);
-    const double expected = filament_mm * kPi * diameter_mm * diameter_mm / 4 * 1e-9;  // m³
+    // What the printer lays of it: Prusa's MK3 profiles start with M221 S95 (flow at 95 %), which the
+    // reader follows as the printer does; the slicer's total counts E alone.
+    // The factor in effect where the printed features begin (the first ;TYPE: that is not the start's Custom).
+    double flow_factor = 1;
+    std::size_t features = text.find(";TYPE:");
+    while (features != std::string::npos && text.compare(features, 12, ";TYPE:Custom") == 0) features = text.find(";TYPE:", features + 1);
+    const std::string before_features = text.substr(0, features);
+    const std::regex flow_override(R"((?:^|\n)M221 S([0-9.]+))");
+    for (auto found = std::sregex_iterator(before_features.begin(), before_features.end(), flow_override); found != std::sregex_iterator(); ++found)
+      flow_factor = std::stod((*found)[1]) / 100;
+    const double expected = flow_factor * filament_mm * kPi * diameter_mm * diameter_mm / 4 * 1e-9;  // m³
     double laid = 0;
     for (const GcodeMove& move : program.moves)
       if (move.feature != "Custom") laid += move.material_volume;

@@ -273,9 +273,9 @@ class Parser {
 
   /// The commands this reader follows; every other one is skipped with a warning.
   static bool is_read(std::string_view command) {
-    static constexpr std::array<std::string_view, 21> kRead{"G0",  "G1",  "G00", "G01", "G2",  "G3",  "G02",
-                                                             "G03", "G4",  "G04", "G90", "G91", "M82", "M83",
-                                                             "G20", "G21", "G92", "G17", "G18", "G19", "M404"};
+    static constexpr std::array<std::string_view, 23> kRead{"G0",  "G1",  "G00", "G01", "G2",  "G3",  "G02",  "G03",
+                                                             "G4",  "G04", "G90", "G91", "M82", "M83", "G20",  "G21",
+                                                             "G92", "G17", "G18", "G19", "M404", "M220", "M221"};
     return std::find(kRead.begin(), kRead.end(), command) != kRead.end();
   }
 
@@ -290,6 +290,15 @@ class Parser {
     if (command == "M82") { absolute_e_ = true; return; }
     if (command == "M83") { absolute_e_ = false; return; }
     if (command == "M404") return;  // the filament's diameter: read before the moves (read_slicer_settings)
+    // Marlin's and RepRapFirmware's speed and flow overrides, S in percent (without S they only report).
+    if (command == "M220" || command == "M221") {
+      if (!words['S']) return;
+      const double percent = number(words, 'S', line_number);
+      if (!(percent > 0 && percent <= 1000))
+        fail(line_number, fmt::format("{} S{}: the {} factor must be in (0, 1000] %", command, percent, command == "M220" ? "speed" : "flow"));
+      (command == "M220" ? file_speed_factor_ : file_flow_factor_) = percent / 100;
+      return;
+    }
     if (command == "G20") { unit_to_mm_ = 25.4; return; }
     if (command == "G21") { unit_to_mm_ = 1.0; return; }
     if (command == "G92") {
@@ -392,9 +401,9 @@ class Parser {
     move.feature = feature_;
     // Time at the feed rate; an E-only move (retraction) runs the filament at that rate in place.
     const double travel_mm = length_mm > 0 ? length_mm : std::abs(extrusion);
-    move.duration = travel_mm / (feed_rate_ * settings_.speed_scale) * 60;
+    move.duration = travel_mm / (feed_rate_ * settings_.speed_scale * file_speed_factor_) * 60;
     move.dwell = length_mm == 0;
-    move.material_volume = volume_of(laid_by(extrusion, length_mm > 0)) * settings_.flow_scale;
+    move.material_volume = volume_of(laid_by(extrusion, length_mm > 0)) * settings_.flow_scale * file_flow_factor_;
     if (diameter_assumed_ && move.material_volume > 0) {
       diameter_assumed_ = false;  // said once, at the first move that lays material
       program_.warnings.push_back(Diagnostic{
@@ -509,6 +518,8 @@ class Parser {
   std::array<double, 3> position_{0, 0, 0};  // mm, G-code frame
   double e_ = 0;                              // E units
   double feed_rate_;                          // G-code mm/min
+  double file_speed_factor_ = 1;              // the file's M220 S/100
+  double file_flow_factor_ = 1;               // the file's M221 S/100
   double unit_to_mm_ = 1;
   bool absolute_xyz_ = true, absolute_e_ = true;
   int plane_ = 0;                    // arcs in 0: XY (G17), 1: ZX (G18), 2: YZ (G19)
