@@ -21,7 +21,6 @@
 #include <vector>
 
 #include "m3dp/core/error.hpp"
-#include "m3dp/core/text.hpp"
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/camera_rig.hpp"
 #include "m3dp/sim/print_quality.hpp"
@@ -309,9 +308,7 @@ PYBIND11_MODULE(m3dp, module) {
   python::translate_errors(module);
 
   module.def("resolve_scene", [](const fs::path& file, const std::optional<py::dict>& overrides) {
-    const std::string text = read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)");
-    const auto values = python::overrides_from(overrides);
-    std::string resolved = scene::apply_overrides(text, file, values);
+    std::string resolved = scene::read_scene_text(file, python::overrides_from(overrides));
     const scene::Scene loaded = scene::load_scene_from_string(resolved, file);
     py::dict result;
     result["text"] = std::move(resolved);

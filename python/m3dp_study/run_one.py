@@ -167,7 +167,7 @@ def run(folder: Path) -> dict:
         if "summary" in spec["figures"]:
             figures.update(summary_figures(summary))
         result["figures"] = figures
-        result["status"] = summary.get("status", "completed") if summary.get("status") != "completed" else "ok"
+        result["status"] = "ok" if summary.get("status") == "completed" else summary.get("status", "failed")
         result["reason"] = summary.get("error") or ""
     except Exception as problem:  # every failure is the run's row, with its reason
         result["reason"] = f"{type(problem).__name__}: {problem}".strip()

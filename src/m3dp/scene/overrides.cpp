@@ -14,6 +14,7 @@
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/text.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/scene/xml_names.hpp"
 
 namespace m3dp::scene {
 
@@ -53,16 +54,6 @@ std::vector<PathStep> parse_path(const std::string& path, const std::string& pro
   return steps;
 }
 
-bool is_m3dp_plugin(const pugi::xml_node& node) {
-  return std::string_view(node.name()) == "plugin" &&
-         (std::string_view(node.attribute("name").value()) == "m3dp" || std::string_view(node.attribute("filename").value()) == "m3dp");
-}
-
-std::string describe_node(const pugi::xml_node& node) {
-  if (const auto name = node.attribute("name")) return fmt::format("<{} name=\"{}\">", node.name(), name.value());
-  return fmt::format("<{}>", node.name());
-}
-
 }  // namespace
 
 std::string apply_overrides(const std::string& text, const std::filesystem::path& file_name, std::span<const SceneOverride> overrides) {
@@ -99,12 +90,12 @@ std::string apply_overrides(const std::string& text, const std::filesystem::path
         if (!next) {
           std::vector<std::string> names;
           for (const auto& candidate : namesakes) names.emplace_back(candidate.attribute("name").value());
-          throw InputError(here, fmt::format("{}: {} has no <{} name=\"{}\"> ({})", prefix, describe_node(at), step.name, step.key,
+          throw InputError(here, fmt::format("{}: {} has no <{} name=\"{}\"> ({})", prefix, describe(at), step.name, step.key,
                                              names.empty() ? fmt::format("it has no <{}>", step.name)
                                                            : fmt::format("its <{}>: {}", step.name, fmt::join(names, ", "))));
         }
       } else if (namesakes.size() > 1) {
-        throw InputError(here, fmt::format("{}: {} has {} <{}>: say which, as in {}[{}]", prefix, describe_node(at), namesakes.size(),
+        throw InputError(here, fmt::format("{}: {} has {} <{}>: say which, as in {}[{}]", prefix, describe(at), namesakes.size(),
                                            step.name, step.name,
                                            namesakes.front().attribute("name") ? namesakes.front().attribute("name").value() : "0"));
       } else if (namesakes.size() == 1) {
@@ -125,7 +116,7 @@ std::string apply_overrides(const std::string& text, const std::filesystem::path
     for (const auto& child : at.children())
       if (child.type() == pugi::node_element)
         throw InputError(SourceLocation{file_name.string(), at.offset_debug() >= 0 ? lines.line_at(at.offset_debug()) : 0},
-                         fmt::format("{}: {} holds elements, not a value", prefix, describe_node(at)));
+                         fmt::format("{}: {} holds elements, not a value", prefix, describe(at)));
     while (at.first_child()) at.remove_child(at.first_child());
     at.remove_attribute("unit");  // the value given is SI
     at.append_child(pugi::node_pcdata).set_value(override_value.value.c_str());

@@ -1,6 +1,7 @@
 #include "m3dp/scene/scene.hpp"
 #include "m3dp/scene/schema.hpp"
 #include "m3dp/scene/urdf_check.hpp"
+#include "m3dp/scene/xml_names.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 
 #include <fmt/format.h>
@@ -125,12 +126,6 @@ bool contains(const Words& words, std::string_view word) {
   return std::find(words.begin(), words.end(), word) != words.end();
 }
 
-/// "<fluid_block name="column">" or "<solver>": how messages name an element.
-std::string describe(const pugi::xml_node& element) {
-  if (const auto name = element.attribute("name")) return fmt::format("<{} name=\"{}\">", element.name(), name.value());
-  return fmt::format("<{}>", element.name());
-}
-
 std::vector<pugi::xml_node> child_elements(const pugi::xml_node& parent, std::string_view name) {
   std::vector<pugi::xml_node> children;
   for (const auto& child : parent.children()) {
@@ -139,10 +134,6 @@ std::vector<pugi::xml_node> child_elements(const pugi::xml_node& parent, std::st
   return children;
 }
 
-bool is_m3dp_plugin(const pugi::xml_node& plugin) {
-  return std::string_view(plugin.attribute("name").value()) == "m3dp" ||
-         std::string_view(plugin.attribute("filename").value()) == "m3dp";
-}
 
 enum class Presence { required, optional };
 
@@ -2147,13 +2138,14 @@ std::vector<MaterialEntry> load_material_presets() {
   return SceneReader(read_text_file(file, "material presets"), file).read_material_library();
 }
 
-Scene load_scene(const std::filesystem::path& file) {
-  return load_scene_from_string(read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)"), file);
+std::string read_scene_text(const std::filesystem::path& file, std::span<const SceneOverride> overrides) {
+  return apply_overrides(read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)"), file, overrides);
 }
 
+Scene load_scene(const std::filesystem::path& file) { return load_scene_from_string(read_scene_text(file), file); }
+
 Scene load_scene(const std::filesystem::path& file, std::span<const SceneOverride> overrides) {
-  const std::string text = read_text_file(file, "scene (expected an SDF world file, e.g. scenes/dam_break.sdf)");
-  return load_scene_from_string(apply_overrides(text, file, overrides), file);
+  return load_scene_from_string(read_scene_text(file, overrides), file);
 }
 
 Scene load_scene_from_string(const std::string& text, const std::filesystem::path& file_name) {

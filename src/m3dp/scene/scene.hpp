@@ -220,6 +220,8 @@ struct SceneOverride {
 Scene load_scene(const std::filesystem::path& file);
 /// Same, with values replaced (studies): each checked as if written in the file.
 Scene load_scene(const std::filesystem::path& file, std::span<const SceneOverride> overrides);
+/// The scene file's text with the overrides applied: what load_scene(file, overrides) reads.
+std::string read_scene_text(const std::filesystem::path& file, std::span<const SceneOverride> overrides = {});
 /// The scene text with the overrides applied (an element not written is added where its path says;
 /// the reader then checks it belongs there). Throws InputError naming the path where it leads nowhere.
 std::string apply_overrides(const std::string& text, const std::filesystem::path& file_name, std::span<const SceneOverride> overrides);
