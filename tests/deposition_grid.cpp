@@ -4,6 +4,7 @@
 // that scripts/plot_deposition.py draws; not in CI (about a minute a point on two cores).
 //   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N] [--gap G/D --speed V/U]
 //                               [--no-rest] [--particles PREFIX] [--bore L/D (0: the exit-plane inlet)]
+//                               [--material bingham|newtonian]
 // (--gap and --speed: that one point of the grid only; --particles: each strand's particles at the
 // end as PREFIX_MATERIAL_G_V_SURFACE.csv.)
 #include <cmath>
@@ -20,12 +21,13 @@ using namespace m3dp;
 namespace deposition = m3dp::sim::deposition;
 
 int main(int argc, char** argv) {
-  std::string output, particles_csv;
+  std::string output, particles_csv, only_material;
   bool quick = false, rest_detection = true;
   double cap = 0, across = 8, only_gap = 0, only_speed = 0, bore = 2;
   for (int k = 1; k < argc; ++k) {
     if (!std::strcmp(argv[k], "-o") && k + 1 < argc) output = argv[++k];
     else if (!std::strcmp(argv[k], "--quick")) quick = true;
+    else if (!std::strcmp(argv[k], "--material") && k + 1 < argc) only_material = argv[++k];
     else if (!std::strcmp(argv[k], "--no-rest")) rest_detection = false;
     else if (!std::strcmp(argv[k], "--bore") && k + 1 < argc) bore = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--cap") && k + 1 < argc) cap = std::atof(argv[++k]);
@@ -34,7 +36,7 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[k], "--particles") && k + 1 < argc) particles_csv = argv[++k];
     else if (!std::strcmp(argv[k], "--speed") && k + 1 < argc) only_speed = std::atof(argv[++k]);
     else {
-      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D]\n",
+      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D] [--material bingham|newtonian]\n",
                    argv[0]);
       return 2;
     }
@@ -51,6 +53,7 @@ int main(int argc, char** argv) {
   if (only_gap > 0) gaps = {only_gap};
   if (only_speed > 0) speeds = {only_speed};
   for (const bool bingham : {true, false}) {
+    if (!only_material.empty() && only_material != (bingham ? "bingham" : "newtonian")) continue;
     for (const double gap : gaps)
       for (const double speed : speeds)
         for (const bool on_layer : {false, true}) {

@@ -465,6 +465,10 @@ void correct_volume(const Model& model, State& state, Workspace& workspace) {
   // thirds of a diameter, so a viscous material's particles pair up (the pairing instability,
   // Dehnen & Aly 2012), and at a free surface, where the density is short, nothing else parts them.
   const Real minimum = model.settings.minimum_spacing * model.particle_diameter;
+  // Every move from the positions before any: moving a particle in place while another thread reads
+  // it as a neighbour made runs on two threads differ (a viscous paste's pairs part here often).
+  auto& displacements = workspace.scratch_vec3;
+  displacements.resize(count);
   parallel_for_each_index(count, [&](std::size_t i) {
     Vec3 displacement = time_step * (workspace.solver_velocity[i].head<3>() - fluid.velocity[i]);
     if (minimum > 0) {
@@ -478,9 +482,9 @@ void correct_volume(const Model& model, State& state, Workspace& workspace) {
       }
     }
     // The pump drives the material in a nozzle's exit: the correction never pushes it back in.
-    displacement = without_push_into_nozzles(model, state, fluid.position[i], displacement);
-    fluid.position[i] += displacement;
+    displacements[i] = without_push_into_nozzles(model, state, fluid.position[i], displacement);
   }, 4096);
+  parallel_for_each_index(count, [&](std::size_t i) { fluid.position[i] += displacements[i]; }, 4096);
 }
 
 }  // namespace m3dp::sph::stages
