@@ -6,6 +6,7 @@
 
 #include <fmt/format.h>
 
+#include <array>
 #include <chrono>
 #include <filesystem>
 #include <fstream>
@@ -130,9 +131,11 @@ int bench_scene(const std::string& name, const BenchOptions& options) {
   sph::StageTimes sum;
   double density = 0, divergence = 0, viscosity = 0;
   std::uint64_t steps = 0;
+  std::array<std::uint64_t, sph::kTimeStepBoundNames.size()> bounds{};
   const auto start = std::chrono::steady_clock::now();
   while (simulation.time() < scene.end_time - 1e-12) {
     const auto& stats = simulation.step();
+    ++bounds[static_cast<std::size_t>(stats.time_step_bound)];
     sum += stats.stage_ms;
     density += stats.density_iterations;
     divergence += stats.divergence_iterations;
@@ -145,6 +148,10 @@ int bench_scene(const std::string& name, const BenchOptions& options) {
              seconds, steps, 1e3 * seconds / n, 1e3 * simulation.time() / n, simulation.solver().fluid().size(),
              resident_megabytes().second);
   fmt::print("iterations per step: density {:.2f}, divergence {:.2f}, viscosity {:.2f}\n", density / n, divergence / n, viscosity / n);
+  std::string set_by;
+  for (std::size_t b = 0; b < bounds.size(); ++b)
+    if (bounds[b] > 0) set_by += fmt::format("{}{} {:.1f} %", set_by.empty() ? "" : ", ", sph::kTimeStepBoundNames[b], 100 * double(bounds[b]) / n);
+  fmt::print("steps set by: {}\n", set_by);
   fmt::print("stage,ms_per_step\n");
   for (std::size_t s = 0; s < sph::kStageCount; ++s) fmt::print("{},{:.3f}\n", sph::kStageNames[s], sum.ms[s] / n);
   return 0;

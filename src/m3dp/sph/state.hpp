@@ -77,8 +77,15 @@ struct StageTimes {
   StageTimes& operator+=(const StageTimes& other);
 };
 
+/// Which limit of the time-step rule (time_step.cpp) set a step: the settings' largest or smallest
+/// step, the CFL condition, the explicit viscosity's, the capillary waves' or gravity's limit.
+enum class TimeStepBound : std::uint8_t { largest, courant, viscosity, capillary, gravity, smallest };
+inline constexpr std::array<std::string_view, 6> kTimeStepBoundNames{"largest step", "CFL", "explicit viscosity", "capillary waves",
+                                                                     "gravity", "smallest step"};
+
 struct StepStats {
   double time_step = 0;                 // s
+  TimeStepBound time_step_bound = TimeStepBound::largest;
   int density_iterations = 0;
   int divergence_iterations = 0;
   int viscosity_iterations = 0;         // conjugate-gradient iterations of the implicit viscosity solve

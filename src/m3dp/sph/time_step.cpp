@@ -35,26 +35,34 @@ Real courant_limit(const Model& model, Real largest_step, Real speed_squared) {
 void choose_time_step(const Model& model, State& state, Workspace& workspace) {
   const auto& settings = model.settings;
   const Real diameter = model.particle_diameter;
+  TimeStepBound bound = TimeStepBound::largest;
+  Real time_step = settings.max_time_step;
+  // Each limit in turn; the last to lower the step is the one that set it.
+  const auto limit = [&](Real candidate, TimeStepBound which) {
+    if (candidate < time_step) time_step = candidate, bound = which;
+  };
   // CFL on the velocity after the non-pressure forces.
-  Real time_step = courant_limit(model, settings.max_time_step, max_speed_squared(state, state.time_step));
+  limit(courant_limit(model, settings.max_time_step, max_speed_squared(state, state.time_step)), TimeStepBound::courant);
   // Explicit viscosity: Morris et al. 1997's limit Δt ≤ 0.125 h²/ν, with the smoothing length h =
   // half the support radius = one particle diameter for our kernels. The implicit solver has none.
   // The calibration strengthens the sums (most at walls), so the limit tightens by the same factor.
   const Real largest_kinematic_viscosity = workspace.largest_kinematic_viscosity;
   if (settings.viscosity_solver == ViscositySolver::explicit_morris1997 && largest_kinematic_viscosity > 0)
-    time_step = std::min(time_step, Real(0.125) * diameter * diameter /
-                                        (largest_kinematic_viscosity * std::max(model.viscosity_calibration.fluid,
-                                                                                 model.viscosity_calibration.boundary)));
+    limit(Real(0.125) * diameter * diameter /
+              (largest_kinematic_viscosity * std::max(model.viscosity_calibration.fluid, model.viscosity_calibration.boundary)),
+          TimeStepBound::viscosity);
   // Capillary waves (Brackbill et al. 1992): Δt ≤ √(ρ d³ / (2π σ)).
   if (model.largest_surface_tension > 0)
-    time_step = std::min(time_step, std::sqrt(model.lightest_rest_density * diameter * diameter * diameter /
-                                              (2 * kPi * model.largest_surface_tension)));
+    limit(std::sqrt(model.lightest_rest_density * diameter * diameter * diameter / (2 * kPi * model.largest_surface_tension)),
+          TimeStepBound::capillary);
   // Body-force limit: from rest, gravity moves a particle at most 1 % of a spacing per step
   // (g Δt²/2 ≤ d/100). Larger steps leave a settling column more compression than the clamped,
   // push-only pressure solve removes cleanly, and deep columns start to ring.
   const Real gravity_norm = settings.gravity.norm();
-  if (gravity_norm > 0) time_step = std::min(time_step, std::sqrt(diameter / (50 * gravity_norm)));
-  state.time_step = std::max(time_step, settings.min_time_step);
+  if (gravity_norm > 0) limit(std::sqrt(diameter / (50 * gravity_norm)), TimeStepBound::gravity);
+  if (time_step < settings.min_time_step) time_step = settings.min_time_step, bound = TimeStepBound::smallest;
+  state.time_step = time_step;
+  state.last_step.time_step_bound = bound;
 }
 
 void choose_granular_time_step(const Model& model, State& state, Workspace& /*workspace*/) {
