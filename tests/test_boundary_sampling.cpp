@@ -2,7 +2,12 @@
 
 #include <cmath>
 
+#include <algorithm>
+
+#include "m3dp/material/material.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
+#include "m3dp/sph/kernels.hpp"
+#include "m3dp/sph/solver.hpp"
 #include "m3dp/sph/neighbors/neighbor_search.hpp"
 
 using namespace m3dp;
@@ -103,4 +108,41 @@ TEST(BoundarySampling, PlaneFollowsItsNormal) {
   for (const auto& p : points) EXPECT_NEAR(p.x(), 0, 1e-6);
   EXPECT_EQ(points.size(), 21u * 11u);
   for (const auto& p : sample_plane(PlaneShape{Vec3(1, 0, 0), 0.2f, 0.1f}, 0.01f, -0.005f).points) EXPECT_NEAR(p.x(), -0.005f, 1e-6);
+}
+
+// A tank of overlapping static boxes added one at a time, and a moving body beside them: each static
+// particle's Akinci volume is 1 / Σ_k W over every static particle (walls that meet are not counted
+// twice), though add_body sums again only the particles near the body it adds; a moving body's over
+// its own particles only.
+TEST(BoundarySampling, StaticVolumesSummedOverEveryStaticParticleWhenBodiesAreAddedOneByOne) {
+  const Real d = Real(0.01);
+  Parameters parameters;
+  parameters.settings.particle_radius = d / 2;
+  parameters.phases.push_back(material::newtonian("water", 1000, Real(1e-3)));
+  Solver solver(parameters);
+  const BoxShape wall{Vec3(0.3f, 0.02f, 0.2f)}, floor{Vec3(0.3f, 0.3f, 0.02f)};
+  const auto place = [](Real x, Real y, Real z) { return Pose{Vec3(x, y, z), Quat::Identity()}; };
+  solver.add_body("floor", sample_box_surface(floor, d).points, place(0, 0, 0), true);
+  solver.add_body("far floor", sample_box_surface(floor, d).points, place(2, 0, 0), true);  // beyond every support
+  solver.add_body("moving", sample_box_surface(BoxShape{Vec3(0.05f, 0.05f, 0.05f)}, d).points, place(0, 0, 0.05f), false);
+  solver.add_body("wall 1", sample_box_surface(wall, d).points, place(0, 0.14f, 0.1f), true);
+  solver.add_body("wall 2", sample_box_surface(wall, d).points, place(0, -0.14f, 0.1f), true);
+  const auto& boundary = solver.state().boundary;
+  const auto& bodies = solver.state().bodies;
+  const Real support = solver.model().support_radius;
+  const CubicSplineKernel kernel(support);
+  std::size_t checked = 0;
+  Real largest_error = 0;
+  for (std::size_t k = 0; k < boundary.size(); k += 7) {  // every 7th: a brute-force sum each
+    const bool is_static = bodies[boundary.body[k]].is_static;
+    Real sum = 0;
+    for (std::size_t j = 0; j < boundary.size(); ++j) {
+      const bool together = is_static ? bodies[boundary.body[j]].is_static : boundary.body[j] == boundary.body[k];
+      if (together) sum += kernel.W((boundary.position[k] - boundary.position[j]).norm());
+    }
+    largest_error = std::max(largest_error, std::abs(boundary.volume[k] * sum / solver.model().boundary_volume_scale - 1));
+    ++checked;
+  }
+  EXPECT_GT(checked, 1000u);
+  EXPECT_LT(largest_error, Real(1e-5));
 }

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 
 #include "m3dp/core/error.hpp"
@@ -72,8 +73,12 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
 
   auto& boundary = state_.boundary;
   const std::size_t total = boundary.size() + local_points.size();
-  boundary.local_position.reserve(total), boundary.position.reserve(total), boundary.velocity.reserve(total);
-  boundary.body.reserve(total), boundary.nozzle_bore.reserve(total);
+  // Room for this body at least, doubling: an exact reserve per body copied every array at each of a
+  // world's many shapes.
+  const auto grow = [total](auto& array) {
+    if (array.capacity() < total) array.reserve(std::max(total, 2 * array.capacity()));
+  };
+  grow(boundary.local_position), grow(boundary.position), grow(boundary.velocity), grow(boundary.body), grow(boundary.nozzle_bore);
   for (const Vec3& local : local_points) {
     boundary.local_position.push_back(local);
     boundary.position.push_back(pose.apply(local));
@@ -84,13 +89,29 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
   // Akinci 2012, eq. 4: V_b = 1 / Σ_k W_bk (times the model's boundary_volume_scale). Static bodies are summed together, so where walls meet or
   // overlap (a tank built from boxes) the shared region is not counted twice; a moving body on its own
   // (its volumes then do not change with its pose).
+  // A static body changes only the sums of static particles within the support of its own: those are
+  // summed again, over every static particle within the support of them (not all static particles at
+  // each static body added, which made a world of many shapes quadratic in them).
   const Real support = model_.support_radius;
-  std::vector<Index> members;
-  for (Index k = 0; k < boundary.size(); ++k)
-    if (is_static ? state_.bodies[boundary.body[k]].is_static : boundary.body[k] == body_index) members.push_back(k);
-  std::vector<Vec3> points;
+  const std::size_t first = body.first_particle;
+  Aabb added;
+  for (std::size_t k = first; k < boundary.size(); ++k) added.extend(boundary.position[k]);
+  const auto within = [](const Aabb& box, const Vec3& point, Real margin) {
+    return (point.array() >= box.min.array() - margin).all() && (point.array() <= box.max.array() + margin).all();
+  };
+  std::vector<Index> members;   // the particles whose volumes are summed again
+  std::vector<Vec3> points;     // every particle of their sums: members first, then the others near them
+  for (Index k = 0; k < boundary.size(); ++k) {
+    const bool together = is_static ? state_.bodies[boundary.body[k]].is_static : boundary.body[k] == body_index;
+    if (together && (!is_static || k >= first || within(added, boundary.position[k], support))) members.push_back(k);
+  }
   points.reserve(members.size());
   for (const Index k : members) points.push_back(boundary.position[k]);
+  if (is_static)
+    for (Index k = 0; k < first; ++k)
+      if (state_.bodies[boundary.body[k]].is_static && !within(added, boundary.position[k], support) &&
+          within(added, boundary.position[k], 2 * support))
+        points.push_back(boundary.position[k]);
   boundary.volume.resize(boundary.size());
   SpatialHashGrid grid;
   grid.build(points, support);
