@@ -7,6 +7,7 @@
 #include <cstring>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <map>
 #include <sstream>
 
 #include "m3dp/core/progress.hpp"
@@ -74,9 +75,33 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   EXPECT_NEAR(json["simulated_time_s"].get<double>(), 0.1, 0.01);
   EXPECT_GT(json["real_time_factor"].get<double>(), 0);
   EXPECT_NEAR(json["mass_final_kg"].get<double>(), json["mass_initial_kg"].get<double>(), 1e-9);
+  // The tank's walls: every boundary particle static, 12 + 12 + 4 bytes of positions and velocity, 4 of
+  // volume, 4 of body and 1 of slip each at least.
+  const std::size_t walls = simulation.solver().state().boundary.size();
+  EXPECT_GT(walls, 500u);
+  EXPECT_EQ(json["boundary"]["particles"].get<std::size_t>(), walls);
+  EXPECT_EQ(json["boundary"]["static_particles"].get<std::size_t>(), walls);
+  EXPECT_GE(json["boundary"]["megabytes"].get<double>(), 1e-6 * 45 * double(walls));
+  EXPECT_GT(json["peak_resident_megabytes"].get<double>(), json["boundary"]["megabytes"].get<double>());
 
   const std::string timing = read_text(directory / "timing.csv");
   EXPECT_EQ(timing.rfind("step,time_s,dt_s,particles", 0), 0u);
+  // Which limit set each step (column 9): for water settling in a tank, gravity's (a particle moves
+  // at most 1 % of a spacing a step from rest) or the CFL condition's, never the smallest step.
+  EXPECT_NE(timing.find(",density_error,dt_set_by,"), std::string::npos);
+  std::map<std::string, int> set_by;
+  std::stringstream rows(timing);
+  std::string row;
+  std::getline(rows, row);
+  while (std::getline(rows, row)) {
+    std::stringstream cells(row);
+    std::string cell;
+    for (int column = 0; column < 9; ++column) std::getline(cells, cell, ',');
+    ++set_by[cell];
+  }
+  for (const auto& [limit, steps] : set_by) std::printf("steps set by %s: %d\n", limit.c_str(), steps);
+  EXPECT_GT(set_by["gravity"] + set_by["cfl"], 0);
+  EXPECT_EQ(set_by["gravity"] + set_by["cfl"] + set_by["largest"], summary.steps);
   EXPECT_EQ(static_cast<std::int64_t>(std::count(timing.begin(), timing.end(), '\n')), summary.steps + 1);
 
   for (const auto& entry : fs::recursive_directory_iterator(directory)) {

@@ -15,6 +15,7 @@
 #include <tuple>
 #include <unistd.h>
 
+#include "m3dp/core/memory.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/sim/presets.hpp"
 #include "m3dp/sim/run.hpp"
@@ -98,36 +99,24 @@ int bench_ur10_wall(const BenchOptions& options) {
 }
 }  // namespace
 
-/// Resident memory now and at its peak (MB), from /proc/self/status.
-std::pair<double, double> resident_megabytes() {
-  std::ifstream status("/proc/self/status");
-  std::string line;
-  double now = 0, peak = 0;
-  while (std::getline(status, line)) {
-    if (line.starts_with("VmRSS:")) now = std::atof(line.c_str() + 6) / 1024;
-    if (line.starts_with("VmHWM:")) peak = std::atof(line.c_str() + 6) / 1024;
-  }
-  return {now, peak};
-}
-
 /// A scene of bench/scenes run to its end (issue 41's cases): setup time, boundary particles and
 /// memory, then the loop's time, steps, iterations a step and stage times, for comparison with a peer.
 int bench_scene(const std::string& name, const BenchOptions& options) {
   const std::filesystem::path file = options.scene_file.empty()
                                          ? std::filesystem::path(M3DP_PROJECT_ROOT) / "bench" / "scenes" / (name + ".sdf")
                                          : std::filesystem::path(options.scene_file);
-  const auto memory_before = resident_megabytes();
+  const ResidentMemory memory_before = resident_memory();
   const auto setup_start = std::chrono::steady_clock::now();
   scene::Scene scene = scene::load_scene(file);
   scene.output.write_particles = false;
   sim::Simulation simulation(scene);
   const double setup_seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - setup_start).count();
-  const auto memory_after = resident_megabytes();
+  const ResidentMemory memory_after = resident_memory();
   const auto& state = simulation.solver().state();
   fmt::print("{}: {} ({} threads), {:.2f} s simulated, particle radius {:.4g} m\n", name, file.string(), ThreadLimit::active_threads(),
              scene.end_time, double(scene.solver.particle_radius));
   fmt::print("setup: {:.3f} s, {} boundary particles, resident memory {:.0f} MB (+{:.0f} MB for the scene)\n", setup_seconds,
-             state.boundary.size(), memory_after.first, memory_after.first - memory_before.first);
+             state.boundary.size(), memory_after.now_megabytes, memory_after.now_megabytes - memory_before.now_megabytes);
   sph::StageTimes sum;
   double density = 0, divergence = 0, viscosity = 0;
   std::uint64_t steps = 0;
@@ -146,7 +135,7 @@ int bench_scene(const std::string& name, const BenchOptions& options) {
   const double n = double(std::max<std::uint64_t>(1, steps));
   fmt::print("loop: {:.3f} s for {} steps ({:.2f} ms/step, mean dt {:.3g} ms), {} particles at the end, peak resident memory {:.0f} MB\n",
              seconds, steps, 1e3 * seconds / n, 1e3 * simulation.time() / n, simulation.solver().fluid().size(),
-             resident_megabytes().second);
+             resident_memory().peak_megabytes);
   fmt::print("iterations per step: density {:.2f}, divergence {:.2f}, viscosity {:.2f}\n", density / n, divergence / n, viscosity / n);
   std::string set_by;
   for (std::size_t b = 0; b < bounds.size(); ++b)

@@ -80,8 +80,7 @@ struct StageTimes {
 /// Which limit of the time-step rule (time_step.cpp) set a step: the settings' largest or smallest
 /// step, the CFL condition, the explicit viscosity's, the capillary waves' or gravity's limit.
 enum class TimeStepBound : std::uint8_t { largest, courant, viscosity, capillary, gravity, smallest };
-inline constexpr std::array<std::string_view, 6> kTimeStepBoundNames{"largest step", "CFL", "explicit viscosity", "capillary waves",
-                                                                     "gravity", "smallest step"};
+inline constexpr std::array<std::string_view, 6> kTimeStepBoundNames{"largest", "cfl", "viscosity", "capillary", "gravity", "smallest"};
 
 struct StepStats {
   double time_step = 0;                 // s

@@ -1,4 +1,4 @@
-// timing.csv: a row per step with its time step, iterations, density error and the milliseconds of
+// timing.csv: a row per step with its time step (and the limit that set it), iterations, density error and the milliseconds of
 // every stage (the solver's table sph::kStageNames, then the coupling, the world and the outputs).
 // Written as timing.csv.partial during the run and renamed when the run ends (partial_text_file.hpp).
 #include <fmt/format.h>
@@ -21,7 +21,7 @@ class TimingTable final : public RunObserver {
   explicit TimingTable(const std::filesystem::path& output_directory) : file_(output_directory / "timing.csv") {}
 
   void start(const Simulation& /*simulation*/) override {
-    std::string header = "step,time_s,dt_s,particles,density_iterations,divergence_iterations,viscosity_iterations,density_error";
+    std::string header = "step,time_s,dt_s,particles,density_iterations,divergence_iterations,viscosity_iterations,density_error,dt_set_by";
     for (const auto name : sph::kStageNames) header += fmt::format(",ms_{}", name);
     // ms_cameras: the cameras' rendering, a part of ms_output (the outputs that asked for images).
     header += ",ms_coupling,ms_world,ms_output,ms_cameras,ms_total\n";
@@ -34,9 +34,9 @@ class TimingTable final : public RunObserver {
     std::FILE* file = file_.get();
     const sph::StepStats& stats = report.stats;
     const auto& solver = simulation.solver();
-    fmt::print(file, "{},{:.8g},{:.6g},{},{},{},{},{:.4g}", solver.state().step, solver.time(), stats.time_step,
+    fmt::print(file, "{},{:.8g},{:.6g},{},{},{},{},{:.4g},{}", solver.state().step, solver.time(), stats.time_step,
                solver.fluid().size(), stats.density_iterations, stats.divergence_iterations, stats.viscosity_iterations,
-               stats.density_error);
+               stats.density_error, sph::kTimeStepBoundNames[static_cast<std::size_t>(stats.time_step_bound)]);
     for (const double ms : stats.stage_ms.ms) fmt::print(file, ",{:.4f}", ms);
     const double camera_ms = simulation.scene().cameras.empty() ? 0.0 : simulation.cameras().take_render_ms();
     fmt::print(file, ",{:.4f},{:.4f},{:.4f},{:.4f},{:.4f}\n", simulation.last_coupling_ms(), simulation.last_world_ms(), report.output_ms,
