@@ -3,7 +3,10 @@
 #include <cmath>
 
 #include <algorithm>
+#include <array>
+#include <map>
 
+#include "m3dp/core/state_io.hpp"
 #include "m3dp/material/material.hpp"
 #include "m3dp/sph/boundary_sampling.hpp"
 #include "m3dp/sph/kernels.hpp"
@@ -145,4 +148,119 @@ TEST(BoundarySampling, StaticVolumesSummedOverEveryStaticParticleWhenBodiesAreAd
   }
   EXPECT_GT(checked, 1000u);
   EXPECT_LT(largest_error, Real(1e-5));
+}
+
+namespace {
+/// Points as exact bit patterns, sorted: two samplings hold the same points when these are equal.
+std::vector<std::array<Real, 3>> sorted_points(const std::vector<Vec3>& points) {
+  std::vector<std::array<Real, 3>> sorted;
+  for (const Vec3& p : points) sorted.push_back({p.x(), p.y(), p.z()});
+  std::sort(sorted.begin(), sorted.end());
+  return sorted;
+}
+}  // namespace
+
+// A tiled sampling leaves the wide faces' lattices for later: its points now and the lattices' points
+// together are the whole sampling's, bit for bit (a floor box: its top and bottom faces' inner points).
+TEST(BoundarySampling, TiledSurfacesHoldTheWholeSamplingsPoints) {
+  const Real d = Real(0.005);
+  for (const Shape& shape : {Shape{BoxShape{Vec3(1.0f, 0.6f, 0.1f)}}, Shape{PlaneShape{Vec3(0, 0.6f, 0.8f), 0.9f, 0.7f}}}) {
+    const SurfaceSamples whole = sample_shape_surface(shape, d, -d / 2);
+    const TiledSurface tiled = sample_shape_surface_tiled(shape, d, -d / 2, 4096);
+    ASSERT_FALSE(tiled.later.empty());
+    std::vector<Vec3> points = tiled.now.points;
+    for (const RectangleLattice& lattice : tiled.later)
+      for (int i = lattice.first_a; i <= lattice.last_a; ++i)
+        for (int j = lattice.first_b; j <= lattice.last_b; ++j) points.push_back(lattice.point(i, j));
+    std::printf("%zu points, %zu of them now\n", whole.points.size(), tiled.now.points.size());
+    EXPECT_LT(tiled.now.points.size(), whole.points.size() / 4);
+    EXPECT_TRUE(sorted_points(points) == sorted_points(whole.points));
+  }
+}
+
+namespace {
+/// A paste block settling on a 2 × 2 m floor box, its walls sampled whole or made where the paste comes.
+Solver paste_on_a_floor(bool lazy) {
+  const Real d = Real(0.01);
+  Parameters parameters;
+  parameters.settings.particle_radius = d / 2;
+  parameters.settings.bounds.min = Vec3(-1.5f, -1.5f, -0.5f);
+  parameters.settings.bounds.max = Vec3(1.5f, 1.5f, 1.0f);
+  parameters.phases.push_back(material::newtonian("paste", 1500, 50));
+  Solver solver(parameters);
+  const BoxShape floor{Vec3(2.0f, 2.0f, 0.1f)};
+  const Pose pose{Vec3(0.3f, -0.2f, -0.05f), Quat(Eigen::AngleAxis<Real>(Real(0.3), Vec3::UnitZ()))};
+  if (lazy)
+    solver.add_static_surface("floor", sample_shape_surface_tiled(floor, d, -d / 2, 4096), pose);
+  else
+    solver.add_body("floor", sample_box_surface(floor, d, -d / 2).points, pose, true);
+  std::vector<Vec3> block;
+  for (int x = 0; x < 10; ++x)
+    for (int y = 0; y < 10; ++y)
+      for (int z = 0; z < 8; ++z) block.push_back(Vec3(x * d, y * d, d / 2 + z * d + Real(0.02)));
+  solver.add_particles(block, Vec3::Zero(), 0);
+  return solver;
+}
+}  // namespace
+
+// The lazy floor holds the tiles under the paste only, each wall particle near the paste has the
+// volume it has in the whole floor, and the paste settles on it as on the whole floor (rounding apart:
+// the particles' order differs, and a falling block amplifies it); a state saved mid-run and loaded
+// into a fresh solver, which had made fewer tiles, goes on bit for bit.
+TEST(BoundarySampling, LazyWallsAreMadeUnderTheMaterialAndActAsTheWholeWall) {
+  Solver whole = paste_on_a_floor(false), lazy = paste_on_a_floor(true);
+  for (int step = 0; step < 60; ++step) whole.step(), lazy.step();
+  const auto& state = lazy.state();
+  std::printf("boundary particles: whole %zu, lazy %zu (%zu tiles)\n", whole.state().boundary.size(), state.boundary.size(),
+              state.made_tiles.size());
+  EXPECT_LT(state.boundary.size(), whole.state().boundary.size() / 4);
+  // Volumes: every lazy wall particle within reach of the paste against the whole floor's at its place.
+  std::map<std::array<Real, 3>, Real> whole_volume;
+  for (std::size_t k = 0; k < whole.state().boundary.size(); ++k) {
+    const Vec3& p = whole.state().boundary.position[k];
+    whole_volume[{p.x(), p.y(), p.z()}] = whole.state().boundary.volume[k];
+  }
+  Aabb paste;
+  for (const Vec3& p : lazy.fluid().position) paste.extend(p);
+  const Real reach = 2 * lazy.model().support_radius;
+  std::size_t compared = 0;
+  Real largest_volume_error = 0;
+  for (std::size_t k = 0; k < state.boundary.size(); ++k) {
+    const Vec3& p = state.boundary.position[k];
+    if (((p.array() < paste.min.array() - reach).any() || (p.array() > paste.max.array() + reach).any())) continue;
+    const auto found = whole_volume.find({p.x(), p.y(), p.z()});
+    ASSERT_NE(found, whole_volume.end()) << "a wall particle the whole floor does not have";
+    largest_volume_error = std::max(largest_volume_error, std::abs(state.boundary.volume[k] / found->second - 1));
+    ++compared;
+  }
+  std::printf("%zu wall particles near the paste: largest volume difference %.3g\n", compared, largest_volume_error);
+  EXPECT_GT(compared, 500u);
+  EXPECT_LT(largest_volume_error, Real(1e-5));
+  ASSERT_EQ(whole.fluid().size(), lazy.fluid().size());
+  Real lowest_whole = 1, lowest_lazy = 1, largest_difference = 0;
+  std::map<std::uint64_t, Vec3> by_id;
+  for (std::size_t i = 0; i < whole.fluid().size(); ++i) by_id[whole.fluid().id[i]] = whole.fluid().position[i];
+  for (std::size_t i = 0; i < lazy.fluid().size(); ++i) {
+    largest_difference = std::max(largest_difference, (by_id[lazy.fluid().id[i]] - lazy.fluid().position[i]).norm());
+    lowest_lazy = std::min(lowest_lazy, lazy.fluid().position[i].z());
+  }
+  for (const Vec3& p : whole.fluid().position) lowest_whole = std::min(lowest_whole, p.z());
+  std::printf("lowest particle: whole %.5f m, lazy %.5f m; largest difference %.3g m\n", lowest_whole, lowest_lazy, largest_difference);
+  const Real d = lazy.particle_diameter();
+  EXPECT_NEAR(lowest_lazy, lowest_whole, Real(0.05) * d);  // on the floor as on the whole one
+  EXPECT_LT(largest_difference, Real(0.3) * d);
+
+  // Saved after 60 steps, loaded into a fresh solver (which made only the tiles its block needed).
+  StateWriter out;
+  save_state(state, out);
+  Solver resumed = paste_on_a_floor(true);
+  {
+    State loaded = resumed.state();
+    StateReader in(out.bytes(), "test");
+    load_state(in, loaded);
+    resumed.restore(loaded);
+  }
+  for (int step = 0; step < 40; ++step) lazy.step(), resumed.step();
+  EXPECT_TRUE(lazy.fluid().position == resumed.fluid().position);
+  EXPECT_TRUE(lazy.state().boundary.position == resumed.state().boundary.position);
 }

@@ -133,8 +133,9 @@ int bench_scene(const std::string& name, const BenchOptions& options) {
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const double n = double(std::max<std::uint64_t>(1, steps));
-  fmt::print("loop: {:.3f} s for {} steps ({:.2f} ms/step, mean dt {:.3g} ms), {} particles at the end, peak resident memory {:.0f} MB\n",
-             seconds, steps, 1e3 * seconds / n, 1e3 * simulation.time() / n, simulation.solver().fluid().size(),
+  fmt::print("loop: {:.3f} s for {} steps ({:.2f} ms/step, mean dt {:.3g} ms), {} particles and {} boundary particles at the end, "
+             "peak resident memory {:.0f} MB\n",
+             seconds, steps, 1e3 * seconds / n, 1e3 * simulation.time() / n, simulation.solver().fluid().size(), state.boundary.size(),
              resident_memory().peak_megabytes);
   fmt::print("iterations per step: density {:.2f}, divergence {:.2f}, viscosity {:.2f}\n", density / n, divergence / n, viscosity / n);
   std::string set_by;

@@ -6,6 +6,7 @@
 #include <algorithm>
 
 #include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/kernels.hpp"
 #include "m3dp/sph/stages.hpp"
 
 namespace m3dp::sph::stages {
@@ -27,9 +28,9 @@ void move_bodies(const Model& model, State& state, Workspace& workspace) {
   if (workspace.static_boundary_dirty) {
     ++workspace.fixed_grids_version;
     workspace.static_boundary_indices.clear();
-    for (const auto& body : state.bodies)
-      if (body.is_static)
-        for (Index k = 0; k < body.particle_count; ++k) workspace.static_boundary_indices.push_back(body.first_particle + k);
+    // Every static body's particles, a lazy wall's tiles too (appended after the other bodies').
+    for (Index k = 0; k < boundary.size(); ++k)
+      if (state.bodies[boundary.body[k]].is_static) workspace.static_boundary_indices.push_back(k);
     workspace.static_boundary_grid.build(boundary.position, workspace.static_boundary_indices, cell_size);
     workspace.static_boundary_dirty = false;
   }
@@ -39,23 +40,9 @@ void move_bodies(const Model& model, State& state, Workspace& workspace) {
     workspace.moving_boundary_grid.build(boundary.position, workspace.moving_boundary_indices, cell_size);
     return;
   }
-  // Where fluid can be this step: around the particles and every nozzle that is extruding. A
-  // moving body outside it cannot have fluid neighbours, so its particles are neither moved nor sorted.
-  Aabb region = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, state.fluid.size(), 4096), Aabb{},
-      [&](const tbb::blocked_range<std::size_t>& range, Aabb box) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) box.extend(state.fluid.position[i]);
-        return box;
-      },
-      [](Aabb a, const Aabb& b) {
-        if (!b.empty()) {
-          a.extend(b.min);
-          a.extend(b.max);
-        }
-        return a;
-      });
-  for (std::size_t n = 0; n < state.nozzles.size(); ++n)
-    if (state.nozzles[n].extruding) region.extend(state.nozzles[n].pose.position);
+  // Where fluid can be this step (make_walls_near_material): a moving body outside it cannot have
+  // fluid neighbours, so its particles are neither moved nor sorted.
+  const Aabb& region = workspace.material_region;
   // A body within a support radius of that region may have fluid neighbours; a nozzle's disc reaches
   // its radius further, and a particle moves less than a diameter in a step.
     const Vec3 reach = Vec3::Constant(support + model.widest_nozzle / 2 + model.particle_diameter);
@@ -86,6 +73,46 @@ void move_bodies(const Model& model, State& state, Workspace& workspace) {
     }
   }
   workspace.moving_boundary_grid.build(boundary.position, workspace.moving_boundary_indices, cell_size);
+}
+
+void sum_boundary_volumes(const Model& model, State& state, std::size_t first, Index body_index, bool is_static) {
+  auto& boundary = state.boundary;
+  // Akinci 2012, eq. 4: V_b = 1 / Σ_k W_bk (times the model's boundary_volume_scale). Static bodies are summed together, so where walls meet or
+  // overlap (a tank built from boxes) the shared region is not counted twice; a moving body on its own
+  // (its volumes then do not change with its pose).
+  // A static body changes only the sums of static particles within the support of its own: those are
+  // summed again, over every static particle within the support of them (not all static particles at
+  // each static body added, which made a world of many shapes quadratic in them).
+  const Real support = model.support_radius;
+  Aabb added;
+  for (std::size_t k = first; k < boundary.size(); ++k) added.extend(boundary.position[k]);
+  const auto within = [](const Aabb& box, const Vec3& point, Real margin) {
+    return (point.array() >= box.min.array() - margin).all() && (point.array() <= box.max.array() + margin).all();
+  };
+  std::vector<Index> members;   // the particles whose volumes are summed again
+  std::vector<Vec3> points;     // every particle of their sums: members first, then the others near them
+  for (Index k = 0; k < boundary.size(); ++k) {
+    const bool together = is_static ? state.bodies[boundary.body[k]].is_static : boundary.body[k] == body_index;
+    if (together && (!is_static || k >= first || within(added, boundary.position[k], support))) members.push_back(k);
+  }
+  points.reserve(members.size());
+  for (const Index k : members) points.push_back(boundary.position[k]);
+  if (is_static)
+    for (Index k = 0; k < first; ++k)
+      if (state.bodies[boundary.body[k]].is_static && !within(added, boundary.position[k], support) &&
+          within(added, boundary.position[k], 2 * support))
+        points.push_back(boundary.position[k]);
+  boundary.volume.resize(boundary.size());
+  SpatialHashGrid grid;
+  grid.build(points, support);
+  // Each particle's own sum, in the grid's order: the same on any number of threads.
+  with_kernel(model.settings.kernel, support, [&](const auto& kernel) {
+    parallel_for_each_index(members.size(), [&](std::size_t m) {
+      Real sum = 0;
+      grid.for_each_candidate(points[m], [&](Index, const Vec3& other) { sum += kernel.W((points[m] - other).norm()); });
+      boundary.volume[members[m]] = model.boundary_volume_scale / sum;
+    }, 4096);
+  });
 }
 
 void reset_body_wrenches(const Model& /*model*/, State& /*state*/, Workspace& workspace) { workspace.body_wrench_chunks_used = 0; }

@@ -10,18 +10,32 @@ namespace m3dp::sph {
 namespace {
 int segments_for(Real length, Real spacing) { return std::max(1, static_cast<int>(std::ceil(length / spacing - Real(1e-4)))); }
 
+RectangleLattice rectangle_lattice(Real size_a, Real size_b, Real spacing, const Mat3& rotation, const Vec3& offset) {
+  RectangleLattice lattice;
+  lattice.rotation = rotation, lattice.offset = offset, lattice.size_a = size_a, lattice.size_b = size_b;
+  lattice.count_a = segments_for(size_a, spacing);
+  lattice.count_b = segments_for(size_b, spacing);
+  lattice.first_a = 0, lattice.last_a = lattice.count_a, lattice.first_b = 0, lattice.last_b = lattice.count_b;
+  return lattice;
+}
+
 // Points on a rectangle [−a/2, a/2] × [−b/2, b/2] (z = 0), including its edges. `on_edge`, when
-// given, gets for each point whether it lies on the rectangle's border.
-void add_rectangle(SurfaceSamples& samples, Real size_a, Real size_b, Real spacing, const Mat3& rotation,
-                   const Vec3& offset, const Vec3& normal, std::vector<char>* on_edge = nullptr) {
-  const int count_a = segments_for(size_a, spacing);
-  const int count_b = segments_for(size_b, spacing);
-  for (int i = 0; i <= count_a; ++i)
-    for (int j = 0; j <= count_b; ++j) {
-      const Vec3 local(size_a * (Real(i) / count_a - Real(0.5)), size_b * (Real(j) / count_b - Real(0.5)), 0);
-      samples.add(rotation * local + offset, normal);
-      if (on_edge) on_edge->push_back(i == 0 || i == count_a || j == 0 || j == count_b);
+// given, gets for each point whether it lies on the rectangle's border. With `only_border`, the inner
+// points are left out.
+void add_rectangle(SurfaceSamples& samples, const RectangleLattice& lattice, const Vec3& normal, std::vector<char>* on_edge = nullptr,
+                   bool only_border = false) {
+  for (int i = 0; i <= lattice.count_a; ++i) {
+    const bool border_a = i == 0 || i == lattice.count_a;
+    for (int j = 0; j <= lattice.count_b; ++j) {
+      const bool border = border_a || j == 0 || j == lattice.count_b;
+      if (only_border && !border) {
+        j = lattice.count_b - 1;  // on to the far border
+        continue;
+      }
+      samples.add(lattice.point(i, j), normal);
+      if (on_edge) on_edge->push_back(border);
     }
+  }
 }
 
 // Which of `points` remove_close_points keeps: each one no earlier kept point is within `min_distance`
@@ -78,7 +92,11 @@ void add_disc(SurfaceSamples& samples, Real radius, Real spacing, Real z) {
 }
 }  // namespace
 
-SurfaceSamples sample_box_surface(const BoxShape& inner_box, Real spacing, Real offset) {
+namespace {
+/// A box's samples; with `later` given, the inner points of faces with at least `min_points_later`
+/// of them are left out and their lattices go there instead.
+SurfaceSamples sample_box(const BoxShape& inner_box, Real spacing, Real offset, std::vector<RectangleLattice>* later,
+                          std::size_t min_points_later) {
   SurfaceSamples samples;
   const BoxShape box{(inner_box.size + Vec3::Constant(2 * offset)).cwiseMax(Real(0))};
   const Vec3 half = box.size / 2;
@@ -87,21 +105,37 @@ SurfaceSamples sample_box_surface(const BoxShape& inner_box, Real spacing, Real 
   to_x << 0, 0, 1, 1, 0, 0, 0, 1, 0;
   Mat3 to_y;  // maps (a, b, 0) to (a, 0, b): faces normal to y
   to_y << 1, 0, 0, 0, 0, 1, 0, 1, 0;
-  std::vector<char> on_edge;
-  for (int sign = -1; sign <= 1; sign += 2) {
-    add_rectangle(samples, box.size.x(), box.size.y(), spacing, identity, Vec3(0, 0, sign * half.z()), Vec3(0, 0, sign), &on_edge);
-    add_rectangle(samples, box.size.y(), box.size.z(), spacing, to_x, Vec3(sign * half.x(), 0, 0), Vec3(sign, 0, 0), &on_edge);
-    add_rectangle(samples, box.size.x(), box.size.z(), spacing, to_y, Vec3(0, sign * half.y(), 0), Vec3(0, sign, 0), &on_edge);
-  }
   // Faces meet only along the box's edges: with every side at least a spacing long, a face's inner
   // points are at least half a spacing from any other point, so only the faces' borders can repeat
   // (a 10 x 10 m floor at 5 mm: 8 million points, 32,000 on borders). A flatter box (a wall thinner
-  // than the spacing, its two faces one over the other) takes the whole pass.
-  if ((box.size.array() >= spacing).all())
+  // than the spacing, its two faces one over the other) takes the whole pass, and nothing is left.
+  const bool only_borders_meet = (box.size.array() >= spacing).all();
+  std::vector<char> on_edge;
+  const auto face = [&](Real size_a, Real size_b, const Mat3& rotation, const Vec3& centre, const Vec3& normal) {
+    RectangleLattice lattice = rectangle_lattice(size_a, size_b, spacing, rotation, centre);
+    const std::size_t inner = std::size_t(std::max(0, lattice.count_a - 1)) * std::size_t(std::max(0, lattice.count_b - 1));
+    const bool leave_inner = later && only_borders_meet && inner > 0 && inner >= min_points_later;
+    add_rectangle(samples, lattice, normal, &on_edge, leave_inner);
+    if (leave_inner) {
+      lattice.first_a = 1, lattice.last_a = lattice.count_a - 1, lattice.first_b = 1, lattice.last_b = lattice.count_b - 1;
+      later->push_back(lattice);
+    }
+  };
+  for (int sign = -1; sign <= 1; sign += 2) {
+    face(box.size.x(), box.size.y(), identity, Vec3(0, 0, sign * half.z()), Vec3(0, 0, sign));
+    face(box.size.y(), box.size.z(), to_x, Vec3(sign * half.x(), 0, 0), Vec3(sign, 0, 0));
+    face(box.size.x(), box.size.z(), to_y, Vec3(0, sign * half.y(), 0), Vec3(0, sign, 0));
+  }
+  if (only_borders_meet)
     keep_only(samples, kept_points(samples.points, spacing * Real(0.25), &on_edge));
   else
     remove_close_points(samples, spacing * Real(0.25));
   return samples;
+}
+}  // namespace
+
+SurfaceSamples sample_box_surface(const BoxShape& inner_box, Real spacing, Real offset) {
+  return sample_box(inner_box, spacing, offset, nullptr, 0);
 }
 
 SurfaceSamples sample_sphere_surface(const SphereShape& inner_sphere, Real spacing, Real offset) {
@@ -142,12 +176,34 @@ SurfaceSamples sample_cylinder_surface(const CylinderShape& inner_cylinder, Real
   return samples;
 }
 
-SurfaceSamples sample_plane(const PlaneShape& plane, Real spacing, Real offset) {
-  SurfaceSamples samples;
+namespace {
+RectangleLattice plane_lattice(const PlaneShape& plane, Real spacing, Real offset) {
   const Vec3 normal = plane.normal.normalized();
   const Mat3 rotation = Quat::FromTwoVectors(Vec3::UnitZ(), normal).toRotationMatrix();
-  add_rectangle(samples, plane.size_x, plane.size_y, spacing, rotation, offset * normal, normal);
+  return rectangle_lattice(plane.size_x, plane.size_y, spacing, rotation, offset * normal);
+}
+}  // namespace
+
+SurfaceSamples sample_plane(const PlaneShape& plane, Real spacing, Real offset) {
+  SurfaceSamples samples;
+  add_rectangle(samples, plane_lattice(plane, spacing, offset), plane.normal.normalized());
   return samples;
+}
+
+TiledSurface sample_shape_surface_tiled(const Shape& shape, Real spacing, Real offset, std::size_t min_points_later) {
+  TiledSurface surface;
+  if (const auto* box = std::get_if<BoxShape>(&shape)) {
+    surface.now = sample_box(*box, spacing, offset, &surface.later, min_points_later);
+  } else if (const auto* plane = std::get_if<PlaneShape>(&shape)) {
+    const RectangleLattice lattice = plane_lattice(*plane, spacing, offset);
+    if (std::size_t(lattice.count_a + 1) * std::size_t(lattice.count_b + 1) >= min_points_later)
+      surface.later.push_back(lattice);
+    else
+      surface.now = sample_plane(*plane, spacing, offset);
+  } else {
+    surface.now = sample_shape_surface(shape, spacing, offset);
+  }
+  return surface;
 }
 
 SurfaceSamples sample_mesh_surface(const TriangleMesh& input_mesh, Real spacing, Real offset) {

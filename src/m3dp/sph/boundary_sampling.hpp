@@ -24,6 +24,32 @@ struct SurfaceSamples {
 };
 
 SurfaceSamples sample_shape_surface(const Shape& shape, Real spacing, Real offset = 0);
+
+/// A flat face's lattice of points, as the samplers lay them: point(i, j) for i in 0..count_a and j in
+/// 0..count_b spans a size_a × size_b rectangle, rotated and offset into the shape's frame. The points
+/// in [first_a, last_a] × [first_b, last_b] are the ones a TiledSurface leaves to be made later.
+struct RectangleLattice {
+  Mat3 rotation = Mat3::Identity();
+  Vec3 offset = Vec3::Zero();
+  Real size_a = 0, size_b = 0;
+  int count_a = 1, count_b = 1;
+  int first_a = 0, last_a = 0, first_b = 0, last_b = 0;
+
+  [[nodiscard]] Vec3 point(int i, int j) const {
+    const Vec3 local(size_a * (Real(i) / Real(count_a) - Real(0.5)), size_b * (Real(j) / Real(count_b) - Real(0.5)), 0);
+    return rotation * local + offset;
+  }
+};
+
+/// A shape's samples with the points of its wide flat faces left to be made where material comes
+/// (Solver::add_static_surface): `now` and every `later` lattice's range together are exactly
+/// sample_shape_surface's points (in another order). Boxes leave their faces' inner points, planes
+/// all theirs, when a face has at least `min_points_later` of them; other shapes are sampled now.
+struct TiledSurface {
+  SurfaceSamples now;
+  std::vector<RectangleLattice> later;
+};
+TiledSurface sample_shape_surface_tiled(const Shape& shape, Real spacing, Real offset, std::size_t min_points_later);
 /// The shape's surface area (m², in double: a scene's sizes are checked before anything is sampled).
 double shape_surface_area(const Shape& shape);
 SurfaceSamples sample_box_surface(const BoxShape& box, Real spacing, Real offset = 0);

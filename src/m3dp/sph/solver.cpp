@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <stdexcept>
 
 #include "m3dp/core/error.hpp"
 #include "m3dp/core/parallel.hpp"
@@ -31,7 +32,7 @@ Solver::Solver(Parameters parameters) : model_(compile_model(std::move(parameter
 const StepStats& Solver::step() {
   using namespace stages;
   state_.last_step = StepStats{};
-  run(Stage::bodies, {choose_neighbor_search, move_bodies});
+  run(Stage::bodies, {choose_neighbor_search, make_walls_near_material, move_bodies});
   run(Stage::remove, {remove_out_of_bounds});
   run(Stage::emit, {emit_layers});
   run(Stage::reorder, {update_rest_partition, reorder_particles});
@@ -86,50 +87,38 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
     boundary.body.push_back(body_index);
     boundary.nozzle_bore.push_back(0);
   }
-  // Akinci 2012, eq. 4: V_b = 1 / Σ_k W_bk (times the model's boundary_volume_scale). Static bodies are summed together, so where walls meet or
-  // overlap (a tank built from boxes) the shared region is not counted twice; a moving body on its own
-  // (its volumes then do not change with its pose).
-  // A static body changes only the sums of static particles within the support of its own: those are
-  // summed again, over every static particle within the support of them (not all static particles at
-  // each static body added, which made a world of many shapes quadratic in them).
-  const Real support = model_.support_radius;
-  const std::size_t first = body.first_particle;
-  Aabb added;
-  for (std::size_t k = first; k < boundary.size(); ++k) added.extend(boundary.position[k]);
-  const auto within = [](const Aabb& box, const Vec3& point, Real margin) {
-    return (point.array() >= box.min.array() - margin).all() && (point.array() <= box.max.array() + margin).all();
-  };
-  std::vector<Index> members;   // the particles whose volumes are summed again
-  std::vector<Vec3> points;     // every particle of their sums: members first, then the others near them
-  for (Index k = 0; k < boundary.size(); ++k) {
-    const bool together = is_static ? state_.bodies[boundary.body[k]].is_static : boundary.body[k] == body_index;
-    if (together && (!is_static || k >= first || within(added, boundary.position[k], support))) members.push_back(k);
-  }
-  points.reserve(members.size());
-  for (const Index k : members) points.push_back(boundary.position[k]);
-  if (is_static)
-    for (Index k = 0; k < first; ++k)
-      if (state_.bodies[boundary.body[k]].is_static && !within(added, boundary.position[k], support) &&
-          within(added, boundary.position[k], 2 * support))
-        points.push_back(boundary.position[k]);
-  boundary.volume.resize(boundary.size());
-  SpatialHashGrid grid;
-  grid.build(points, support);
-  // Each particle's own sum, in the grid's order: the same on any number of threads.
-  with_kernel(model_.settings.kernel, support, [&](const auto& kernel) {
-    parallel_for_each_index(members.size(), [&](std::size_t m) {
-      Real sum = 0;
-      grid.for_each_candidate(points[m], [&](Index, const Vec3& other) { sum += kernel.W((points[m] - other).norm()); });
-      boundary.volume[members[m]] = model_.boundary_volume_scale / sum;
-    }, 4096);
-  });
+  stages::sum_boundary_volumes(model_, state_, body.first_particle, body_index, is_static);
   workspace_.static_boundary_dirty = true;
   workspace_.static_boundary_indices.reserve(boundary.size());
   workspace_.moving_boundary_indices.reserve(boundary.size());
   return body_index;
 }
 
+Index Solver::add_static_surface(const std::string& name, const TiledSurface& surface, const Pose& pose) {
+  const Index body = add_body(name, surface.now.points, pose, true);
+  for (const RectangleLattice& lattice : surface.later) {
+    LazyWallFace face;
+    face.body = body;
+    face.lattice = lattice;
+    face.tiles_a = (lattice.last_a - lattice.first_a) / kLazyTilePoints + 1;
+    face.tiles_b = (lattice.last_b - lattice.first_b) / kLazyTilePoints + 1;
+    face.made.assign(std::size_t(face.tiles_a) * std::size_t(face.tiles_b), 0);
+    state_.lazy_walls.push_back(std::move(face));
+  }
+  return body;
+}
+
 std::size_t Solver::add_particles(std::span<const Vec3> positions, const Vec3& velocity, std::uint16_t phase) {
+  // The lazy walls' tiles around the new particles first: they are the material's region from now on.
+  Aabb around;
+  for (const Vec3& point : positions) around.extend(point);
+  if (!around.empty()) {
+    const Vec3 reach = Vec3::Constant(stages::lazy_wall_reach(model_));
+    Aabb within;
+    within.extend(around.min - reach);
+    within.extend(around.max + reach);
+    stages::make_walls_within(model_, state_, workspace_, within);
+  }
   // Points within the boundary clearance of a wall's particles are skipped.
   const Real clearance = stages::boundary_clearance(model_);
   SpatialHashGrid grid;
@@ -151,6 +140,8 @@ void Solver::reserve(std::size_t capacity) {
 
 void Solver::set_body_motion(Index body, const Pose& pose, const Vec3& linear_velocity, const Vec3& angular_velocity) {
   auto& target = state_.bodies.at(body);
+  for (const LazyWallFace& face : state_.lazy_walls)
+    if (face.body == body) throw std::logic_error("body '" + target.name + "' has walls made where material comes: it cannot move");
   target.pose = pose;
   target.linear_velocity = linear_velocity;
   target.angular_velocity = angular_velocity;

@@ -19,6 +19,9 @@ class Solver {
   // ---- set-up ----
   /// Adds a rigid body whose surface is sampled as `local_points` (body frame). Returns its index.
   Index add_body(const std::string& name, std::span<const Vec3> local_points, const Pose& pose, bool is_static);
+  /// A static body whose `surface.now` points are in at once and whose `surface.later` faces get
+  /// their particles tile by tile where material comes near (sample_shape_surface_tiled).
+  Index add_static_surface(const std::string& name, const TiledSurface& surface, const Pose& pose);
   /// Adds fluid particles at rest spacing (positions in m); points closer than a radius to a boundary are skipped.
   std::size_t add_particles(std::span<const Vec3> positions, const Vec3& velocity, std::uint16_t phase);
   /// Pre-sizes every array for `capacity` fluid particles, so steps do not allocate.

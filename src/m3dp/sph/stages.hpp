@@ -20,6 +20,16 @@ using StageFunction = void (*)(const Model& model, State& state, Workspace& work
 void choose_neighbor_search(const Model& model, State& state, Workspace& workspace);
 /// Moving bodies' boundary particles to their poses; the static and moving boundary grids.
 void move_bodies(const Model& model, State& state, Workspace& workspace);
+/// This step's material region (the fluid and the extruding nozzles), and the particles of the lazy
+/// walls' tiles within reach of it (lazy_walls.cpp).
+void make_walls_near_material(const Model& model, State& state, Workspace& workspace);
+/// The particles of every lazy wall tile that `box` (world) touches, appended with their volumes.
+void make_walls_within(const Model& model, State& state, Workspace& workspace, const Aabb& box);
+/// How far from the material region wall particles must be in: their volumes need their neighbours.
+Real lazy_wall_reach(const Model& model);
+/// Akinci volumes (eq. 4) of the boundary particles from `first` on, all of body `body`; when static,
+/// summed over every static particle, and those of the static particles near them summed again.
+void sum_boundary_volumes(const Model& model, State& state, std::size_t first, Index body, bool is_static);
 
 // ---- remove (removal.cpp) ----
 /// Deletes the particles outside SolverSettings::bounds.

@@ -1,5 +1,6 @@
 #include "m3dp/sph/state.hpp"
 
+#include <algorithm>
 #include <numeric>
 
 #include "m3dp/core/state_io.hpp"
@@ -72,12 +73,24 @@ void Workspace::reserve(std::size_t capacity) {
 
 namespace m3dp::sph {
 
+LazyWallFace::Range LazyWallFace::tile_range(std::size_t tile) const {
+  const int tile_a = int(tile / std::size_t(tiles_b)), tile_b = int(tile % std::size_t(tiles_b));
+  Range range;
+  range.first_a = lattice.first_a + tile_a * kLazyTilePoints;
+  range.last_a = std::min(lattice.last_a, range.first_a + kLazyTilePoints - 1);
+  range.first_b = lattice.first_b + tile_b * kLazyTilePoints;
+  range.last_b = std::min(lattice.last_b, range.first_b + kLazyTilePoints - 1);
+  return range;
+}
+
 void save_state(const State& state, StateWriter& out) {
-  out.section("sph.state");
+  out.section("sph.state 2");
   const_cast<FluidParticles&>(state.fluid).for_each_field([&](const auto& field) { out.put(field); });
   out.put(state.active_count);
   out.put(state.resting_woken);
   out.put(state.next_load_check_time);
+  // The lazy walls' tiles made so far, before the arrays they lengthened.
+  out.put(state.made_tiles);
   out.put(state.boundary.local_position);
   out.put(state.boundary.position);
   out.put(state.boundary.velocity);
@@ -117,7 +130,7 @@ void save_state(const State& state, StateWriter& out) {
 }
 
 void load_state(StateReader& in, State& state) {
-  in.section("sph.state");
+  in.section("sph.state 2");
   state.fluid.for_each_field([&](auto& field) { in.get(field); });
   const std::size_t count = state.fluid.size();
   state.fluid.for_each_field([&](const auto& field) {
@@ -128,7 +141,19 @@ void load_state(StateReader& in, State& state) {
   if (state.active_count > count) in.fail("more active particles than particles");
   in.get(state.resting_woken);
   in.get(state.next_load_check_time);
-  const std::size_t boundary_particles = state.boundary.size();
+  // The walls the scene makes (without the lazy walls' tiles this state has made), then the tiles the
+  // run had made, whose particles follow.
+  std::size_t boundary_particles = state.boundary.size();
+  for (const std::uint64_t made : state.made_tiles) boundary_particles -= state.lazy_walls[made >> 32].tile_range(made & 0xffffffffu).points();
+  for (auto& face : state.lazy_walls) std::fill(face.made.begin(), face.made.end(), std::uint8_t(0));
+  in.get(state.made_tiles);
+  for (const std::uint64_t made : state.made_tiles) {
+    const std::size_t face_index = made >> 32, tile = made & 0xffffffffu;
+    if (face_index >= state.lazy_walls.size() || tile >= state.lazy_walls[face_index].made.size() || state.lazy_walls[face_index].made[tile])
+      in.fail("a wall tile the scene does not have");
+    state.lazy_walls[face_index].made[tile] = 1;
+    boundary_particles += state.lazy_walls[face_index].tile_range(tile).points();
+  }
   in.get(state.boundary.local_position);
   if (state.boundary.local_position.size() != boundary_particles) in.fail("another set of walls and bodies than the scene makes");
   in.get(state.boundary.position);
@@ -138,6 +163,7 @@ void load_state(StateReader& in, State& state) {
   if (state.boundary.position.size() != boundary_particles || state.boundary.velocity.size() != boundary_particles ||
       state.boundary.volume.size() != boundary_particles || state.boundary.body.size() != boundary_particles)
     in.fail("another set of walls and bodies than the scene makes");
+  state.boundary.nozzle_bore.resize(boundary_particles, 0);  // tiles are floors and walls, never a bore
   const auto bodies = in.get<std::uint64_t>();
   if (bodies != state.bodies.size()) in.fail("a different number of boundary bodies than the scene makes");
   for (BoundaryBody& body : state.bodies) {

@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "m3dp/core/types.hpp"
+#include "m3dp/sph/boundary_sampling.hpp"
 #include "m3dp/sph/neighbors/neighbor_search.hpp"
 #include "m3dp/sph/particles.hpp"
 
@@ -103,6 +104,24 @@ struct Wrench {
   Vec3 torque = Vec3::Zero();
 };
 
+inline constexpr int kLazyTilePoints = 32;
+
+/// A static body's wide flat face whose boundary particles are made tile by tile where material comes
+/// near (lazy_walls.cpp): a wall costs memory and time for the area the material reaches, not its whole.
+struct LazyWallFace {
+  Index body = 0;                       // the static body whose particles they become
+  RectangleLattice lattice;             // its points, in the body's frame
+  int tiles_a = 0, tiles_b = 0;         // tiles of kLazyTilePoints × kLazyTilePoints lattice points
+  std::vector<std::uint8_t> made;       // (tiles_a × tiles_b) 1: the tile's particles are in
+
+  /// The lattice indices of tile `tile` (= tile_a · tiles_b + tile_b), inclusive.
+  struct Range {
+    int first_a, last_a, first_b, last_b;
+    [[nodiscard]] std::size_t points() const { return std::size_t(last_a - first_a + 1) * std::size_t(last_b - first_b + 1); }
+  };
+  [[nodiscard]] Range tile_range(std::size_t tile) const;
+};
+
 /// Everything a checkpoint needs.
 struct State {
   FluidParticles fluid;
@@ -113,6 +132,8 @@ struct State {
   double next_load_check_time = 0;   // s, when the weight on resting material is checked next
   BoundaryParticles boundary;
   std::vector<BoundaryBody> bodies;
+  std::vector<LazyWallFace> lazy_walls;
+  std::vector<std::uint64_t> made_tiles;  // face << 32 | tile, in the order their particles were appended
   std::vector<NozzleState> nozzles;
 
   double time = 0;                   // s
@@ -184,6 +205,7 @@ struct Workspace {
   SpatialHashGrid static_boundary_grid;
   SpatialHashGrid moving_boundary_grid;
   bool static_boundary_dirty = true;
+  Aabb material_region;  // this step's fluid and extruding nozzles (stage "bodies"); empty: none
   std::vector<Index> static_boundary_indices;
   std::vector<Index> moving_boundary_indices;  // this step's: particles of the moving bodies near the fluid
   // Every grid's cell: the support radius, or support + skin while lists are kept across steps.
