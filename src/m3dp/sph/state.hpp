@@ -206,6 +206,7 @@ struct Workspace {
   SpatialHashGrid moving_boundary_grid;
   bool static_boundary_dirty = true;
   Aabb material_region;  // this step's fluid and extruding nozzles (stage "bodies"); empty: none
+  std::vector<std::vector<std::uint8_t>> lazy_wall_wanted;  // (faces × tiles) tiles this step's material reaches
   std::vector<Index> static_boundary_indices;
   std::vector<Index> moving_boundary_indices;  // this step's: particles of the moving bodies near the fluid
   // Every grid's cell: the support radius, or support + skin while lists are kept across steps.

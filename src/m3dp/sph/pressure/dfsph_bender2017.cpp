@@ -465,26 +465,40 @@ void correct_volume(const Model& model, State& state, Workspace& workspace) {
   // thirds of a diameter, so a viscous material's particles pair up (the pairing instability,
   // Dehnen & Aly 2012), and at a free surface, where the density is short, nothing else parts them.
   const Real minimum = model.settings.minimum_spacing * model.particle_diameter;
-  // Every move from the positions before any: moving a particle in place while another thread reads
-  // it as a neighbour made runs on two threads differ (a viscous paste's pairs part here often).
-  auto& displacements = workspace.scratch_vec3;
-  displacements.resize(count);
+  // The correction's moves first, each particle's own. Then the close pairs are parted one particle
+  // after another in index order, each from its neighbours' positions as already moved (Gauss-Seidel):
+  // the same on any number of threads (moving in place while other threads read them as neighbours
+  // made a viscous paste's runs differ), and as strong as one sweep in place was (parting every pair
+  // at once from the old positions pushed into the neighbours: a honey ring's p99 density +1.3 → +4.1 %).
   parallel_for_each_index(count, [&](std::size_t i) {
-    Vec3 displacement = time_step * (workspace.solver_velocity[i].head<3>() - fluid.velocity[i]);
-    if (minimum > 0) {
-      const Vec3 position_i = fluid.position[i];
-      for (const Index j : workspace.fluid_neighbors.of(i)) {
-        const Vec3 r = position_i - fluid.position[j];
-        const Real distance_squared = r.squaredNorm();
-        if (distance_squared >= minimum * minimum || distance_squared == 0) continue;
-        const Real distance = std::sqrt(distance_squared);
-        displacement += ((j < count ? Real(0.5) : Real(1)) * (minimum - distance) / distance) * r;
-      }
-    }
+    const Vec3 displacement = time_step * (workspace.solver_velocity[i].head<3>() - fluid.velocity[i]);
     // The pump drives the material in a nozzle's exit: the correction never pushes it back in.
-    displacements[i] = without_push_into_nozzles(model, state, fluid.position[i], displacement);
+    fluid.position[i] += without_push_into_nozzles(model, state, fluid.position[i], displacement);
   }, 4096);
-  parallel_for_each_index(count, [&](std::size_t i) { fluid.position[i] += displacements[i]; }, 4096);
+  if (minimum <= 0) return;
+  const auto closest_pair = [&](std::size_t i, auto&& each_close) {
+    const Vec3 position_i = fluid.position[i];
+    for (const Index j : workspace.fluid_neighbors.of(i)) {
+      const Vec3 r = position_i - fluid.position[j];
+      const Real distance_squared = r.squaredNorm();
+      if (distance_squared < minimum * minimum && distance_squared != 0) each_close(j, r, distance_squared);
+    }
+  };
+  auto& close = workspace.scratch_u16;  // 1: particle i has a neighbour closer than the minimum
+  close.resize(count);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    close[i] = 0;
+    closest_pair(i, [&](Index, const Vec3&, Real) { close[i] = 1; });
+  }, 4096);
+  for (std::size_t i = 0; i < count; ++i) {
+    if (!close[i]) continue;
+    Vec3 displacement = Vec3::Zero();
+    closest_pair(i, [&](Index j, const Vec3& r, Real distance_squared) {
+      const Real distance = std::sqrt(distance_squared);
+      displacement += ((j < count ? Real(0.5) : Real(1)) * (minimum - distance) / distance) * r;
+    });
+    fluid.position[i] += without_push_into_nozzles(model, state, fluid.position[i], displacement);
+  }
 }
 
 }  // namespace m3dp::sph::stages
