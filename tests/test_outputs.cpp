@@ -82,7 +82,6 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   EXPECT_EQ(json["boundary"]["particles"].get<std::size_t>(), walls);
   EXPECT_EQ(json["boundary"]["static_particles"].get<std::size_t>(), walls);
   EXPECT_GE(json["boundary"]["megabytes"].get<double>(), 1e-6 * 45 * double(walls));
-  EXPECT_GT(json["peak_resident_megabytes"].get<double>(), json["boundary"]["megabytes"].get<double>());
 
   const std::string timing = read_text(directory / "timing.csv");
   EXPECT_EQ(timing.rfind("step,time_s,dt_s,particles", 0), 0u);

@@ -69,7 +69,7 @@ simulated = ["step", "time_s", "dt_s", "particles", "density_iterations", "diver
 rows = [[[row[c] for c in simulated] for row in csv.DictReader(open(f"{folder}/timing.csv"))] for folder in (whole, resumed)]
 assert rows[0] == rows[1], "timing.csv's simulated columns differ"
 wall = {"wall_time_s", "real_time_factor", "particle_steps_per_second", "render_seconds", "rays_per_second", "seconds", "encode_seconds",
-        "peak_resident_megabytes", "megabytes",
+        "megabytes",
         "bytes", "scene"}
 def compare(a, b, where=""):
     if isinstance(a, dict):

@@ -175,11 +175,9 @@ struct RunSummary {
   };
   std::optional<Quality> quality;
   double particle_steps_per_second = 0;
-  // The walls' particles (static bodies, moving bodies and nozzles) and the bytes their arrays hold;
-  // the process's peak resident memory (MB, /proc/self/status VmHWM; 0 where unknown).
+  // The walls' particles (static bodies, moving bodies and nozzles) and the megabytes their arrays hold.
   std::size_t boundary_particles = 0, static_boundary_particles = 0;
   double boundary_megabytes = 0;
-  double peak_resident_megabytes = 0;
   std::string output_directory;
 };
 

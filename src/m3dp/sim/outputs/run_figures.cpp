@@ -5,7 +5,6 @@
 #include <array>
 #include <chrono>
 
-#include "m3dp/core/memory.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/simulation.hpp"
 
@@ -61,7 +60,6 @@ class RunFigures final : public RunObserver {
     const auto bytes = [](const auto& array) { return double(array.capacity() * sizeof(array[0])); };
     summary.boundary_megabytes = 1e-6 * (bytes(boundary.local_position) + bytes(boundary.position) + bytes(boundary.velocity) +
                                          bytes(boundary.volume) + bytes(boundary.body) + bytes(boundary.nozzle_bore));
-    summary.peak_resident_megabytes = resident_memory().peak_megabytes;
     const double particle_volume = solver.model().particle_volume;
     for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
       sph::NozzleState nozzle = state.nozzles[n];

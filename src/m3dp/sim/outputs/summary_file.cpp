@@ -195,7 +195,6 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
        {{"particles", summary.boundary_particles},
         {"static_particles", summary.static_boundary_particles},
         {"megabytes", summary.boundary_megabytes}}},
-      {"peak_resident_megabytes", summary.peak_resident_megabytes},
       {"materials", materials},
       {"bodies", bodies},
       {"nozzles", nozzles},

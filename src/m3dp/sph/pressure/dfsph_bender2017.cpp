@@ -465,38 +465,29 @@ void correct_volume(const Model& model, State& state, Workspace& workspace) {
   // thirds of a diameter, so a viscous material's particles pair up (the pairing instability,
   // Dehnen & Aly 2012), and at a free surface, where the density is short, nothing else parts them.
   const Real minimum = model.settings.minimum_spacing * model.particle_diameter;
-  // The correction's moves first, each particle's own. Then the close pairs are parted one particle
-  // after another in index order, each from its neighbours' positions as already moved (Gauss-Seidel):
-  // the same on any number of threads (moving in place while other threads read them as neighbours
-  // made a viscous paste's runs differ), and as strong as one sweep in place was (parting every pair
-  // at once from the old positions pushed into the neighbours: a honey ring's p99 density +1.3 → +4.1 %).
+  // One particle after another in index order, each parted from its close neighbours as they stand
+  // (those before it already moved): the same on any number of threads. Moving in place in parallel,
+  // while other threads read the particles as neighbours, made a viscous paste's runs differ; parting
+  // every pair from the old positions at once (Jacobi) pushed into neighbours (a honey ring's p99
+  // density +1.3 → +4.1 %). The correction's own moves are taken in parallel first.
+  auto& own_move = workspace.scratch_vec3;
+  own_move.resize(count);
   parallel_for_each_index(count, [&](std::size_t i) {
-    const Vec3 displacement = time_step * (workspace.solver_velocity[i].head<3>() - fluid.velocity[i]);
-    // The pump drives the material in a nozzle's exit: the correction never pushes it back in.
-    fluid.position[i] += without_push_into_nozzles(model, state, fluid.position[i], displacement);
-  }, 4096);
-  if (minimum <= 0) return;
-  const auto closest_pair = [&](std::size_t i, auto&& each_close) {
-    const Vec3 position_i = fluid.position[i];
-    for (const Index j : workspace.fluid_neighbors.of(i)) {
-      const Vec3 r = position_i - fluid.position[j];
-      const Real distance_squared = r.squaredNorm();
-      if (distance_squared < minimum * minimum && distance_squared != 0) each_close(j, r, distance_squared);
-    }
-  };
-  auto& close = workspace.scratch_u16;  // 1: particle i has a neighbour closer than the minimum
-  close.resize(count);
-  parallel_for_each_index(count, [&](std::size_t i) {
-    close[i] = 0;
-    closest_pair(i, [&](Index, const Vec3&, Real) { close[i] = 1; });
+    own_move[i] = time_step * (workspace.solver_velocity[i].head<3>() - fluid.velocity[i]);
   }, 4096);
   for (std::size_t i = 0; i < count; ++i) {
-    if (!close[i]) continue;
-    Vec3 displacement = Vec3::Zero();
-    closest_pair(i, [&](Index j, const Vec3& r, Real distance_squared) {
-      const Real distance = std::sqrt(distance_squared);
-      displacement += ((j < count ? Real(0.5) : Real(1)) * (minimum - distance) / distance) * r;
-    });
+    Vec3 displacement = own_move[i];
+    if (minimum > 0) {
+      const Vec3 position_i = fluid.position[i];
+      for (const Index j : workspace.fluid_neighbors.of(i)) {
+        const Vec3 r = position_i - fluid.position[j];
+        const Real distance_squared = r.squaredNorm();
+        if (distance_squared >= minimum * minimum || distance_squared == 0) continue;
+        const Real distance = std::sqrt(distance_squared);
+        displacement += ((j < count ? Real(0.5) : Real(1)) * (minimum - distance) / distance) * r;
+      }
+    }
+    // The pump drives the material in a nozzle's exit: the correction never pushes it back in.
     fluid.position[i] += without_push_into_nozzles(model, state, fluid.position[i], displacement);
   }
 }
