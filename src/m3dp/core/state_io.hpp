@@ -95,6 +95,7 @@ class StateReader {
  private:
   void take(void* destination, std::size_t count) {
     if (count > remaining()) fail("the file ends early");
+    if (count == 0) return;  // an empty list's data() may be null, which memcpy must not get
     std::memcpy(destination, bytes_.data() + offset_, count);
     offset_ += count;
   }
