@@ -4,9 +4,11 @@
 // that scripts/plot_deposition.py draws; not in CI (about a minute a point on two cores).
 //   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N] [--gap G/D --speed V/U]
 //                               [--no-rest] [--particles PREFIX] [--bore L/D (0: the exit-plane inlet)]
-//                               [--material bingham|newtonian]
+//                               [--material bingham|newtonian] [--yield-stress PA] [--plastic-viscosity PA_S]
+//                               [--surface floor|layer]
 // (--gap and --speed: that one point of the grid only; --particles: each strand's particles at the
-// end as PREFIX_MATERIAL_G_V_SURFACE.csv.)
+// end as PREFIX_MATERIAL_G_V_SURFACE.csv; --material newtonian with --gap/--speed lays a free
+// Newtonian rope too; --yield-stress and --plastic-viscosity change the mortar's Bingham figures.)
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -21,9 +23,9 @@ using namespace m3dp;
 namespace deposition = m3dp::sim::deposition;
 
 int main(int argc, char** argv) {
-  std::string output, particles_csv, only_material;
+  std::string output, particles_csv, only_material, only_surface;
   bool quick = false, rest_detection = true;
-  double cap = 0, across = 8, only_gap = 0, only_speed = 0, bore = 2;
+  double cap = 0, across = 8, only_gap = 0, only_speed = 0, bore = 2, yield_stress = 0, plastic_viscosity = 0;
   for (int k = 1; k < argc; ++k) {
     if (!std::strcmp(argv[k], "-o") && k + 1 < argc) output = argv[++k];
     else if (!std::strcmp(argv[k], "--quick")) quick = true;
@@ -35,8 +37,11 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[k], "--gap") && k + 1 < argc) only_gap = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--particles") && k + 1 < argc) particles_csv = argv[++k];
     else if (!std::strcmp(argv[k], "--speed") && k + 1 < argc) only_speed = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--surface") && k + 1 < argc) only_surface = argv[++k];
+    else if (!std::strcmp(argv[k], "--yield-stress") && k + 1 < argc) yield_stress = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--plastic-viscosity") && k + 1 < argc) plastic_viscosity = std::atof(argv[++k]);
     else {
-      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D] [--material bingham|newtonian]\n",
+      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D] [--material bingham|newtonian] [--yield-stress PA] [--plastic-viscosity PA_S] [--surface floor|layer]\n",
                    argv[0]);
       return 2;
     }
@@ -57,8 +62,11 @@ int main(int argc, char** argv) {
     for (const double gap : gaps)
       for (const double speed : speeds)
         for (const bool on_layer : {false, true}) {
+          if (!only_surface.empty() && only_surface != (on_layer ? "layer" : "floor")) continue;
           deposition::StrandCase strand;
           strand.material = bingham ? deposition::printable_mortar() : deposition::stiff_newtonian_paste();
+          if (bingham && yield_stress > 0) strand.material.rheology.yield_stress = Real(yield_stress);
+          if (bingham && plastic_viscosity > 0) strand.material.rheology.viscosity = Real(plastic_viscosity);
           strand.gap_ratio = gap;
           strand.speed_ratio = speed;
           strand.particles_across = across;
@@ -71,7 +79,8 @@ int main(int argc, char** argv) {
                                    std::to_string(speed) + (on_layer ? "_layer" : "_floor") + ".csv";
           const bool pressed = deposition::pressed(strand);
           if (on_layer && pressed) continue;   // pressed strands: on the floor
-          if (!bingham && !pressed) continue;  // free ropes: the mortar that holds its shape
+          // Free ropes: the mortar that holds its shape, unless a Newtonian one is asked for alone.
+          if (!bingham && !pressed && !(only_material == "newtonian" && only_gap > 0)) continue;
           const auto result = deposition::lay_strand(strand);
           const double round = strand.diameter * std::sqrt(1 / speed);
           const double reference_height = pressed ? gap * strand.diameter : round;
