@@ -112,6 +112,7 @@ void for_each_particle_range(std::size_t count, Body&& body) {
 Vec4 velocity_position_products(const Vec4* velocity, const Vec4* position, const Index* neighbor, const Real* weight,
                                 Index count, const Vec4& velocity_i, const Vec4& position_i) {
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  if (avx512::available()) return avx512::difference_products(velocity, position, neighbor, weight, count, velocity_i, position_i);
   if (avx2::available()) return avx2::difference_products(velocity, position, neighbor, weight, count, velocity_i, position_i);
 #endif
   Vec4 sum = Vec4::Zero();  // no horizontal add per neighbour
@@ -146,6 +147,10 @@ template <class Finish>
 Real sum_over_rates(const SolverView& view, const tbb::blocked_range<std::size_t>& range, Finish&& finish) {
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
   // One call for the range: a call per particle into the AVX2 code cost as much as its pairs.
+  if (avx512::available())
+    return avx512::difference_product_rows(range.begin(), range.end(), view.velocity, view.position, view.fluid_neighbor,
+                                           view.fluid_neighbor_count, view.fluid_first, view.fluid_pair_gradient,
+                                           [&](std::size_t i, const Vec4& lanes) { return finish(i, rate_with_walls(view, i, lanes)); });
   if (avx2::available())
     return avx2::difference_product_rows(range.begin(), range.end(), view.velocity, view.position, view.fluid_neighbor,
                                          view.fluid_neighbor_count, view.fluid_first, view.fluid_pair_gradient,

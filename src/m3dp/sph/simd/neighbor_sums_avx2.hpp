@@ -9,6 +9,8 @@
 // attribute) and the rest of the program keeps Eigen's default alignment (which Debian's DART and
 // OpenVDB are built with). With FMA their results round differently from the generic loops: a run
 // is reproducible on one machine, not bit for bit across machines with and without AVX2.
+// Where the CPU has AVX-512F, the viscous product and the density change rates (the solvers' sums
+// over vectors) take four neighbours per 512-bit instruction (avx512::available(), M3DP_NO_AVX512).
 #include "m3dp/core/types.hpp"
 #include "m3dp/sph/kernels.hpp"
 
@@ -383,5 +385,170 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
   return sums;
 }
 
+
+/// The particle shifting's sums over a particle's fluid neighbours (see shift_particles in
+/// shifting/lind2012.cpp), over neighbours at 0 < r < h: Σ V W_ij, Σ V g_ij r_ij and
+/// Σ (1 + R (W_ij W(d)⁻¹)⁴) V g_ij r_ij, with g_ij = (dW/dr)/r. Eight at a time, the last one to seven as
+/// a masked group (their kernel, branchy in the generic loop, is selected here).
+/// The shifting sums' lanes (no initialisers: the implicit constructor is not compiled for AVX).
+struct ShiftingLanes {
+  __m256 concentration, gx, gy, gz, wx, wy, wz;
+};
+/// Adds one group of eight neighbours; `live`: the lanes (in transposed order) that hold one.
+template <class Kernel>
+__attribute__((target("avx2,fma"))) inline void add_shifting_group(const Kernel& kernel, const Vec4* position, const Index* group, __m256 center,
+                                                                    __m256 live, __m256 volume, __m256 reference, __m256 clumping,
+                                                                    ShiftingLanes& sums) {
+  const EightDifferences r = eight_differences(position, group, center);
+  const __m256 distance = _mm256_sqrt_ps(_mm256_fmadd_ps(r.x, r.x, _mm256_fmadd_ps(r.y, r.y, _mm256_mul_ps(r.z, r.z))));
+  const EightKernelValues w = eight_kernel_values(kernel, distance);
+  const __m256 taken = _mm256_and_ps(live, _mm256_cmp_ps(distance, _mm256_setzero_ps(), _CMP_GT_OQ));  // not a coincident one
+  const __m256 value = _mm256_and_ps(taken, w.value);
+  const __m256 pair = _mm256_and_ps(taken, _mm256_mul_ps(volume, w.gradient_factor));
+  sums.concentration = _mm256_fmadd_ps(volume, value, sums.concentration);
+  const __m256 px = _mm256_mul_ps(pair, r.x), py = _mm256_mul_ps(pair, r.y), pz = _mm256_mul_ps(pair, r.z);
+  sums.gx = _mm256_add_ps(sums.gx, px);
+  sums.gy = _mm256_add_ps(sums.gy, py);
+  sums.gz = _mm256_add_ps(sums.gz, pz);
+  const __m256 relative = _mm256_mul_ps(value, reference);
+  const __m256 squared = _mm256_mul_ps(relative, relative);
+  const __m256 weight = _mm256_fmadd_ps(clumping, _mm256_mul_ps(squared, squared), _mm256_set1_ps(1));
+  sums.wx = _mm256_fmadd_ps(weight, px, sums.wx);
+  sums.wy = _mm256_fmadd_ps(weight, py, sums.wy);
+  sums.wz = _mm256_fmadd_ps(weight, pz, sums.wz);
+}
+/// For the particles [begin, end) that wants(i): finish(i, Σ V W, Σ V g r, Σ (1 + R (W/W(d))⁴) V g r). `reference` is 1/W(d),
+/// `clumping` R.
+template <class Kernel, class Wants, class Finish>
+__attribute__((target("avx2,fma"))) inline void shifting_sum_rows(std::size_t begin, std::size_t end, const Kernel& kernel, const Vec4* position,
+                                                                   const Index* neighbor_lists, const Index* neighbor_counts,
+                                                                   const std::size_t* firsts, Real volume, Real reference, Real clumping,
+                                                                   Wants&& wants, Finish&& finish) {
+  const __m256i transpose_order = _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7);
+  const __m256 volume_lanes = _mm256_set1_ps(volume), reference_lanes = _mm256_set1_ps(reference);
+  const __m256 clumping_lanes = _mm256_set1_ps(clumping), all = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
+  for (std::size_t i = begin; i < end; ++i) {
+    if (!wants(i)) continue;
+    const Index* neighbor = neighbor_lists + firsts[i];
+    const Index count = neighbor_counts[i];
+    const __m256 center = broadcast(position[i]);
+    const __m256 zero = _mm256_setzero_ps();
+    ShiftingLanes sums{zero, zero, zero, zero, zero, zero, zero};
+    Index k = 0;
+    for (; k + 8 <= count; k += 8)
+      add_shifting_group(kernel, position, neighbor + k, center, all, volume_lanes, reference_lanes, clumping_lanes, sums);
+    if (k < count) {  // the last one to seven: the empty lanes repeat the last neighbour and count nothing
+      const Index left = count - k;
+      Index tail[8];
+      for (Index lane = 0; lane < 8; ++lane) tail[lane] = neighbor[k + std::min<Index>(lane, left - 1)];
+      const __m256 live = _mm256_castsi256_ps(_mm256_cmpgt_epi32(_mm256_set1_epi32(static_cast<int>(left)), transpose_order));
+      add_shifting_group(kernel, position, tail, center, live, volume_lanes, reference_lanes, clumping_lanes, sums);
+    }
+    finish(i, lanes_added(sums.concentration), Vec3(lanes_added(sums.gx), lanes_added(sums.gy), lanes_added(sums.gz)),
+           Vec3(lanes_added(sums.wx), lanes_added(sums.wy), lanes_added(sums.wz)));
+  }
+}
+
+
 }  // namespace m3dp::sph::avx2
+
+/// AVX-512 versions, where the CPU has AVX-512F (and AVX2 and FMA: they fall back on the AVX2 pieces
+/// for a list's last pairs), unless M3DP_NO_AVX512 or M3DP_NO_AVX2 is set. Four neighbours per 512-bit
+/// instruction where the sum is over vectors. They round differently from the AVX2 loops (other
+/// partial sums): a run is reproducible on one machine, as with AVX2.
+namespace m3dp::sph::avx512 {
+inline bool available() {
+  static const bool supported = avx2::available() && __builtin_cpu_supports("avx512f") && !std::getenv("M3DP_NO_AVX512");
+  return supported;
+}
+#define M3DP_TARGET_AVX512 __attribute__((target("avx512f,avx2,fma")))
+/// Vectors j0..j3 of a padded array in the four 128-bit quarters.
+M3DP_TARGET_AVX512 inline __m512 load_quad(const Vec4* vectors, const Index* j) {
+  const __m512 low = _mm512_castps256_ps512(avx2::load_pair(vectors, j[0], j[1]));
+  return _mm512_castpd_ps(_mm512_insertf64x4(_mm512_castps_pd(low), _mm256_castps_pd(avx2::load_pair(vectors, j[2], j[3])), 1));
+}
+/// (w0 ×4, w1 ×4, w2 ×4, w3 ×4) from four consecutive weights.
+M3DP_TARGET_AVX512 inline __m512 spread_quad(const Real* weights) {
+  return _mm512_permutexvar_ps(_mm512_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3), _mm512_castps128_ps512(_mm_loadu_ps(weights)));
+}
+/// The dot product of a and b in each 128-bit quarter, in all four of its lanes, in avx2::lane_dots's order.
+M3DP_TARGET_AVX512 inline __m512 lane_dots(__m512 a, __m512 b) {
+  const __m512 products = _mm512_mul_ps(a, b);
+  const __m512 pairs = _mm512_add_ps(products, _mm512_permute_ps(products, _MM_SHUFFLE(2, 3, 0, 1)));
+  return _mm512_add_ps(pairs, _mm512_permute_ps(pairs, _MM_SHUFFLE(1, 0, 3, 2)));
+}
+/// avx2::viscous_product_rows four pairs at a time; the last one to three as AVX2 pairs and one alone.
+template <class Finish>
+M3DP_TARGET_AVX512 inline void viscous_product_rows(std::size_t begin, std::size_t end, const Vec4* position, const Vec4* operand,
+                                                    const Index* neighbor_lists, const Index* neighbor_counts, const std::size_t* firsts,
+                                                    const Real* coefficients, const Mat3* own_block, Finish&& finish) {
+  for (std::size_t i = begin; i < end; ++i) {
+    const Index* neighbor = neighbor_lists + firsts[i];
+    const Real* coefficient = coefficients + firsts[i];
+    const Index count = neighbor_counts[i];
+    const __m512 position_i = _mm512_broadcast_f32x4(_mm_load_ps(position[i].data()));
+    const __m512 operand_i = _mm512_broadcast_f32x4(_mm_load_ps(operand[i].data()));
+    __m512 sum = _mm512_setzero_ps();
+    Index k = 0;
+    for (; k + 3 < count; k += 4) {
+      const __m512 r = _mm512_sub_ps(position_i, load_quad(position, neighbor + k));
+      const __m512 dot = lane_dots(r, _mm512_sub_ps(operand_i, load_quad(operand, neighbor + k)));
+      sum = _mm512_fmadd_ps(_mm512_mul_ps(dot, spread_quad(coefficient + k)), r, sum);
+    }
+    __m256 half = _mm256_add_ps(_mm512_castps512_ps256(sum), _mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(sum), 1)));
+    if (k + 1 < count) {
+      const __m256 position_pair = _mm512_castps512_ps256(position_i), operand_pair = _mm512_castps512_ps256(operand_i);
+      const __m256 r = _mm256_sub_ps(position_pair, avx2::load_pair(position, neighbor[k], neighbor[k + 1]));
+      const __m256 dot = avx2::lane_dots(r, _mm256_sub_ps(operand_pair, avx2::load_pair(operand, neighbor[k], neighbor[k + 1])));
+      half = _mm256_fmadd_ps(_mm256_mul_ps(dot, avx2::spread_pair(coefficient + k)), r, half);
+      k += 2;
+    }
+    Vec4 result = avx2::halves_added(half);
+    if (k < count) {
+      const Vec4 r = position[i] - position[neighbor[k]];
+      result += (coefficient[k] * r.dot(operand[i] - operand[neighbor[k]])) * r;
+    }
+    finish(i, Vec3(result.head<3>() + own_block[i] * operand[i].head<3>()));
+  }
+}
+
+/// avx2::difference_products four pairs at a time: Σ_k w_k (a_i − a_j) ⊙ (b_i − b_j), lane by lane; the
+/// last one to three as an AVX2 pair and the last neighbour weighted by the count's parity (as there).
+M3DP_TARGET_AVX512 inline Vec4 difference_products(const Vec4* a, const Vec4* b, const Index* neighbor, const Real* weight, Index count,
+                                                   const Vec4& a_i, const Vec4& b_i) {
+  if (count == 0) return Vec4::Zero();
+  const __m512 a_ii = _mm512_broadcast_f32x4(_mm_load_ps(a_i.data())), b_ii = _mm512_broadcast_f32x4(_mm_load_ps(b_i.data()));
+  __m512 sum = _mm512_setzero_ps();
+  Index k = 0;
+  for (; k + 3 < count; k += 4) {
+    const __m512 product = _mm512_mul_ps(_mm512_sub_ps(a_ii, load_quad(a, neighbor + k)), _mm512_sub_ps(b_ii, load_quad(b, neighbor + k)));
+    sum = _mm512_fmadd_ps(spread_quad(weight + k), product, sum);
+  }
+  __m256 half = _mm256_add_ps(_mm512_castps512_ps256(sum), _mm256_castpd_ps(_mm512_extractf64x4_pd(_mm512_castps_pd(sum), 1)));
+  const __m256 a_pair = _mm512_castps512_ps256(a_ii), b_pair = _mm512_castps512_ps256(b_ii);
+  if (k + 1 < count) {
+    const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_pair, avx2::load_pair(a, neighbor[k], neighbor[k + 1])),
+                                         _mm256_sub_ps(b_pair, avx2::load_pair(b, neighbor[k], neighbor[k + 1])));
+    half = _mm256_fmadd_ps(avx2::spread_pair(weight + k), product, half);
+  }
+  // The last neighbour once more, weighted where the count is odd and zero where it is even (no branch).
+  const Index last = neighbor[count - 1];
+  const __m256 odd = _mm256_castsi256_ps(_mm256_set1_epi32(-static_cast<int>(count & 1)));
+  const __m256 last_weight = _mm256_and_ps(odd, _mm256_set_m128(_mm_setzero_ps(), _mm_set1_ps(weight[count - 1])));
+  const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_pair, avx2::load_pair(a, last, last)), _mm256_sub_ps(b_pair, avx2::load_pair(b, last, last)));
+  half = _mm256_fmadd_ps(last_weight, product, half);
+  return avx2::halves_added(half);
+}
+/// Σ_{i in [begin, end)} finish(i, difference_products of i): avx2::difference_product_rows four pairs at a time.
+template <class Finish>
+M3DP_TARGET_AVX512 inline Real difference_product_rows(std::size_t begin, std::size_t end, const Vec4* a, const Vec4* b, const Index* neighbor_lists,
+                                                       const Index* neighbor_counts, const std::size_t* firsts, const Real* weights,
+                                                       Finish&& finish) {
+  Real total = 0;
+  for (std::size_t i = begin; i < end; ++i)
+    total += finish(i, difference_products(a, b, neighbor_lists + firsts[i], weights + firsts[i], neighbor_counts[i], a[i], b[i]));
+  return total;
+}
+#undef M3DP_TARGET_AVX512
+}  // namespace m3dp::sph::avx512
 #endif

@@ -66,10 +66,15 @@ class ViscousOperator {
     return Vec3(result.head<3>() + own_block_[i] * x_i.head<3>());
   }
 
-  /// visit(i, (A x)_i) for the particles of a range, in order: the AVX2 sweep where there is one.
+  /// visit(i, (A x)_i) for the particles of a range, in order: the AVX-512 or AVX2 sweep where there is one.
   template <class Visit>
   void rows(const tbb::blocked_range<std::size_t>& range, Visit&& visit) const {
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
+    if (avx512::available()) {
+      avx512::viscous_product_rows(range.begin(), range.end(), position_, operand_, lists_.indices.data(), lists_.counts.data(),
+                                   lists_.firsts.data(), coefficient_, own_block_, visit);
+      return;
+    }
     if (avx2::available()) {
       avx2::viscous_product_rows(range.begin(), range.end(), position_, operand_, lists_.indices.data(), lists_.counts.data(),
                                  lists_.firsts.data(), coefficient_, own_block_, visit);
