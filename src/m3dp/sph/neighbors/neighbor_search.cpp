@@ -112,10 +112,46 @@ __attribute__((target("avx2,popcnt"))) Index keep_candidates_within_avx2(Neighbo
   }
   return count;
 }
+
+/// The same with AVX-512, sixteen candidates at a time: the mask of neighbours compresses their
+/// indices to the front of a register (no table), which is stored whole.
+__attribute__((target("avx512f,avx2,popcnt"))) Index keep_candidates_within_avx512(NeighborLists::CandidateBuffer& buffer,
+                                                                                   const Vec3& query, Real radius_squared, Index self) {
+  const std::size_t candidate_count = buffer.count;
+  const Real* x = buffer.x.data();
+  const Real* y = buffer.y.data();
+  const Real* z = buffer.z.data();
+  const Index* candidate = buffer.index.data();
+  Index* found = buffer.found.data();
+  const __m512 query_x = _mm512_set1_ps(query.x()), query_y = _mm512_set1_ps(query.y()), query_z = _mm512_set1_ps(query.z());
+  const __m512 limit = _mm512_set1_ps(radius_squared);
+  const __m512i own = _mm512_set1_epi32(static_cast<int>(self));
+  Index count = 0;
+  std::size_t c = 0;
+  for (; c + 16 <= candidate_count; c += 16) {
+    const __m512 dx = _mm512_sub_ps(query_x, _mm512_loadu_ps(x + c));
+    const __m512 dy = _mm512_sub_ps(query_y, _mm512_loadu_ps(y + c));
+    const __m512 dz = _mm512_sub_ps(query_z, _mm512_loadu_ps(z + c));
+    // Not fused: the same rounding as the generic filter, the same lists.
+    const __m512 distance_squared = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(dx, dx), _mm512_mul_ps(dy, dy)), _mm512_mul_ps(dz, dz));
+    const __m512i indices = _mm512_loadu_si512(candidate + c);
+    const __mmask16 mask = _mm512_cmp_ps_mask(distance_squared, limit, _CMP_LT_OQ) & ~_mm512_cmpeq_epi32_mask(indices, own);
+    // Compressed in a register, then stored whole (a compressing store to memory is slow on some CPUs).
+    _mm512_storeu_si512(found + count, _mm512_maskz_compress_epi32(mask, indices));
+    count += static_cast<Index>(_mm_popcnt_u32(mask));
+  }
+  for (; c < candidate_count; ++c) {
+    const Real dx = query.x() - x[c], dy = query.y() - y[c], dz = query.z() - z[c];
+    found[count] = candidate[c];
+    count += static_cast<Index>((dx * dx + dy * dy + dz * dz < radius_squared) & (candidate[c] != self));
+  }
+  return count;
+}
 #endif
 
 Index keep_candidates_within(NeighborLists::CandidateBuffer& buffer, const Vec3& query, Real radius_squared, Index self) {
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  if (avx512::available()) return keep_candidates_within_avx512(buffer, query, radius_squared, self);
   if (avx2::available()) return keep_candidates_within_avx2(buffer, query, radius_squared, self);
 #endif
   return keep_candidates_within_generic(buffer, query, radius_squared, self);

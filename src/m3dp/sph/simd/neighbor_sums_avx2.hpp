@@ -10,7 +10,8 @@
 // OpenVDB are built with). With FMA their results round differently from the generic loops: a run
 // is reproducible on one machine, not bit for bit across machines with and without AVX2.
 // Where the CPU has AVX-512F, the viscous product and the density change rates (the solvers' sums
-// over vectors) take four neighbours per 512-bit instruction (avx512::available(), M3DP_NO_AVX512).
+// over vectors) take four neighbours per 512-bit instruction, and the neighbour search's filter
+// sixteen candidates (avx512::available(), M3DP_NO_AVX512).
 #include "m3dp/core/types.hpp"
 #include "m3dp/sph/kernels.hpp"
 
