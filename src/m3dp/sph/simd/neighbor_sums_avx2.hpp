@@ -457,6 +457,12 @@ __attribute__((target("avx2,fma"))) inline void shifting_sum_rows(std::size_t be
 /// for a list's last pairs), unless M3DP_NO_AVX512 or M3DP_NO_AVX2 is set. Four neighbours per 512-bit
 /// instruction where the sum is over vectors. They round differently from the AVX2 loops (other
 /// partial sums): a run is reproducible on one machine, as with AVX2.
+// GCC 12's AVX-512 intrinsics fill their unused mask operands with _mm512_undefined_ps(), which its
+// -Wmaybe-uninitialized takes for a read of an unset value (GCC bug 105593, fixed in 13).
+#if !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#endif
 namespace m3dp::sph::avx512 {
 inline bool available() {
   static const bool supported = avx2::available() && __builtin_cpu_supports("avx512f") && !std::getenv("M3DP_NO_AVX512");
@@ -552,4 +558,7 @@ M3DP_TARGET_AVX512 inline Real difference_product_rows(std::size_t begin, std::s
 }
 #undef M3DP_TARGET_AVX512
 }  // namespace m3dp::sph::avx512
+#if !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 #endif
