@@ -59,6 +59,20 @@ Index keep_candidates_within_generic(NeighborLists::CandidateBuffer& buffer, con
 }
 
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
+/// The vector filters' last candidates, from `c` on, one by one after the `count` found so far.
+inline Index keep_last_candidates(NeighborLists::CandidateBuffer& buffer, std::size_t c, Index count, const Vec3& query,
+                                  Real radius_squared, Index self) {
+  const Real* x = buffer.x.data();
+  const Real* y = buffer.y.data();
+  const Real* z = buffer.z.data();
+  for (; c < buffer.count; ++c) {
+    const Real dx = query.x() - x[c], dy = query.y() - y[c], dz = query.z() - z[c];
+    buffer.found[count] = buffer.index[c];
+    count += static_cast<Index>((dx * dx + dy * dy + dz * dz < radius_squared) & (buffer.index[c] != self));
+  }
+  return count;
+}
+
 // For each 8-bit mask, the positions of its set bits, packed to the front (one byte each): the
 // permutation that moves a group's neighbours together.
 constexpr std::array<std::uint64_t, 256> make_pack_table() {
@@ -105,12 +119,7 @@ __attribute__((target("avx2,popcnt"))) Index keep_candidates_within_avx2(Neighbo
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(found + count), _mm256_permutevar8x32_epi32(indices, permutation));
     count += static_cast<Index>(_mm_popcnt_u32(mask));
   }
-  for (; c < candidate_count; ++c) {
-    const Real dx = query.x() - x[c], dy = query.y() - y[c], dz = query.z() - z[c];
-    found[count] = candidate[c];
-    count += static_cast<Index>((dx * dx + dy * dy + dz * dz < radius_squared) & (candidate[c] != self));
-  }
-  return count;
+  return keep_last_candidates(buffer, c, count, query, radius_squared, self);
 }
 
 /// The same with AVX-512, sixteen candidates at a time: the mask of neighbours compresses their
@@ -140,12 +149,7 @@ __attribute__((target("avx512f,avx2,popcnt"))) Index keep_candidates_within_avx5
     _mm512_storeu_si512(found + count, _mm512_maskz_compress_epi32(mask, indices));
     count += static_cast<Index>(_mm_popcnt_u32(mask));
   }
-  for (; c < candidate_count; ++c) {
-    const Real dx = query.x() - x[c], dy = query.y() - y[c], dz = query.z() - z[c];
-    found[count] = candidate[c];
-    count += static_cast<Index>((dx * dx + dy * dy + dz * dz < radius_squared) & (candidate[c] != self));
-  }
-  return count;
+  return keep_last_candidates(buffer, c, count, query, radius_squared, self);
 }
 #endif
 
