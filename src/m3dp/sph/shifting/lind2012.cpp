@@ -74,7 +74,8 @@ void shift_particles(const Model& model, State& state, Workspace& workspace) {
       sums.gradient += pair;
       sums.weighted += (1 + kClumping * clumping * clumping * clumping * clumping) * pair;
     };
-    // The shift from the sums over the particle itself and its fluid neighbours: the walls' added, the surface's normal part taken out.
+    // The shift from the sums over the particle itself and its fluid neighbours: the walls' added, the
+    // surface's normal part taken out.
     const auto finish = [&](std::size_t i, Real fluid_concentration, const Vec3& fluid_gradient, const Vec3& fluid_weighted) {
       const Vec3 position_i = fluid.position[i];
       Sums sums{fluid_concentration, fluid_gradient, fluid_weighted};

@@ -52,6 +52,17 @@ __attribute__((target("avx2,fma"))) inline Vec4 halves_added(__m256 sum) {
   return result;
 }
 
+/// sum + the last neighbour's w (a_i − a_j) ⊙ (b_i − b_j) in the low half where the count is odd, zero
+/// where it is even: a branch on the count's parity would be mispredicted for half of the particles.
+__attribute__((target("avx2,fma"))) inline __m256 with_last_if_odd(const Vec4* a, const Vec4* b, const Index* neighbor, const Real* weight,
+                                                                   Index count, __m256 a_ii, __m256 b_ii, __m256 sum) {
+  const Index last = neighbor[count - 1];
+  const __m256 odd = _mm256_castsi256_ps(_mm256_set1_epi32(-static_cast<int>(count & 1)));
+  const __m256 last_weight = _mm256_and_ps(odd, _mm256_set_m128(_mm_setzero_ps(), _mm_set1_ps(weight[count - 1])));  // low half only
+  const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_ii, load_pair(a, last, last)), _mm256_sub_ps(b_ii, load_pair(b, last, last)));
+  return _mm256_fmadd_ps(last_weight, product, sum);
+}
+
 /// Σ_k w_k (a_i − a_j) ⊙ (b_i − b_j), j = neighbor[k], lane by lane (as the generic loop in dfsph).
 __attribute__((target("avx2,fma"))) inline Vec4 difference_products(const Vec4* a, const Vec4* b, const Index* neighbor,
                                                                     const Real* weight, Index count, const Vec4& a_i,
@@ -65,14 +76,7 @@ __attribute__((target("avx2,fma"))) inline Vec4 difference_products(const Vec4* 
     const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_ii, load_pair(a, j0, j1)), _mm256_sub_ps(b_ii, load_pair(b, j0, j1)));
     sum = _mm256_fmadd_ps(spread_pair(weight + k), product, sum);
   }
-  // The last neighbour once more, weighted where the count is odd and zero where it is even: a
-  // branch on the count's parity would be mispredicted for half of the particles.
-  const Index last = neighbor[count - 1];
-  const __m256 odd = _mm256_castsi256_ps(_mm256_set1_epi32(-static_cast<int>(count & 1)));
-  const __m256 last_weight = _mm256_and_ps(odd, _mm256_set_m128(_mm_setzero_ps(), _mm_set1_ps(weight[count - 1])));  // low half only
-  const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_ii, load_pair(a, last, last)), _mm256_sub_ps(b_ii, load_pair(b, last, last)));
-  sum = _mm256_fmadd_ps(last_weight, product, sum);
-  return halves_added(sum);
+  return halves_added(with_last_if_odd(a, b, neighbor, weight, count, a_ii, b_ii, sum));
 }
 
 /// Σ_{i in [begin, end)} finish(i, Σ_k w_k (a_i − a_j) ⊙ (b_i − b_j)) over each particle's list: the
@@ -386,12 +390,7 @@ __attribute__((target("avx2,fma"))) inline DensityPairSums density_pair_sums(con
   return sums;
 }
 
-
-/// The particle shifting's sums over a particle's fluid neighbours (see shift_particles in
-/// shifting/lind2012.cpp), over neighbours at 0 < r < h: Σ V W_ij, Σ V g_ij r_ij and
-/// Σ (1 + R (W_ij W(d)⁻¹)⁴) V g_ij r_ij, with g_ij = (dW/dr)/r. Eight at a time, the last one to seven as
-/// a masked group (their kernel, branchy in the generic loop, is selected here).
-/// The shifting sums' lanes (no initialisers: the implicit constructor is not compiled for AVX).
+/// The particle shifting's sums' lanes (no initialisers: the implicit constructor is not compiled for AVX).
 struct ShiftingLanes {
   __m256 concentration, gx, gy, gz, wx, wy, wz;
 };
@@ -418,8 +417,10 @@ __attribute__((target("avx2,fma"))) inline void add_shifting_group(const Kernel&
   sums.wy = _mm256_fmadd_ps(weight, py, sums.wy);
   sums.wz = _mm256_fmadd_ps(weight, pz, sums.wz);
 }
-/// For the particles [begin, end) that wants(i): finish(i, Σ V W, Σ V g r, Σ (1 + R (W/W(d))⁴) V g r). `reference` is 1/W(d),
-/// `clumping` R.
+/// The particle shifting's sums over a particle's fluid neighbours at 0 < r < h (see shift_particles in
+/// shifting/lind2012.cpp), for the particles [begin, end) that wants(i): finish(i, Σ V W_ij, Σ V g_ij r_ij,
+/// Σ (1 + R (W_ij/W(d))⁴) V g_ij r_ij), g_ij = (dW/dr)/r; `reference` is 1/W(d), `clumping` R. Eight pairs
+/// at a time, the last one to seven as a masked group (their kernel, branchy in the generic loop, selected).
 template <class Kernel, class Wants, class Finish>
 __attribute__((target("avx2,fma"))) inline void shifting_sum_rows(std::size_t begin, std::size_t end, const Kernel& kernel, const Vec4* position,
                                                                    const Index* neighbor_lists, const Index* neighbor_counts,
@@ -449,7 +450,6 @@ __attribute__((target("avx2,fma"))) inline void shifting_sum_rows(std::size_t be
            Vec3(lanes_added(sums.wx), lanes_added(sums.wy), lanes_added(sums.wz)));
   }
 }
-
 
 }  // namespace m3dp::sph::avx2
 
@@ -538,13 +538,7 @@ M3DP_TARGET_AVX512 inline Vec4 difference_products(const Vec4* a, const Vec4* b,
                                          _mm256_sub_ps(b_pair, avx2::load_pair(b, neighbor[k], neighbor[k + 1])));
     half = _mm256_fmadd_ps(avx2::spread_pair(weight + k), product, half);
   }
-  // The last neighbour once more, weighted where the count is odd and zero where it is even (no branch).
-  const Index last = neighbor[count - 1];
-  const __m256 odd = _mm256_castsi256_ps(_mm256_set1_epi32(-static_cast<int>(count & 1)));
-  const __m256 last_weight = _mm256_and_ps(odd, _mm256_set_m128(_mm_setzero_ps(), _mm_set1_ps(weight[count - 1])));
-  const __m256 product = _mm256_mul_ps(_mm256_sub_ps(a_pair, avx2::load_pair(a, last, last)), _mm256_sub_ps(b_pair, avx2::load_pair(b, last, last)));
-  half = _mm256_fmadd_ps(last_weight, product, half);
-  return avx2::halves_added(half);
+  return avx2::halves_added(avx2::with_last_if_odd(a, b, neighbor, weight, count, a_pair, b_pair, half));
 }
 /// Σ_{i in [begin, end)} finish(i, difference_products of i): avx2::difference_product_rows four pairs at a time.
 template <class Finish>
