@@ -46,6 +46,10 @@ int main(int argc, char** argv) {
       return 2;
     }
   }
+  if (!only_surface.empty() && only_surface != "floor" && only_surface != "layer") {
+    std::fprintf(stderr, "%s: --surface is floor or layer, got %s\n", argv[0], only_surface.c_str());
+    return 2;
+  }
   std::FILE* out = output.empty() ? stdout : std::fopen(output.c_str(), "w");
   if (!out) {
     std::fprintf(stderr, "cannot write %s\n", output.c_str());
