@@ -307,6 +307,10 @@ std::vector<SchemaRow> make_rows() {
   number("solver", "shifting", Quantity::plain_number, Limits::between(0, 10),
          "particle shifting of viscous materials' moving particles (Skillen et al.'s A, 1 to 6 there); 0: none",
          M3DP_SOLVER_REAL(shifting_factor), "shifting_factor");
+  boolean("solver", "tension",
+          "whether viscous material holds tension: a two-sided projection after the viscosity solve, zero at the free surface, so "
+          "that a stretched thread thins instead of cracking (experimental: its extensional stress is about twice Trouton's)",
+          [](Scene& scene, bool value) { scene.solver.tension = value; }, [](const Scene& scene) { return scene.solver.tension; });
   structure("solver", "max_particles",
             "the most particles the scene may hold (> 0); default: what 80 % of this machine's memory holds at 2 kB a particle");
 #undef M3DP_SOLVER_REAL

@@ -21,6 +21,7 @@ struct FluidParticles {
   std::vector<Real> density_advected;    // (n) predicted ρ*/ρ0 (density solve) or divergence (1/s)
   std::vector<Real> kappa_density;       // (n) Σκ of the density solve (m²/s², κ = ρ0 p/ρ²): warm start, pressure
   std::vector<Real> kappa_divergence;    // (n) Σκ of the divergence solve (m²/s²)
+  std::vector<Real> kappa_tension;       // (n) κ of the tension projection (m²/s², < 0 pulls), kept across steps
   std::vector<std::uint16_t> phase;      // (n) index into Parameters::phases
   std::vector<std::uint16_t> neighbor_count;  // (n) fluid neighbours + boundary ones weighted as fluid, this step
   std::vector<std::uint64_t> id;         // (n) stable id for tracking across reorders
@@ -50,6 +51,7 @@ struct FluidParticles {
     visit(density_advected);
     visit(kappa_density);
     visit(kappa_divergence);
+    visit(kappa_tension);
     visit(phase);
     visit(neighbor_count);
     visit(id);

@@ -25,6 +25,7 @@ void update_rest_partition(const Model& model, State& state, Workspace& /*worksp
     fluid.angular_velocity[last] = Vec3::Zero();
     fluid.kappa_density[last] = 0;
     fluid.kappa_divergence[last] = 0;
+    fluid.kappa_tension[last] = 0;
     fluid.rest_load[last] = -1;  // measured at the next load check
   }
   // Waking: a resting particle whose clock was reset by motion nearby (update_rest_clocks).

@@ -50,6 +50,14 @@ struct SolverSettings {
   Real volume_tolerance = Real(0.01);
   // The least distance between two particles the volume correction leaves, in particle diameters.
   Real minimum_spacing = Real(0.7);
+  // Tension in viscous material (pressure/projection_cummins_rudman1999.cpp): after the implicit
+  // viscosity a two-sided projection takes the velocities' divergence out (pushing and pulling, the air
+  // beyond a free surface at p = 0, and the dilation of the material's interior), and its pressure is
+  // kept and applied again before the next step's viscosity solve, so that a stretched thread thins as
+  // an incompressible one does instead of dilating and cracking. Off by default until its extensional
+  // stress is right (docs/decisions.md, "Tension in viscous material"); false: the solves only push.
+  bool tension = false;
+  int max_tension_iterations = 100;           // conjugate-gradient iterations of the projection
   // Particle shifting of viscous materials' moving particles (shift_particles): Skillen et al.'s A
   // (they use 1 to 6); 0 leaves the particles where the solves put them.
   Real shifting_factor = Real(4);

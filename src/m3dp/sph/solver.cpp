@@ -49,7 +49,7 @@ const StepStats& Solver::step() {
   run(Stage::pressure, {solve_density});
   // Viscosity after the pressure solve, right before the velocities move the particles: see
   // viscosity/weiler2018.cpp.
-  run(Stage::viscosity, {add_elastic_stiffness, solve_implicit_viscosity, apply_xsph, shift_particles, correct_volume});
+  run(Stage::viscosity, {add_elastic_stiffness, apply_tension_pressure, solve_implicit_viscosity, project_tension, apply_xsph, shift_particles, correct_volume});
   run(Stage::advect, {push_out_of_nozzles, advect_positions, relax_reference_shape, update_rest_clocks, wake_loaded_rest,
                       wake_compressed_rest, keep_out_of_boundaries, collect_body_wrenches, finish_step});
   return state_.last_step;
@@ -174,7 +174,7 @@ Real Solver::pressure(std::size_t i) const {
   const auto& fluid = state_.fluid;
   const Real rest_density = fluid.mass[i] / particle_rest_volume(model_.settings.particle_radius);  // its phase's
   // κ = ρ0 p / ρ² summed over both solvers' updates of the last step.
-  return (fluid.kappa_density[i] + fluid.kappa_divergence[i]) * fluid.density[i] * fluid.density[i] / rest_density;
+  return (fluid.kappa_density[i] + fluid.kappa_divergence[i] + fluid.kappa_tension[i]) * fluid.density[i] * fluid.density[i] / rest_density;
 }
 
 double Solver::total_fluid_mass() const {

@@ -57,6 +57,13 @@ void solve_divergence(const Model& model, State& state, Workspace& workspace);
 /// Constant-density solver (Bender & Koschier 2017, Algorithm 3), over this step's time step.
 void solve_density(const Model& model, State& state, Workspace& workspace);
 
+// ---- tension (pressure/projection_cummins_rudman1999.cpp) ----
+/// The kept tension pressure (FluidParticles::kappa_tension) applied to the velocities, before the solves.
+void apply_tension_pressure(const Model& model, State& state, Workspace& workspace);
+/// After the implicit viscosity: the velocities' divergence taken out with both signs (the air beyond
+/// a free surface at p = 0), its pressure added to the kept one.
+void project_tension(const Model& model, State& state, Workspace& workspace);
+
 // ---- forces ----
 /// Each particle's shear rate (1/s) and effective viscosity (Pa·s) from its rheology and age
 /// (viscosity/effective_viscosity.cpp).

@@ -31,6 +31,11 @@ void Workspace::invalidate() {
 
 void Workspace::reserve(std::size_t capacity) {
   kappa.reserve(capacity);
+  for (auto* vector : {&tension_system.residual, &tension_system.solution, &tension_system.direction, &tension_system.preconditioned,
+                       &tension_system.product, &tension_system.inverse_diagonal})
+    vector->reserve(capacity);
+  tension_system.velocity_change.reserve(capacity);
+  tension_system.at_surface.reserve(capacity);
   solver_position.reserve(capacity);
   solver_velocity.reserve(capacity);
   solver_wall_sums.reserve(capacity);
@@ -84,7 +89,7 @@ LazyWallFace::Range LazyWallFace::tile_range(std::size_t tile) const {
 }
 
 void save_state(const State& state, StateWriter& out) {
-  out.section("sph.state 2");
+  out.section("sph.state 3");
   const_cast<FluidParticles&>(state.fluid).for_each_field([&](const auto& field) { out.put(field); });
   out.put(state.active_count);
   out.put(state.resting_woken);
@@ -130,7 +135,7 @@ void save_state(const State& state, StateWriter& out) {
 }
 
 void load_state(StateReader& in, State& state) {
-  in.section("sph.state 2");
+  in.section("sph.state 3");
   state.fluid.for_each_field([&](auto& field) { in.get(field); });
   const std::size_t count = state.fluid.size();
   state.fluid.for_each_field([&](const auto& field) {

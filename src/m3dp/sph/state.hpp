@@ -89,10 +89,13 @@ struct StepStats {
   int density_iterations = 0;
   int divergence_iterations = 0;
   int viscosity_iterations = 0;         // conjugate-gradient iterations of the implicit viscosity solve
+  bool viscosity_solved = false;        // the implicit viscosity solve ran (a viscous material moved)
   Real density_error = 0;               // mean relative density error after the density solve
   Real max_density_error = 0;           // max over particles of (ρ/ρ0 − 1) at the start of the step
   Real volume_error = 0;                // mean predicted ρ/ρ0 − 1 after the viscosity solve, before the volume correction
   int volume_iterations = 0;            // iterations of the volume correction (correct_volume)
+  int tension_iterations = 0;           // conjugate-gradient iterations of the tension projection
+  Real tension_error = 0;               // its mean |∇·v| Δt after the solve
   std::size_t particles_emitted = 0;
   std::size_t particles_removed = 0;
   std::size_t particles_at_rest = 0;    // at the end of the step (not simulated)
@@ -252,6 +255,15 @@ struct Workspace {
   std::vector<Real> height;          // (n) m, against gravity (load check)
   std::vector<std::uint8_t> near_motion;  // (resting) 1: a moving particle's neighbour this step
   SpatialHashGrid moved_grid;             // the active particles where the step left them (wake_compressed_rest)
+  // The tension projection's conjugate gradients (pressure/projection_cummins_rudman1999.cpp), (n) each:
+  // its right-hand side and residual (1/s²), the iterate and the direction (m κ, kg m²/s²), the
+  // preconditioned residual, the product, the inverse diagonal, and the velocity change of the
+  // direction (M⁻¹ Bᵀ p, padded; zero for the resting particles).
+  struct TensionSystem {
+    std::vector<Real> residual, solution, direction, preconditioned, product, inverse_diagonal;
+    std::vector<Vec4> velocity_change;
+    std::vector<std::uint8_t> at_surface;  // (n) 1: its neighbourhood is lopsided (a free surface or a wall)
+  } tension_system;
   // Implicit viscosity (Weiler et al. 2018): the system's coefficients and the CG vectors.
   struct ViscositySystem {
     std::vector<Real> fluid_pair_coefficient;     // per fluid neighbour slot: −Δt × the pair's viscous factor (kg/m²)

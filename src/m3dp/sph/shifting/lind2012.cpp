@@ -30,7 +30,10 @@ struct Sums {
 void shift_particles(const Model& model, State& state, Workspace& workspace) {
   const Real factor = model.settings.shifting_factor;
   const std::size_t count = state.active_count;
-  if (!(factor > 0) || count == 0 || state.last_step.viscosity_iterations == 0) return;
+  // With tension on, also where the viscosity solve's warm start already met its tolerance: stretched
+  // material rearranges however its viscosity solve went.
+  const bool viscous = state.last_step.viscosity_iterations > 0 || (model.settings.tension && state.last_step.viscosity_solved);
+  if (!(factor > 0) || count == 0 || !viscous) return;
   auto& fluid = state.fluid;
   const auto& boundary = state.boundary;
   const Real diameter = model.particle_diameter, support = model.support_radius;
@@ -60,7 +63,9 @@ void shift_particles(const Model& model, State& state, Workspace& workspace) {
       if (fluid.viscosity[i] * time_step < kViscousRegime * phase.density * support * support) return false;
       // Slower than the wake speed it is settling: shifting it, and its neighbours' pressure answering,
       // would keep it from coming to rest (four times the particles kept moving in the ur10_wall print).
-      return fluid.velocity[i].norm() >= settling_speed;
+      // Unless it is pulled (under tension): stretched material, however slowly, has to take new
+      // neighbours along the stretch, or its lattice's layers part and it cracks across.
+      return fluid.velocity[i].norm() >= settling_speed || fluid.kappa_tension[i] < 0;
     };
     // Σ V W, Σ V g r and Σ (1 + R (W/W(d))⁴) V g r over the neighbours of particle i at 0 < r < h.
     const auto add = [&](const Vec3& position_i, const Vec3& other, Real other_volume, Sums& sums) {
@@ -80,7 +85,8 @@ void shift_particles(const Model& model, State& state, Workspace& workspace) {
       const Vec3 position_i = fluid.position[i];
       Sums sums{fluid_concentration, fluid_gradient, fluid_weighted};
       for (const Index b : workspace.boundary_neighbors.of(i)) add(position_i, boundary.position[b], boundary.volume[b], sums);
-      const Real speed = fluid.velocity[i].norm();
+      // A pulled particle is shifted as one at least at the wake speed.
+      const Real speed = fluid.kappa_tension[i] < 0 ? std::max(fluid.velocity[i].norm(), settling_speed) : fluid.velocity[i].norm();
       Vec3 displacement = (-factor * support * speed * time_step) * sums.weighted;
       // The normal counts the walls: with the fluid's alone a slumping paste's foot slid out along the
       // floor (the τ' = 0.2 slump 23 % too far).

@@ -58,6 +58,7 @@ void solve_implicit_viscosity(const Model& model, State& state, Workspace& works
     return;
   }
 
+  state.last_step.viscosity_solved = true;
   weiler2018::build_system(model, state, workspace);
   const weiler2018::StartResidual start = weiler2018::start_solve(model, state, workspace);
   const int iterations = weiler2018::run_conjugate_gradients(model, state, workspace, start);

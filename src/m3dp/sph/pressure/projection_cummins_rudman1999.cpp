@@ -1,0 +1,283 @@
+// Tension in viscous material: a two-sided pressure projection after the implicit viscosity, with its
+// pressure kept from step to step.
+//   S. J. Cummins, M. Rudman: "An SPH Projection Method", J. Comput. Phys. 152(2), 584–607, 1999
+//   (the velocity's divergence as the source, the pressure unclamped, the air beyond a free surface at
+//   p = 0);
+//   the pressure carried to the next step and applied before its solves, an incremental pressure
+//   correction (van Kan 1986) that is, for a stiff material, one outer round of the pressure–viscosity
+//   coupling a step (the adapted SIMPLE of Liu, He, Wang & Wu, IEEE TVCG 28(9), 3168, 2022).
+//
+// The DFSPH solves (dfsph_bender2017.cpp) only push: a stretched thread's particles were never pulled
+// together, so it dilated and cracked instead of thinning. Here, after the viscosity solve, the
+// velocities' divergence (Σ_j V (v_i − v_j)·∇W_ij over fluid neighbours) is taken out with both signs,
+// by the pressure p = m κ solving
+//   B M⁻¹ Bᵀ p = B v / Δt,   (Bᵀ p)_i = Σ_j V (p_i + p_j) ∇W_ij,   v ← v − Δt M⁻¹ Bᵀ p,
+// the same symmetric gradient as the DFSPH update. Its missing neighbours at a free surface count as air
+// at p = 0 (the self term p_i Σ_j V ∇W_ij), so the surface is neither clamped nor given a Dirichlet
+// value: with the symmetric viscous sum this leaves the traction σ·n = 0 there, and a stretched thread's
+// pressure is −μ ε̇ to its surface (Trouton's 3μ). The source is the divergence, not the density: a
+// surface's density deficit is no reason to pull, and material at rest is not pulled at all. Walls
+// take no part (they are air for this projection): material never sticks to a wall by suction, and
+// the DFSPH solves keep it out of walls. Resting particles are neighbours at their fixed velocity and
+// κ = 0. The system is symmetric positive definite, solved by conjugate gradients with Jacobi's
+// diagonal (Jacobi alone stalls on the long wavelengths of a thread).
+//
+// The pressure found is added to FluidParticles::kappa_tension and applied again at the start of the
+// next step's pressure stage (apply_tension_pressure), before the DFSPH density solve and the
+// viscosity: the viscosity solve then balances it, and the next projection only corrects the change.
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/simd/neighbor_sums_avx2.hpp"
+#include "m3dp/sph/stages.hpp"
+
+namespace m3dp::sph::stages {
+
+namespace {
+
+/// The projection stops when its residual divergence is this fraction of the one it started with…
+constexpr double kRelativeTolerance = 1e-3;
+/// …or when the mean relative density change a step it leaves is this fraction of the divergence
+/// solve's tolerance: slow viscous flows change their density by less than that tolerance in a step,
+/// and their divergence would otherwise stay, step after step.
+constexpr double kAbsoluteToleranceFraction = 1e-2;
+/// A neighbourhood this lopsided (|Σ_j V ∇W_ij| over a flat face's) is at a free surface.
+constexpr Real kSurfaceLopsidedness = Real(0.25);
+
+/// The N sums of body(i, sums) over [0, count), added in a fixed order (the same on every run).
+template <std::size_t N, class Body>
+std::array<double, N> ordered_sums(std::size_t count, Body&& body) {
+  using Sums = std::array<double, N>;
+  return tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
+      [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
+        for (std::size_t i = range.begin(); i != range.end(); ++i) body(i, sums);
+        return sums;
+      },
+      [](Sums a, const Sums& b) {
+        for (std::size_t n = 0; n < N; ++n) a[n] += b[n];
+        return a;
+      });
+}
+
+/// Σ_j V (a_i − a_j)·∇W_ij over i's fluid neighbours: the rate of compression of field a at i (1/s for
+/// a velocity).
+Real compression_rate(const Workspace& workspace, const Vec4* field, std::size_t i) {
+  const auto& lists = workspace.fluid_neighbors;
+  const std::size_t first = lists.first(i);
+  const Index* neighbor = lists.indices.data() + first;
+  const Real* pair_gradient = workspace.fluid_pair_gradient.data() + first;
+  const Vec4* position = workspace.solver_position.data();
+#ifdef M3DP_NEIGHBOR_SUMS_AVX2
+  if (avx512::available())
+    return avx512::difference_products(field, position, neighbor, pair_gradient, lists.counts[i], field[i], position[i]).sum();
+  if (avx2::available())
+    return avx2::difference_products(field, position, neighbor, pair_gradient, lists.counts[i], field[i], position[i]).sum();
+#endif
+  Vec4 sum = Vec4::Zero();
+  for (Index k = 0; k < lists.counts[i]; ++k) {
+    const Index j = neighbor[k];
+    sum += pair_gradient[k] * (field[i] - field[j]).cwiseProduct(position[i] - position[j]);
+  }
+  return sum.sum();
+}
+
+/// (M⁻¹ Bᵀ p)_i = (1/m_i) Σ_j V (p_i + p_j) ∇W_ij over i's fluid neighbours (p_j = 0 for resting j).
+Vec4 pressure_velocity_change(const Workspace& workspace, const Real* mass, const Real* pressure, std::size_t i, std::size_t active) {
+  const auto& lists = workspace.fluid_neighbors;
+  const std::size_t first = lists.first(i);
+  const Index* neighbor = lists.indices.data() + first;
+  const Real* pair_gradient = workspace.fluid_pair_gradient.data() + first;
+  const Vec4* position = workspace.solver_position.data();
+  const Vec4 position_i = position[i];
+  const Real pressure_i = pressure[i];
+  Vec4 sum = Vec4::Zero(), odd_sum = Vec4::Zero();
+  const Index count = lists.counts[i];
+  auto pressure_of = [&](Index j) { return std::size_t(j) < active ? pressure[j] : Real(0); };
+  Index k = 0;
+  for (; k + 1 < count; k += 2) {
+    const Index j0 = neighbor[k], j1 = neighbor[k + 1];
+    sum += ((pressure_i + pressure_of(j0)) * pair_gradient[k]) * (position_i - position[j0]);
+    odd_sum += ((pressure_i + pressure_of(j1)) * pair_gradient[k + 1]) * (position_i - position[j1]);
+  }
+  if (k < count) sum += ((pressure_i + pressure_of(neighbor[k])) * pair_gradient[k]) * (position_i - position[neighbor[k]]);
+  return (sum + odd_sum) / mass[i];
+}
+
+/// |Σ_j V ∇W_ij| (1/m) of a particle on a flat face of the rest lattice (its half-space of neighbours):
+/// how lopsided a free surface makes a neighbourhood.
+Real flat_surface_gradient_sum(const Model& model) {
+  return with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
+    const Real spacing = model.particle_diameter;
+    const int reach = static_cast<int>(std::ceil(model.support_radius / spacing));
+    Real sum = 0;  // the normal component; the others cancel
+    for (int a = -reach; a <= reach; ++a)
+      for (int b = -reach; b <= reach; ++b)
+        for (int c = 1; c <= reach; ++c) {
+          const Vec3 r = spacing * Vec3(Real(a), Real(b), Real(c));
+          sum += model.particle_volume * kernel.gradient_factor(r.norm()) * r.z();
+        }
+    return std::abs(sum);
+  });
+}
+
+/// The kept pressure's velocity change at i with tensile instability control (after Sun et al. 2017's
+/// δ+-SPH): the symmetric form (p_i + p_j) is the difference form (p_j − p_i) plus 2 p_i Σ_j V ∇W_ij.
+/// That last term is the traction −p n of the air at a free surface, but inside the material it is only
+/// the lattice's disorder, and under tension it draws particles into pairs. It is weighted by how
+/// lopsided the neighbourhood is: fully from half a flat face's gradient sum, not at all below a quarter.
+Vec4 kept_pressure_velocity_change(const Workspace& workspace, const Real* mass, const Real* pressure, std::size_t i,
+                                   std::size_t active, Real flat_surface_sum) {
+  const auto& lists = workspace.fluid_neighbors;
+  const std::size_t first = lists.first(i);
+  const Index* neighbor = lists.indices.data() + first;
+  const Real* pair_gradient = workspace.fluid_pair_gradient.data() + first;
+  const Vec4* position = workspace.solver_position.data();
+  const Vec4 position_i = position[i];
+  const Real pressure_i = pressure[i];
+  Vec4 difference = Vec4::Zero(), gradient_sum = Vec4::Zero();
+  for (Index k = 0; k < lists.counts[i]; ++k) {
+    const Index j = neighbor[k];
+    const Vec4 gradient = pair_gradient[k] * (position_i - position[j]);
+    gradient_sum += gradient;
+    difference += ((std::size_t(j) < active ? pressure[j] : Real(0)) - pressure_i) * gradient;
+  }
+  const Real lopsided = gradient_sum.norm() / flat_surface_sum;
+  const Real surface = std::clamp((lopsided - Real(0.25)) / Real(0.25), Real(0), Real(1));
+  return (difference + (2 * surface * pressure_i) * gradient_sum) / mass[i];
+}
+
+}  // namespace
+
+void apply_tension_pressure(const Model& model, State& state, Workspace& workspace) {
+  const std::size_t count = state.active_count;
+  if (!model.settings.tension || count == 0) return;
+  auto& fluid = state.fluid;
+  const bool any = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+                     sums[0] += fluid.kappa_tension[i] != 0 ? 1 : 0;
+                   })[0] > 0;
+  if (!any) return;
+  auto& system = workspace.tension_system;
+  system.solution.resize(fluid.size());
+  parallel_for_each_index(count, [&](std::size_t i) { system.solution[i] = fluid.mass[i] * fluid.kappa_tension[i]; }, 4096);
+  system.velocity_change.resize(fluid.size());
+  const Real time_step = state.time_step;
+  const Real flat_surface_sum = flat_surface_gradient_sum(model);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    system.velocity_change[i] = kept_pressure_velocity_change(workspace, fluid.mass.data(), system.solution.data(), i, count, flat_surface_sum);
+  });
+  parallel_for_each_index(count, [&](std::size_t i) { fluid.velocity[i] -= time_step * system.velocity_change[i].head<3>(); }, 4096);
+}
+
+void project_tension(const Model& model, State& state, Workspace& workspace) {
+  const std::size_t count = state.active_count;
+  if (!model.settings.tension || count == 0 || !state.last_step.viscosity_solved) return;
+  auto& fluid = state.fluid;
+  const std::size_t size = fluid.size();
+  auto& system = workspace.tension_system;
+  for (auto* vector : {&system.residual, &system.solution, &system.direction, &system.preconditioned, &system.product, &system.inverse_diagonal})
+    vector->resize(size);
+  system.velocity_change.resize(size);
+  // The velocity change of a direction is zero at the resting particles (their velocities are fixed).
+  std::fill(system.velocity_change.begin() + static_cast<std::ptrdiff_t>(count), system.velocity_change.end(), Vec4::Zero());
+  auto& velocity = workspace.solver_velocity;
+  velocity.resize(size);
+  parallel_for_each_index(size, [&](std::size_t i) { velocity[i] = padded(fluid.velocity[i]); }, 4096);
+  const Real time_step = state.time_step;
+  const Real* mass = fluid.mass.data();
+  const auto& lists = workspace.fluid_neighbors;
+  const Vec4* position = workspace.solver_position.data();
+
+  // Where the material is whole around a particle: neither it nor any of its neighbours has a lopsided
+  // neighbourhood (a free surface, a crack's face or a wall, which is air here). There the density
+  // is measured whole, and a deficit is dilation to take back; elsewhere a deficit is only the kernel
+  // missing its neighbours, no reason to pull.
+  const Real flat_surface_sum = flat_surface_gradient_sum(model);
+  system.at_surface.resize(size);
+  std::fill(system.at_surface.begin() + static_cast<std::ptrdiff_t>(count), system.at_surface.end(), std::uint8_t(0));
+  parallel_for_each_index(count, [&](std::size_t i) {
+    const std::size_t first = lists.first(i);
+    Vec4 gradient_sum = Vec4::Zero();
+    for (Index k = 0; k < lists.counts[i]; ++k)
+      gradient_sum += workspace.fluid_pair_gradient[first + k] * (position[i] - position[lists.indices[first + k]]);
+    system.at_surface[i] = gradient_sum.norm() > kSurfaceLopsidedness * flat_surface_sum || workspace.boundary_neighbors.counts[i] > 0;
+  });
+  const Real volume = model.particle_volume;
+
+  // The right-hand side B v / Δt (and the interior's dilation, (ρ/ρ0 − 1)/Δt², where it is below ρ0),
+  // the diagonal of B M⁻¹ Bᵀ ((1/m_i)|Σ_j V∇W_ij|² + Σ_j (1/m_j)|V∇W_ij|² over active j), and the start:
+  // r = b, p = 0.
+  const auto start = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
+    const Real rate = compression_rate(workspace, velocity.data(), i);
+    const std::size_t first = lists.first(i);
+    Vec4 gradient_sum = Vec4::Zero();
+    Real squares = 0;
+    bool whole = !system.at_surface[i];
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index j = lists.indices[first + k];
+      const Vec4 gradient = workspace.fluid_pair_gradient[first + k] * (position[i] - position[j]);
+      gradient_sum += gradient;
+      if (std::size_t(j) < count) squares += gradient.squaredNorm() / mass[j];
+      whole = whole && !system.at_surface[j];
+    }
+    const Real diagonal = gradient_sum.squaredNorm() / mass[i] + squares;
+    system.inverse_diagonal[i] = diagonal > 0 ? Real(1) / diagonal : Real(0);
+    const Real dilation = whole ? std::min(fluid.density[i] * volume / mass[i] - 1, Real(0)) : Real(0);
+    system.residual[i] = rate / time_step + dilation / (time_step * time_step);
+    system.solution[i] = 0;
+    sums[0] += double(system.residual[i]) * double(system.residual[i]);
+    sums[1] += std::abs(double(system.residual[i]) * double(time_step));
+  });
+  const double rhs_norm = std::sqrt(start[0]);
+  const double absolute = kAbsoluteToleranceFraction * double(model.settings.divergence_tolerance) / double(time_step);
+  double mean_rate = start[1] / double(count);  // mean |B v| (1/s)
+  double residual_norm = rhs_norm;
+  auto precondition = [&]() {
+    return ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+      system.preconditioned[i] = system.inverse_diagonal[i] * system.residual[i];
+      sums[0] += double(system.residual[i]) * double(system.preconditioned[i]);
+    })[0];
+  };
+  double residual_dot = precondition();
+  parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i]; }, 4096);
+  int iterations = 0;
+  while (residual_norm > kRelativeTolerance * rhs_norm && mean_rate > absolute && iterations < model.settings.max_tension_iterations) {
+    // q = B M⁻¹ Bᵀ d: the velocity change of the direction, then its compression rate.
+    parallel_for_each_index(count, [&](std::size_t i) {
+      system.velocity_change[i] = pressure_velocity_change(workspace, mass, system.direction.data(), i, count);
+    });
+    const double curvature = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+      system.product[i] = compression_rate(workspace, system.velocity_change.data(), i);
+      sums[0] += double(system.direction[i]) * double(system.product[i]);
+    })[0];
+    if (!(curvature > 0)) break;
+    const Real step = static_cast<Real>(residual_dot / curvature);
+    const auto next = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
+      system.solution[i] += step * system.direction[i];
+      velocity[i] -= (time_step * step) * system.velocity_change[i];
+      system.residual[i] -= step * system.product[i];
+      sums[0] += double(system.residual[i]) * double(system.residual[i]);
+      sums[1] += std::abs(double(system.residual[i]));
+    });
+    residual_norm = std::sqrt(next[0]);
+    mean_rate = next[1] / double(count) * double(time_step);
+    const double next_residual_dot = precondition();
+    const Real beta = static_cast<Real>(next_residual_dot / residual_dot);
+    residual_dot = next_residual_dot;
+    parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i] + beta * system.direction[i]; }, 4096);
+    ++iterations;
+  }
+  parallel_for_each_index(count, [&](std::size_t i) {
+    fluid.velocity[i] = velocity[i].head<3>();
+    fluid.kappa_tension[i] += system.solution[i] / mass[i];
+  }, 4096);
+  state.last_step.tension_iterations = iterations;
+  state.last_step.tension_error = static_cast<Real>(mean_rate * double(time_step));
+}
+
+}  // namespace m3dp::sph::stages
