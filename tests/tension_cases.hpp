@@ -163,12 +163,13 @@ inline std::vector<FilamentSample> stretch_filament(const FilamentCase& filament
     for (std::size_t i = 0; i < fluid.size(); ++i)
       if (std::abs(fluid.position[i].z()) < half_now / 3) pressure_sum += solver.pressure(i), pressure_count += 1;
     sample.mean_pressure = pressure_sum / std::max(pressure_count, 1.0);
-    // A crack: a slab two spacings thick with no particle (the lattice's layers may stand apart by more
-    // than one spacing in stretched material that has not yet rearranged).
-    std::vector<int> slab_counts(static_cast<std::size_t>(std::ceil(half_now / d)) + 1, 0);
-    for (const Vec3& p : fluid.position)
-      if (std::abs(p.z()) < half_now) ++slab_counts[static_cast<std::size_t>((p.z() + half_now) / (2 * d))];
-    sample.whole = std::all_of(slab_counts.begin(), slab_counts.end() - 1, [](int n) { return n > 0; });
+    // A crack: a slab two spacings thick with no particle, between a spacing from each plate (the
+    // lattice's layers may stand apart by more than one spacing where stretched material has not yet
+    // rearranged).
+    sample.whole = true;
+    for (Real low = -half_now + d; low + 2 * d <= half_now - d; low += 2 * d)
+      sample.whole = sample.whole && std::any_of(fluid.position.begin(), fluid.position.end(),
+                                                 [&](const Vec3& p) { return p.z() >= low && p.z() < low + 2 * d; });
     std::nth_element(densities.begin(), densities.begin() + densities.size() / 2, densities.end());
     sample.median_density = densities.empty() ? 0 : densities[densities.size() / 2];
     samples.push_back(sample);
