@@ -1,7 +1,7 @@
 // The viscous threads of tension_cases.hpp at any resolution (not a test): the fine table of
 // docs/validation.md. Usage:
 //   tension_cases filament|column|bingham [--radius PARTICLE_RADIUS_M] [--length L0_M] [--no-tension]
-//                 [--cap MAX_VISCOSITY_PA_S]
+//                 [--cap MAX_VISCOSITY_PA_S] [--support SUPPORT_IN_PARTICLE_RADII]
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -14,7 +14,7 @@ int main(int argc, char** argv) {
   using namespace m3dp;
   const std::string which = argc > 1 ? argv[1] : "filament";
   bool tension = true;
-  double particle_radius = 0, length = 0, cap = 1e5;
+  double particle_radius = 0, length = 0, cap = 1e5, support = 4;
   for (int a = 2; a < argc; ++a) {
     const std::string flag = argv[a];
     const bool has_value = a + 1 < argc;
@@ -22,6 +22,7 @@ int main(int argc, char** argv) {
     else if (flag == "--radius" && has_value) particle_radius = std::atof(argv[++a]);
     else if (flag == "--length" && has_value) length = std::atof(argv[++a]);
     else if (flag == "--cap" && has_value) cap = std::atof(argv[++a]);
+    else if (flag == "--support" && has_value) support = std::atof(argv[++a]);
     else {
       std::fprintf(stderr, "tension_cases: unknown argument '%s'\n", argv[a]);
       return 2;
@@ -32,6 +33,7 @@ int main(int argc, char** argv) {
     filament.tension = tension;
     if (particle_radius > 0) filament.particle_radius = Real(particle_radius);
     if (length > 0) filament.length = Real(length);
+    filament.support_radius_factor = Real(support);
     tension::stretch_filament(filament);
     return 0;
   }
@@ -40,6 +42,7 @@ int main(int argc, char** argv) {
     column.tension = tension;
     if (particle_radius > 0) column.particle_radius = Real(particle_radius);
     if (length > 0) column.length = Real(length);
+    column.support_radius_factor = Real(support);
     if (which == "column") {
       tension::hang_column(column, tension::stokes_break_time(column));
       return 0;

@@ -77,6 +77,7 @@ struct FilamentCase {
   Real strain_rate = 1;                 // ε̇, 1/s
   Real hencky_strain = Real(1.5);       // drawn to L0 e^ε
   bool tension = true;
+  Real support_radius_factor = 4;       // the kernel's support in particle radii (the engine's default)
   int samples = 5;                      // figures at Hencky strains ε/samples, 2ε/samples, …
 };
 
@@ -88,6 +89,7 @@ struct FilamentSample {
   double volume_ratio = 0;     // the material's volume between the plates over its first
   double closest_pair = 0;     // in particle diameters
   double median_density = 0;   // ρ/ρ0 of the interior particles within the middle third
+  std::size_t interior_particles = 0;  // how many there are (a support radius inside the surface)
   bool whole = false;          // material across every slab two spacings thick between the plates (no crack)
   double mean_pressure = 0;    // Pa, of the particles within the middle third (a stretched thread's is −μ ε̇)
 };
@@ -101,6 +103,7 @@ inline std::vector<FilamentSample> stretch_filament(const FilamentCase& filament
   parameters.settings.max_time_step = Real(2e-3);
   parameters.settings.rest_detection = false;
   parameters.settings.tension = filament.tension;
+  parameters.settings.support_radius_factor = filament.support_radius_factor;
   const Real reach = filament.length * std::exp(filament.hencky_strain) + 10 * d;
   parameters.settings.bounds.min = Vec3(-reach, -reach, -reach);
   parameters.settings.bounds.max = Vec3(reach, reach, reach);
@@ -172,6 +175,7 @@ inline std::vector<FilamentSample> stretch_filament(const FilamentCase& filament
                                                  [&](const Vec3& p) { return p.z() >= low && p.z() < low + 2 * d; });
     std::nth_element(densities.begin(), densities.begin() + densities.size() / 2, densities.end());
     sample.median_density = densities.empty() ? 0 : densities[densities.size() / 2];
+    sample.interior_particles = densities.size();
     samples.push_back(sample);
     std::printf("filament eps %.2f: R/R0 %.4f (ideal %.4f), force %.4g N (Trouton %.4g), volume %.4f, %s, closest pair %.3f d, median rho %.4f, "
                 "mid pressure %.1f Pa (-mu epsdot %.1f), tension its %d, viscosity its %d\n",
@@ -190,6 +194,7 @@ struct ColumnCase {
   Real length = Real(0.05);             // L0, m
   material::Material material = material::newtonian("column", 1800, 1000);
   bool tension = true;
+  Real support_radius_factor = 4;       // the kernel's support in particle radii (the engine's default)
   std::vector<double> sample_fractions = {0.2, 0.4, 0.6, 0.8};  // of the expected break time
   double longest_fraction = 1.3;        // gives up on a break after this fraction of it
 };
@@ -237,6 +242,7 @@ inline ColumnResult hang_column(const ColumnCase& column, double expected_break,
   parameters.settings.max_time_step = Real(2e-3);
   parameters.settings.rest_detection = false;
   parameters.settings.tension = column.tension;
+  parameters.settings.support_radius_factor = column.support_radius_factor;
   parameters.settings.bounds.min = Vec3(-1, -1, -1);
   parameters.settings.bounds.max = Vec3(1, 1, 1);
   material::Material material = column.material;

@@ -152,6 +152,66 @@ Vec4 kept_pressure_velocity_change(const Workspace& workspace, const Real* mass,
   return (difference + (2 * surface * pressure_i) * gradient_sum) / mass[i];
 }
 
+/// Conjugate gradients on B M⁻¹ Bᵀ p = r from the right-hand side in system.residual (1/s²) and the
+/// inverse diagonal, p from 0 into system.solution; each step's velocity change, times Δt, subtracted
+/// from `change` (padded, active particles). Stops at the relative tolerance, or where the mean |r| Δt²
+/// is under `absolute` (a relative density change a step). Returns the iterations and the last mean.
+struct ProjectionResult {
+  int iterations = 0;
+  double mean_change = 0;  // mean |r| Δt² at the end
+};
+ProjectionResult solve_projection(const Model& model, const State& state, Workspace& workspace, Vec4* change, double absolute) {
+  const std::size_t count = state.active_count;
+  auto& system = workspace.tension_system;
+  const Real time_step = state.time_step;
+  const Real* mass = state.fluid.mass.data();
+  const auto start = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
+    system.solution[i] = 0;
+    sums[0] += double(system.residual[i]) * double(system.residual[i]);
+    sums[1] += std::abs(double(system.residual[i]));
+  });
+  const double squared_step = double(time_step) * double(time_step);
+  const double rhs_norm = std::sqrt(start[0]);
+  double residual_norm = rhs_norm, mean_change = start[1] / double(count) * squared_step;
+  auto precondition = [&]() {
+    return ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+      system.preconditioned[i] = system.inverse_diagonal[i] * system.residual[i];
+      sums[0] += double(system.residual[i]) * double(system.preconditioned[i]);
+    })[0];
+  };
+  double residual_dot = precondition();
+  parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i]; }, 4096);
+  ProjectionResult result;
+  while (residual_norm > kRelativeTolerance * rhs_norm && mean_change > absolute && result.iterations < model.settings.max_tension_iterations) {
+    // q = B M⁻¹ Bᵀ d: the velocity change of the direction, then its compression rate.
+    parallel_for_each_index(count, [&](std::size_t i) {
+      system.velocity_change[i] = pressure_velocity_change(workspace, mass, system.direction.data(), i, count);
+    });
+    const double curvature = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+      system.product[i] = compression_rate(workspace, system.velocity_change.data(), i);
+      sums[0] += double(system.direction[i]) * double(system.product[i]);
+    })[0];
+    if (!(curvature > 0)) break;
+    const Real step = static_cast<Real>(residual_dot / curvature);
+    const auto next = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
+      system.solution[i] += step * system.direction[i];
+      change[i] -= (time_step * step) * system.velocity_change[i];
+      system.residual[i] -= step * system.product[i];
+      sums[0] += double(system.residual[i]) * double(system.residual[i]);
+      sums[1] += std::abs(double(system.residual[i]));
+    });
+    residual_norm = std::sqrt(next[0]);
+    mean_change = next[1] / double(count) * squared_step;
+    const double next_residual_dot = precondition();
+    const Real beta = static_cast<Real>(next_residual_dot / residual_dot);
+    residual_dot = next_residual_dot;
+    parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i] + beta * system.direction[i]; }, 4096);
+    ++result.iterations;
+  }
+  result.mean_change = mean_change;
+  return result;
+}
+
 }  // namespace
 
 void apply_tension_pressure(const Model& model, State& state, Workspace& workspace) {
@@ -209,11 +269,11 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   });
   const Real volume = model.particle_volume;
 
-  // The right-hand side B v / Δt (and the interior's dilation, (ρ/ρ0 − 1)/Δt², where it is below ρ0),
-  // the diagonal of B M⁻¹ Bᵀ ((1/m_i)|Σ_j V∇W_ij|² + Σ_j (1/m_j)|V∇W_ij|² over active j), and the start:
-  // r = b, p = 0.
-  const auto start = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
-    const Real rate = compression_rate(workspace, velocity.data(), i);
+  // The velocities: B M⁻¹ Bᵀ p = B v / Δt, with the diagonal (1/m_i)|Σ_j V∇W_ij|² + Σ_j (1/m_j)|V∇W_ij|²
+  // over active j; each whole particle's dilation, (ρ/ρ0 − 1) where below ρ0, aside for the positions.
+  auto& dilation = workspace.scratch_real;
+  dilation.assign(count, Real(0));
+  const double any_dilation = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
     const std::size_t first = lists.first(i);
     Vec4 gradient_sum = Vec4::Zero();
     Real squares = 0;
@@ -227,57 +287,28 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
     }
     const Real diagonal = gradient_sum.squaredNorm() / mass[i] + squares;
     system.inverse_diagonal[i] = diagonal > 0 ? Real(1) / diagonal : Real(0);
-    const Real dilation = whole ? std::min(fluid.density[i] * volume / mass[i] - 1, Real(0)) : Real(0);
-    system.residual[i] = rate / time_step + dilation / (time_step * time_step);
-    system.solution[i] = 0;
-    sums[0] += double(system.residual[i]) * double(system.residual[i]);
-    sums[1] += std::abs(double(system.residual[i]) * double(time_step));
-  });
-  const double rhs_norm = std::sqrt(start[0]);
-  const double absolute = kAbsoluteToleranceFraction * double(model.settings.divergence_tolerance) / double(time_step);
-  double mean_rate = start[1] / double(count);  // mean |B v| (1/s)
-  double residual_norm = rhs_norm;
-  auto precondition = [&]() {
-    return ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-      system.preconditioned[i] = system.inverse_diagonal[i] * system.residual[i];
-      sums[0] += double(system.residual[i]) * double(system.preconditioned[i]);
-    })[0];
-  };
-  double residual_dot = precondition();
-  parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i]; }, 4096);
-  int iterations = 0;
-  while (residual_norm > kRelativeTolerance * rhs_norm && mean_rate > absolute && iterations < model.settings.max_tension_iterations) {
-    // q = B M⁻¹ Bᵀ d: the velocity change of the direction, then its compression rate.
-    parallel_for_each_index(count, [&](std::size_t i) {
-      system.velocity_change[i] = pressure_velocity_change(workspace, mass, system.direction.data(), i, count);
-    });
-    const double curvature = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-      system.product[i] = compression_rate(workspace, system.velocity_change.data(), i);
-      sums[0] += double(system.direction[i]) * double(system.product[i]);
-    })[0];
-    if (!(curvature > 0)) break;
-    const Real step = static_cast<Real>(residual_dot / curvature);
-    const auto next = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
-      system.solution[i] += step * system.direction[i];
-      velocity[i] -= (time_step * step) * system.velocity_change[i];
-      system.residual[i] -= step * system.product[i];
-      sums[0] += double(system.residual[i]) * double(system.residual[i]);
-      sums[1] += std::abs(double(system.residual[i]));
-    });
-    residual_norm = std::sqrt(next[0]);
-    mean_rate = next[1] / double(count) * double(time_step);
-    const double next_residual_dot = precondition();
-    const Real beta = static_cast<Real>(next_residual_dot / residual_dot);
-    residual_dot = next_residual_dot;
-    parallel_for_each_index(count, [&](std::size_t i) { system.direction[i] = system.preconditioned[i] + beta * system.direction[i]; }, 4096);
-    ++iterations;
-  }
+    system.residual[i] = compression_rate(workspace, velocity.data(), i) / time_step;
+    dilation[i] = whole ? std::min(fluid.density[i] * volume / mass[i] - 1, Real(0)) : Real(0);
+    sums[0] += dilation[i] < 0 ? 1 : 0;
+  })[0];
+  const double tolerance = kAbsoluteToleranceFraction * double(model.settings.divergence_tolerance);
+  const ProjectionResult divergence = solve_projection(model, state, workspace, velocity.data(), tolerance);
   parallel_for_each_index(count, [&](std::size_t i) {
     fluid.velocity[i] = velocity[i].head<3>();
     fluid.kappa_tension[i] += system.solution[i] / mass[i];
   }, 4096);
-  state.last_step.tension_iterations = iterations;
-  state.last_step.tension_error = static_cast<Real>(mean_rate * double(time_step));
+  state.last_step.tension_iterations = divergence.iterations;
+  state.last_step.tension_error = static_cast<Real>(divergence.mean_change);
+
+  // The interior's dilation is taken back by moving positions, as correct_volume takes compression
+  // out: a pressure kept for it would pull again next step what this one pulled back.
+  if (any_dilation == 0) return;
+  auto& change = workspace.solver_velocity;  // the velocities are back in the particles
+  parallel_for_each_index(size, [&](std::size_t i) { change[i] = Vec4::Zero(); }, 4096);
+  parallel_for_each_index(count, [&](std::size_t i) { system.residual[i] = dilation[i] / (time_step * time_step); }, 4096);
+  const ProjectionResult taken_back = solve_projection(model, state, workspace, change.data(), tolerance);
+  state.last_step.tension_iterations += taken_back.iterations;
+  parallel_for_each_index(count, [&](std::size_t i) { fluid.position[i] += time_step * change[i].head<3>(); }, 4096);
 }
 
 }  // namespace m3dp::sph::stages
