@@ -78,6 +78,7 @@ struct FilamentCase {
   Real hencky_strain = Real(1.5);       // drawn to L0 e^ε
   bool tension = true;
   Real support_radius_factor = 4;       // the kernel's support in particle radii (the engine's default)
+  Real stress_form_viscosity = 0;       // SolverSettings::stress_form_viscosity
   int samples = 5;                      // figures at Hencky strains ε/samples, 2ε/samples, …
 };
 
@@ -104,6 +105,7 @@ inline std::vector<FilamentSample> stretch_filament(const FilamentCase& filament
   parameters.settings.rest_detection = false;
   parameters.settings.tension = filament.tension;
   parameters.settings.support_radius_factor = filament.support_radius_factor;
+  parameters.settings.stress_form_viscosity = filament.stress_form_viscosity;
   const Real reach = filament.length * std::exp(filament.hencky_strain) + 10 * d;
   parameters.settings.bounds.min = Vec3(-reach, -reach, -reach);
   parameters.settings.bounds.max = Vec3(reach, reach, reach);
@@ -195,6 +197,7 @@ struct ColumnCase {
   material::Material material = material::newtonian("column", 1800, 1000);
   bool tension = true;
   Real support_radius_factor = 4;       // the kernel's support in particle radii (the engine's default)
+  Real stress_form_viscosity = 0;       // SolverSettings::stress_form_viscosity
   std::vector<double> sample_fractions = {0.2, 0.4, 0.6, 0.8};  // of the expected break time
   double longest_fraction = 1.3;        // gives up on a break after this fraction of it
 };
@@ -243,6 +246,7 @@ inline ColumnResult hang_column(const ColumnCase& column, double expected_break,
   parameters.settings.rest_detection = false;
   parameters.settings.tension = column.tension;
   parameters.settings.support_radius_factor = column.support_radius_factor;
+  parameters.settings.stress_form_viscosity = column.stress_form_viscosity;
   parameters.settings.bounds.min = Vec3(-1, -1, -1);
   parameters.settings.bounds.max = Vec3(1, 1, 1);
   material::Material material = column.material;

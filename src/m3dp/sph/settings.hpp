@@ -80,6 +80,12 @@ struct SolverSettings {
   ViscositySolver viscosity_solver = ViscositySolver::implicit_weiler2018;
   Real viscosity_tolerance = Real(1e-2);      // implicit viscosity: relative residual ‖b − Av‖/‖b‖ of the solve
   int max_viscosity_iterations = 300;
+  // The share of the implicit viscosity taken by the stress form (viscosity/weiler2018_stress.cpp:
+  // the velocity gradient, then the divergence of μ(∇v + ∇vᵀ), isotropic on the rest lattice) instead of
+  // the pair form, whose normal stress along a lattice axis is twice the isotropic one at a support
+  // of four radii. 0: the pair form alone; at most 0.95 (the pair form damps the stress form's
+  // particle-scale modes, which it does not see).
+  Real stress_form_viscosity = 0;
   Real xsph_factor = 0;                       // XSPH velocity smoothing ε (Monaghan 1989), 0 = none
   SurfaceTensionModel surface_tension_model = SurfaceTensionModel::akinci2013;
   // Material at rest costs nothing: a particle of a yield-stress material that has moved slower than

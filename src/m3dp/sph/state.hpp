@@ -275,6 +275,11 @@ struct Workspace {
     // product's sweep as the pressure solves' copies (solver_position holds the positions). The CG
     // direction lives only here.
     std::vector<Vec4> padded_operand;
+    // The stress form's part (SolverSettings::stress_form_viscosity), (n) each: the operand's stress
+    // μ(G + Gᵀ) times M_iᵀ (zero at resting particles), and its share of A times the operand; empty when unused.
+    std::vector<Mat3> stress;
+    std::vector<Vec3> stress_product;
+    std::vector<Mat3> gradient_correction;  // (n) M_i = B_i⁻¹, B_i = Σ_j (x_j − x_i) ⊗ V∇W_ij: exact gradients of linear fields
     // The preconditioner's coarse level: aggregates of particles (cells of a coarse grid) that move
     // as one (see viscosity/coarse_level.hpp).
     std::vector<std::uint64_t> aggregate_key;     // (n) coarse cell of each active particle

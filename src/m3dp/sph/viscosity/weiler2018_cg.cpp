@@ -42,6 +42,7 @@ int run_conjugate_gradients(const Model& model, State& state, Workspace& workspa
   const double tolerance = settings.viscosity_tolerance * start.rhs_norm;
   int iterations = 0;
   while (residual_norm > tolerance && iterations < settings.max_viscosity_iterations) {
+    prepare_stress_product(model, state, workspace);
     const double curvature = product.row_sums<1>(count, [&](std::size_t i, const Vec3& row, std::array<double, 1>& sums) {
       system.product[i] = row;
       sums[0] += double(system.padded_operand[i].head<3>().dot(row));

@@ -14,6 +14,7 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
   auto& velocity = fluid.velocity;
   const std::size_t count = state.active_count;
   const auto& settings = model.settings;
+  prepare_stress_product(model, state, workspace);
   const auto start = product.row_sums<2>(count, [&](std::size_t i, const Vec3& row, std::array<double, 2>& sums) {
     const Vec3 residual = system.rhs[i] - row;
     system.residual[i] = residual;
@@ -30,6 +31,7 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
   constexpr double kFarOff = 10;
   if (settings.warm_start && residual_norm > kFarOff * settings.viscosity_tolerance * std::sqrt(start[0])) {
     parallel_for_each_index(count, [&](std::size_t i) { system.padded_operand[i] = padded(fluid.viscous_velocity[i]); }, 1024);
+    prepare_stress_product(model, state, workspace);
     // v_A = velocity, r_A = residual; v_B = viscous_velocity, r_B into product. A v = b − r.
     const auto sums = product.row_sums<5>(count, [&](std::size_t i, const Vec3& row, std::array<double, 5>& sums) {
       const Vec3 residual = system.rhs[i] - row;

@@ -5,6 +5,8 @@
 
 #include <Eigen/LU>
 
+#include <algorithm>
+
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/sph/viscosity/weiler2018.hpp"
 
@@ -36,9 +38,20 @@ void build_system(const Model& model, State& state, Workspace& workspace) {
   // and V_j (dW/dr)/r = (ρ0_j/ρ_j) × the pair gradient g_ij (which holds (m_j/ρ0_j)(dW/dr)/r; negative), with
   // s_i = −Δt 2(d+2) calibration V_i / V.
   const Real volume = model.particle_volume;
+  // The pair form's share of the fluid pairs (the rest is the stress form's, weiler2018_stress.cpp).
+  const Real stress_share = std::clamp(settings.stress_form_viscosity, Real(0), Real(0.95));
+  const Real pair_share = 1 - stress_share;
   auto pair_scale = [&](std::size_t i) {
-    return -time_step * kDimensionFactor * calibration.fluid * (fluid.mass[i] / fluid.density[i]) / volume;
+    return -time_step * kDimensionFactor * calibration.fluid * pair_share * (fluid.mass[i] / fluid.density[i]) / volume;
   };
+  if (stress_share > 0) {
+    system.stress.assign(fluid.size(), Mat3::Zero());
+    system.stress_product.resize(fluid.size());
+    prepare_gradient_correction(model, state, workspace);
+  } else {
+    system.stress.clear();
+    system.stress_product.clear();
+  }
   // The rest of particle i's set-up, given its fluid pairs' Σ c r rᵀ.
   auto finish_particle = [&](std::size_t i, const Mat3& fluid_coupling) {
     const FluidPhase& phase = model.phases[fluid.phase[i]];
@@ -61,7 +74,8 @@ void build_system(const Model& model, State& state, Workspace& workspace) {
       system.boundary_pair_coefficient[boundary_first + k] = coefficient;
     }
     system.own_block[i] = own_block;
-    system.inverse_diagonal[i] = (own_block + fluid_coupling).inverse();
+    // The stress form's diagonal block taken as the pair form's would be (both are the viscous Laplacian).
+    system.inverse_diagonal[i] = (own_block + fluid_coupling / pair_share).inverse();
     system.rhs[i] = rhs;
     // Warm start: v* plus last step's viscous change. A stiff paste's viscosity undoes nearly the same
     // pressure-driven spreading every step, so this guess is close and CG needs far fewer iterations.

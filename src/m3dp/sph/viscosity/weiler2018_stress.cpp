@@ -1,0 +1,79 @@
+// The implicit viscosity's stress form (SolverSettings::stress_form_viscosity; see weiler2018.cpp for
+// the pair form it shares the system with). The pair form's force Σ_j c_ij x_ij x_ijᵀ v_ij weighs each
+// pair's relative velocity along the pair: on a cubic lattice with a support of four radii its normal
+// stress along a lattice axis is 2.05 × the isotropic one (its fourth moments are cubic, and the
+// calibration fits shear), so a thread drawn along an axis resisted twice as much as Trouton says.
+// The stress form takes the velocity gradient first and then the divergence of the stress,
+//   G_i = Σ_j (v_j − v_i) ⊗ V∇W_ij M_i,   τ_i = μ_i (G_i + G_iᵀ),   F_i = V Σ_j (τ_i M_iᵀ + τ_j M_jᵀ) V∇W_ij,
+// with M_i = B_i⁻¹, B_i = Σ_j (x_j − x_i) ⊗ V∇W_ij, the renormalisation that makes the gradient exact
+// for linear fields inside and at a free surface alike (Bonet & Lok 1999); where B_i is nearly
+// singular (a particle with few neighbours), the rest lattice's calibration c I instead. F = −∂E/∂v
+// of E = Σ_i V μ_i |G_i + G_iᵀ|²/4, so −Δt F adds a symmetric positive semi-definite part to the
+// system and conjugate gradients still apply. Walls keep the pair form's no-
+// slip term; resting particles have no stress of their own (their velocity gradient is not taken).
+// (Two-pass SPH viscosity: Watkins, Bhattal, Francis, Turner & Whitworth 1996, A&AS 119, 177; the
+// symmetric form as Bonet & Lok 1999.)
+#include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/viscosity/weiler2018.hpp"
+
+namespace m3dp::sph::stages::weiler2018 {
+
+void prepare_gradient_correction(const Model& model, const State& state, Workspace& workspace) {
+  auto& system = workspace.viscosity_system;
+  if (system.stress_product.empty()) return;
+  const std::size_t count = state.active_count;
+  const auto& lists = workspace.fluid_neighbors;
+  const Vec4* position = workspace.solver_position.data();
+  const Real* pair_gradient = workspace.fluid_pair_gradient.data();
+  const Real calibration = model.viscosity_calibration.fluid_gradient;
+  system.gradient_correction.resize(state.fluid.size());
+  parallel_for_each_index(count, [&](std::size_t i) {
+    Mat3 moment = Mat3::Zero();  // B_i
+    const std::size_t first = lists.first(i);
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index j = lists.indices[first + k];
+      const Vec3 offset = (position[i] - position[j]).head<3>();
+      moment -= offset * (pair_gradient[first + k] * offset).transpose();
+    }
+    // c B_i is the identity on the rest lattice, about ½ I at a flat free surface.
+    constexpr Real kLeastDeterminant = Real(0.02);
+    system.gradient_correction[i] = (calibration * moment).determinant() > kLeastDeterminant ? Mat3(moment.inverse()) : Mat3(calibration * Mat3::Identity());
+  }, 1024);
+}
+
+void prepare_stress_product(const Model& model, const State& state, Workspace& workspace) {
+  auto& system = workspace.viscosity_system;
+  if (system.stress_product.empty()) return;
+  const std::size_t count = state.active_count;
+  const auto& lists = workspace.fluid_neighbors;
+  const Vec4* position = workspace.solver_position.data();
+  const Vec4* operand = system.padded_operand.data();
+  const Real* pair_gradient = workspace.fluid_pair_gradient.data();
+  const Real* viscosity = state.fluid.viscosity.data();
+  parallel_for_each_index(count, [&](std::size_t i) {
+    Mat3 gradient = Mat3::Zero();
+    const std::size_t first = lists.first(i);
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index j = lists.indices[first + k];
+      const Vec3 along = pair_gradient[first + k] * (position[i] - position[j]).head<3>();  // V ∇W_ij
+      gradient += (operand[j] - operand[i]).head<3>() * along.transpose();
+    }
+    gradient = gradient * system.gradient_correction[i];
+    system.stress[i] = viscosity[i] * (gradient + gradient.transpose()) * system.gradient_correction[i].transpose();
+  }, 512);
+  const Real scale = -state.time_step * model.settings.stress_form_viscosity * model.particle_volume;
+  parallel_for_each_index(count, [&](std::size_t i) {
+    Vec3 force = Vec3::Zero();
+    const std::size_t first = lists.first(i);
+    const Mat3 stress_i = system.stress[i];
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index j = lists.indices[first + k];
+      const Vec3 along = pair_gradient[first + k] * (position[i] - position[j]).head<3>();
+      const Mat3 pair_stress = std::size_t(j) < count ? Mat3(stress_i + system.stress[j]) : stress_i;
+      force += pair_stress * along;
+    }
+    system.stress_product[i] = scale * force;
+  }, 512);
+}
+
+}  // namespace m3dp::sph::stages::weiler2018
