@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <utility>
 #include <vector>
 
 #include "m3dp/sph/boundary_sampling.hpp"
@@ -211,6 +212,7 @@ struct ColumnSample {
 struct ColumnResult {
   std::vector<ColumnSample> samples;
   double break_time = 0;      // s, when the column first parts (a gap over two spacings along it); 0: never
+  double break_height = 0;    // m, where (the lower side of the gap; the plate's face is at L0)
   double lower_part_strain = 0;  // the stretch of the material that started below `lower_height`, over its first length
 };
 
@@ -282,18 +284,24 @@ inline ColumnResult hang_column(const ColumnCase& column, double expected_break,
     std::vector<Real> heights;
     for (const Vec3& p : fluid.position) heights.push_back(p.z());
     std::sort(heights.begin(), heights.end());
-    Real gap = 0;
-    for (std::size_t n = 1; n < heights.size(); ++n) gap = std::max(gap, heights[n] - heights[n - 1]);
-    return double(gap);
+    Real gap = 0, where = 0;
+    for (std::size_t n = 1; n < heights.size(); ++n)
+      if (heights[n] - heights[n - 1] > gap) gap = heights[n] - heights[n - 1], where = heights[n - 1];
+    return std::pair<double, double>(gap, where);
   };
   ColumnResult result;
   std::size_t next_sample = 0;
   const double end_time = column.longest_fraction * expected_break;
   while (solver.time() < end_time) {
     solver.step();
-    if (solver.state().step % 10 == 0 && result.break_time == 0 && largest_gap() > 2 * d) {
-      result.break_time = solver.time();
-      std::printf("column parted at %.3f s (expected %.3f s, %.3f of it)\n", result.break_time, expected_break, result.break_time / expected_break);
+    if (solver.state().step % 10 == 0 && result.break_time == 0) {
+      const auto [gap, where] = largest_gap();
+      if (gap > 2 * d) {
+        result.break_time = solver.time();
+        result.break_height = where;
+        std::printf("column parted at %.3f s (expected %.3f s, %.3f of it), %.1f mm below the plate\n", result.break_time, expected_break,
+                    result.break_time / expected_break, 1e3 * (column.length - where));
+      }
     }
     if (next_sample < column.sample_fractions.size() && solver.time() >= column.sample_fractions[next_sample] * expected_break) {
       ColumnSample sample;

@@ -309,8 +309,13 @@ std::vector<SchemaRow> make_rows() {
          M3DP_SOLVER_REAL(shifting_factor), "shifting_factor");
   boolean("solver", "tension",
           "whether viscous material holds tension: a two-sided projection after the viscosity solve, zero at the free surface, so "
-          "that a stretched thread thins instead of cracking (experimental: its extensional stress is about twice Trouton's)",
+          "that a stretched thread thins instead of cracking (with <viscous_stress_form> 0.9 for its extensional stress)",
           [](Scene& scene, bool value) { scene.solver.tension = value; }, [](const Scene& scene) { return scene.solver.tension; });
+  number("solver", "viscous_stress_form", Quantity::plain_number, Limits::between(0, 0.95),
+         "the share of the implicit viscosity taken by the stress form (the renormalised velocity gradient, then the divergence of "
+         "mu (grad v + grad v^T)), isotropic where the pair form's normal stress along a lattice axis is twice the isotropic one; "
+         "0: the pair form alone; 0.9 for threads with <tension>",
+         M3DP_SOLVER_REAL(stress_form_viscosity), "stress_form_viscosity");
   structure("solver", "max_particles",
             "the most particles the scene may hold (> 0); default: what 80 % of this machine's memory holds at 2 kB a particle");
 #undef M3DP_SOLVER_REAL

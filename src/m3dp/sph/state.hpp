@@ -280,6 +280,7 @@ struct Workspace {
     std::vector<Mat3> stress;
     std::vector<Vec3> stress_product;
     std::vector<Mat3> gradient_correction;  // (n) M_i = B_i⁻¹, B_i = Σ_j (x_j − x_i) ⊗ V∇W_ij: exact gradients of linear fields
+    std::vector<Vec3> no_slip_wall_sum;     // (n) Σ_b V_b ∇W_ib over the walls the particle does not slip on
     // The preconditioner's coarse level: aggregates of particles (cells of a coarse grid) that move
     // as one (see viscosity/coarse_level.hpp).
     std::vector<std::uint64_t> aggregate_key;     // (n) coarse cell of each active particle

@@ -130,6 +130,8 @@ class ViscousOperator {
 void prepare_stress_product(const Model& model, const State& state, Workspace& workspace);
 /// The stress form's gradient corrections M_i of this step's positions (weiler2018_stress.cpp).
 void prepare_gradient_correction(const Model& model, const State& state, Workspace& workspace);
+/// The stress form's share of the right-hand side: the stress of the no-slip walls' own motion.
+void add_stress_form_walls_to_rhs(const Model& model, const State& state, Workspace& workspace);
 
 /// The system A v = b of this step: pair coefficients, block-Jacobi preconditioner, right-hand side,
 /// and the warm start v* + last step's viscous change in state.fluid.velocity (weiler2018_system.cpp).

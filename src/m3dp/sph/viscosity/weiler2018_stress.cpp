@@ -6,8 +6,8 @@
 // The stress form takes the velocity gradient first and then the divergence of the stress,
 //   G_i = Σ_j (v_j − v_i) ⊗ V∇W_ij M_i,   τ_i = μ_i (G_i + G_iᵀ),   F_i = V Σ_j (τ_i M_iᵀ + τ_j M_jᵀ) V∇W_ij,
 // with M_i = B_i⁻¹, B_i = Σ_j (x_j − x_i) ⊗ V∇W_ij, the renormalisation that makes the gradient exact
-// for linear fields inside and at a free surface alike (Bonet & Lok 1999); where B_i is nearly
-// singular (a particle with few neighbours), the rest lattice's calibration c I instead. F = −∂E/∂v
+// for linear fields inside and at a free surface alike (Bonet & Lok 1999), regularised where B_i is
+// nearly singular (a particle with few neighbours). F = −∂E/∂v
 // of E = Σ_i V μ_i |G_i + G_iᵀ|²/4, so −Δt F adds a symmetric positive semi-definite part to the
 // system and conjugate gradients still apply. Walls keep the pair form's no-
 // slip term; resting particles have no stress of their own (their velocity gradient is not taken).
@@ -18,6 +18,13 @@
 
 namespace m3dp::sph::stages::weiler2018 {
 
+namespace {
+/// Whether particle i's material does not slip on walls (the stress form then sees them).
+bool sticks_to_walls(const Model& model, const State& state, std::size_t i) {
+  return model.phases[state.fluid.phase[i]].sticks_to_walls;
+}
+}  // namespace
+
 void prepare_gradient_correction(const Model& model, const State& state, Workspace& workspace) {
   auto& system = workspace.viscosity_system;
   if (system.stress_product.empty()) return;
@@ -27,6 +34,8 @@ void prepare_gradient_correction(const Model& model, const State& state, Workspa
   const Real* pair_gradient = workspace.fluid_pair_gradient.data();
   const Real calibration = model.viscosity_calibration.fluid_gradient;
   system.gradient_correction.resize(state.fluid.size());
+  system.no_slip_wall_sum.resize(state.fluid.size());
+  const auto& walls = workspace.boundary_neighbors;
   parallel_for_each_index(count, [&](std::size_t i) {
     Mat3 moment = Mat3::Zero();  // B_i
     const std::size_t first = lists.first(i);
@@ -35,9 +44,25 @@ void prepare_gradient_correction(const Model& model, const State& state, Workspa
       const Vec3 offset = (position[i] - position[j]).head<3>();
       moment -= offset * (pair_gradient[first + k] * offset).transpose();
     }
-    // c B_i is the identity on the rest lattice, about ½ I at a flat free surface.
-    constexpr Real kLeastDeterminant = Real(0.02);
-    system.gradient_correction[i] = (calibration * moment).determinant() > kLeastDeterminant ? Mat3(moment.inverse()) : Mat3(calibration * Mat3::Identity());
+    Vec3 wall_sum = Vec3::Zero();
+    if (sticks_to_walls(model, state, i)) {
+      const std::size_t wall_first = walls.first(i);
+      for (Index k = 0; k < walls.counts[i]; ++k) {
+        const Index b = walls.indices[wall_first + k];
+        if (state.boundary.nozzle_bore[b] != 0) continue;  // the bore has its own slip setting
+        const Vec3 offset = state.fluid.position[i] - state.boundary.position[b];
+        const Vec3 along = workspace.boundary_pair_gradient[wall_first + k] * offset;
+        moment -= offset * along.transpose();
+        wall_sum += along;
+      }
+    }
+    system.no_slip_wall_sum[i] = wall_sum;
+    // c B_i is the identity on the rest lattice, about ½ I at a flat free surface, nearly singular for a
+    // particle with few neighbours: its inverse regularised, (c B_i + δ I)⁻¹ (1 + δ) c, so that no
+    // direction is amplified more than (1 + δ)/δ (a flat surface's gradient then reads 0.92 of its own).
+    constexpr Real kRegularisation = Real(0.1);
+    const Mat3 scaled = calibration * moment + kRegularisation * Mat3::Identity();
+    system.gradient_correction[i] = ((1 + kRegularisation) * calibration) * scaled.inverse();
   }, 1024);
 }
 
@@ -58,6 +83,7 @@ void prepare_stress_product(const Model& model, const State& state, Workspace& w
       const Vec3 along = pair_gradient[first + k] * (position[i] - position[j]).head<3>();  // V ∇W_ij
       gradient += (operand[j] - operand[i]).head<3>() * along.transpose();
     }
+    gradient -= operand[i].head<3>() * system.no_slip_wall_sum[i].transpose();  // the walls' part in v_i
     gradient = gradient * system.gradient_correction[i];
     system.stress[i] = viscosity[i] * (gradient + gradient.transpose()) * system.gradient_correction[i].transpose();
   }, 512);
@@ -72,7 +98,50 @@ void prepare_stress_product(const Model& model, const State& state, Workspace& w
       const Mat3 pair_stress = std::size_t(j) < count ? Mat3(stress_i + system.stress[j]) : stress_i;
       force += pair_stress * along;
     }
+    force += stress_i * system.no_slip_wall_sum[i];
     system.stress_product[i] = scale * force;
+  }, 512);
+}
+
+void add_stress_form_walls_to_rhs(const Model& model, const State& state, Workspace& workspace) {
+  auto& system = workspace.viscosity_system;
+  if (system.stress_product.empty()) return;
+  const std::size_t count = state.active_count;
+  const auto& lists = workspace.fluid_neighbors;
+  const auto& walls = workspace.boundary_neighbors;
+  const Vec4* position = workspace.solver_position.data();
+  const Real* pair_gradient = workspace.fluid_pair_gradient.data();
+  bool any_moving_wall = false;
+  // The stress of the walls' velocities alone, Σ_b v_b ⊗ V_b∇W_ib M_i, into system.stress.
+  parallel_for_each_index(count, [&](std::size_t i) {
+    Mat3 gradient = Mat3::Zero();
+    if (system.no_slip_wall_sum[i].squaredNorm() > 0) {
+      const std::size_t wall_first = walls.first(i);
+      for (Index k = 0; k < walls.counts[i]; ++k) {
+        const Index b = walls.indices[wall_first + k];
+        if (state.boundary.nozzle_bore[b] != 0) continue;
+        const Vec3 along = workspace.boundary_pair_gradient[wall_first + k] * (state.fluid.position[i] - state.boundary.position[b]);
+        gradient += state.boundary.velocity[b] * along.transpose();
+      }
+      gradient = gradient * system.gradient_correction[i];
+    }
+    system.stress[i] = state.fluid.viscosity[i] * (gradient + gradient.transpose()) * system.gradient_correction[i].transpose();
+  }, 512);
+  for (std::size_t i = 0; i < count && !any_moving_wall; ++i) any_moving_wall = !system.stress[i].isZero(0);
+  if (!any_moving_wall) return;
+  // b_i += Δt θ V Σ_j (P_i + P_j) V∇W_ij + Δt θ V P_i Σ_b V_b∇W_ib (minus the operator's sign).
+  const Real scale = state.time_step * model.settings.stress_form_viscosity * model.particle_volume;
+  parallel_for_each_index(count, [&](std::size_t i) {
+    Vec3 force = Vec3::Zero();
+    const std::size_t first = lists.first(i);
+    const Mat3 stress_i = system.stress[i];
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index j = lists.indices[first + k];
+      const Vec3 along = pair_gradient[first + k] * (position[i] - position[j]).head<3>();
+      force += (std::size_t(j) < count ? Mat3(stress_i + system.stress[j]) : stress_i) * along;
+    }
+    force += stress_i * system.no_slip_wall_sum[i];
+    system.rhs[i] += scale * force;
   }, 512);
 }
 

@@ -47,7 +47,6 @@ void build_system(const Model& model, State& state, Workspace& workspace) {
   if (stress_share > 0) {
     system.stress.assign(fluid.size(), Mat3::Zero());
     system.stress_product.resize(fluid.size());
-    prepare_gradient_correction(model, state, workspace);
   } else {
     system.stress.clear();
     system.stress_product.clear();
@@ -111,6 +110,11 @@ void build_system(const Model& model, State& state, Workspace& workspace) {
       finish_particle(i, fluid_coupling);
     }
   });
+  // The stress form's renormalisation and no-slip walls (its operator part is made at each product).
+  if (stress_share > 0) {
+    prepare_gradient_correction(model, state, workspace);
+    add_stress_form_walls_to_rhs(model, state, workspace);
+  }
 }
 
 }  // namespace m3dp::sph::stages::weiler2018
