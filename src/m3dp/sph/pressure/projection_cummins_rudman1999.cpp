@@ -22,16 +22,16 @@
 // κ = 0. The system is symmetric positive definite, solved by conjugate gradients with Jacobi's
 // diagonal (Jacobi alone stalls on the long wavelengths of a thread).
 //
-// The pressure found is added to FluidParticles::kappa_tension and applied again at the start of the
-// next step's pressure stage (apply_tension_pressure), before the DFSPH density solve and the
-// viscosity: the viscosity solve then balances it, and the next projection only corrects the change.
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_reduce.h>
-
+// The pull found (κ < 0; compression is the density solve's) is added to FluidParticles::kappa_tension
+// and applied again in the next step right before the viscosity solve (apply_tension_pressure, after
+// the DFSPH density solve, which would push a kept pull back): the viscosity solve then balances it,
+// and the next projection only corrects the change. The dilation of the material's interior is taken
+// back by moving positions, with the same conjugate gradients.
 #include <algorithm>
 #include <array>
 #include <cmath>
 
+#include "m3dp/core/deterministic_sums.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/sph/simd/neighbor_sums_avx2.hpp"
 #include "m3dp/sph/stages.hpp"
@@ -48,22 +48,6 @@ constexpr double kRelativeTolerance = 1e-3;
 constexpr double kAbsoluteToleranceFraction = 1e-2;
 /// A neighbourhood this lopsided (|Σ_j V ∇W_ij| over a flat face's) is at a free surface.
 constexpr Real kSurfaceLopsidedness = Real(0.25);
-
-/// The N sums of body(i, sums) over [0, count), added in a fixed order (the same on every run).
-template <std::size_t N, class Body>
-std::array<double, N> ordered_sums(std::size_t count, Body&& body) {
-  using Sums = std::array<double, N>;
-  return tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
-      [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) body(i, sums);
-        return sums;
-      },
-      [](Sums a, const Sums& b) {
-        for (std::size_t n = 0; n < N; ++n) a[n] += b[n];
-        return a;
-      });
-}
 
 /// Σ_j V (a_i − a_j)·∇W_ij over i's fluid neighbours: the rate of compression of field a at i (1/s for
 /// a velocity).
@@ -148,7 +132,7 @@ Vec4 kept_pressure_velocity_change(const Workspace& workspace, const Real* mass,
     difference += ((std::size_t(j) < active ? pressure[j] : Real(0)) - pressure_i) * gradient;
   }
   const Real lopsided = gradient_sum.norm() / flat_surface_sum;
-  const Real surface = std::clamp((lopsided - Real(0.25)) / Real(0.25), Real(0), Real(1));
+  const Real surface = std::clamp((lopsided - kSurfaceLopsidedness) / kSurfaceLopsidedness, Real(0), Real(1));
   return (difference + (2 * surface * pressure_i) * gradient_sum) / mass[i];
 }
 
@@ -165,7 +149,7 @@ ProjectionResult solve_projection(const Model& model, const State& state, Worksp
   auto& system = workspace.tension_system;
   const Real time_step = state.time_step;
   const Real* mass = state.fluid.mass.data();
-  const auto start = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
+  const auto start = deterministic_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
     system.solution[i] = 0;
     sums[0] += double(system.residual[i]) * double(system.residual[i]);
     sums[1] += std::abs(double(system.residual[i]));
@@ -174,7 +158,7 @@ ProjectionResult solve_projection(const Model& model, const State& state, Worksp
   const double rhs_norm = std::sqrt(start[0]);
   double residual_norm = rhs_norm, mean_change = start[1] / double(count) * squared_step;
   auto precondition = [&]() {
-    return ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+    return deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       system.preconditioned[i] = system.inverse_diagonal[i] * system.residual[i];
       sums[0] += double(system.residual[i]) * double(system.preconditioned[i]);
     })[0];
@@ -187,13 +171,13 @@ ProjectionResult solve_projection(const Model& model, const State& state, Worksp
     parallel_for_each_index(count, [&](std::size_t i) {
       system.velocity_change[i] = pressure_velocity_change(workspace, mass, system.direction.data(), i, count);
     });
-    const double curvature = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+    const double curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       system.product[i] = compression_rate(workspace, system.velocity_change.data(), i);
       sums[0] += double(system.direction[i]) * double(system.product[i]);
     })[0];
     if (!(curvature > 0)) break;
     const Real step = static_cast<Real>(residual_dot / curvature);
-    const auto next = ordered_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
+    const auto next = deterministic_sums<2>(count, [&](std::size_t i, std::array<double, 2>& sums) {
       system.solution[i] += step * system.direction[i];
       change[i] -= (time_step * step) * system.velocity_change[i];
       // A particle out of the projection (inverse diagonal 0: nearly alone) keeps p = 0 and no residual.
@@ -219,7 +203,7 @@ void apply_tension_pressure(const Model& model, State& state, Workspace& workspa
   const std::size_t count = state.active_count;
   if (!model.settings.tension || count == 0) return;
   auto& fluid = state.fluid;
-  const bool any = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+  const bool any = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
                      sums[0] += fluid.kappa_tension[i] != 0 ? 1 : 0;
                    })[0] > 0;
   if (!any) return;
@@ -261,40 +245,41 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   const Real flat_surface_sum = flat_surface_gradient_sum(model);
   system.at_surface.resize(size);
   std::fill(system.at_surface.begin() + static_cast<std::ptrdiff_t>(count), system.at_surface.end(), std::uint8_t(0));
+  // The diagonal of B M⁻¹ Bᵀ, (1/m_i)|Σ_j V∇W_ij|² + Σ_j (1/m_j)|V∇W_ij|² over active j, with the same sums.
+  // A particle with a quarter of a full neighbourhood or less (a drop, a fragment of a torn thread)
+  // is air to the projection, p = 0 (inverse diagonal 0): a pair drifting apart cannot be made
+  // divergence-free, and its kept pull grew without bound (to 3·10⁷ m²/s² in a falling stream's spray).
   parallel_for_each_index(count, [&](std::size_t i) {
     const std::size_t first = lists.first(i);
     Vec4 gradient_sum = Vec4::Zero();
-    for (Index k = 0; k < lists.counts[i]; ++k)
-      gradient_sum += workspace.fluid_pair_gradient[first + k] * (position[i] - position[lists.indices[first + k]]);
-    system.at_surface[i] = gradient_sum.norm() > kSurfaceLopsidedness * flat_surface_sum || workspace.boundary_neighbors.counts[i] > 0;
-  });
-  const Real volume = model.particle_volume;
-
-  // The velocities: B M⁻¹ Bᵀ p = B v / Δt, with the diagonal (1/m_i)|Σ_j V∇W_ij|² + Σ_j (1/m_j)|V∇W_ij|²
-  // over active j; each whole particle's dilation, (ρ/ρ0 − 1) where below ρ0, aside for the positions.
-  auto& dilation = workspace.scratch_real;
-  dilation.assign(count, Real(0));
-  const double any_dilation = ordered_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-    const std::size_t first = lists.first(i);
-    Vec4 gradient_sum = Vec4::Zero();
     Real squares = 0;
-    bool whole = !system.at_surface[i];
     for (Index k = 0; k < lists.counts[i]; ++k) {
       const Index j = lists.indices[first + k];
       const Vec4 gradient = workspace.fluid_pair_gradient[first + k] * (position[i] - position[j]);
       gradient_sum += gradient;
       if (std::size_t(j) < count) squares += gradient.squaredNorm() / mass[j];
-      whole = whole && !system.at_surface[j];
     }
+    system.at_surface[i] = gradient_sum.norm() > kSurfaceLopsidedness * flat_surface_sum || workspace.boundary_neighbors.counts[i] > 0;
     const Real diagonal = gradient_sum.squaredNorm() / mass[i] + squares;
-    // A particle with a quarter of a full neighbourhood or less (a drop, a fragment of a torn thread)
-    // is air to the projection, p = 0: a pair drifting apart cannot be made divergence-free, and its
-    // kept pull grew without bound (to 3·10⁷ m²/s² in a falling stream's spray).
     const bool alone = lists.counts[i] * 4 < std::size_t(model.full_neighbourhood);
     system.inverse_diagonal[i] = diagonal > 0 && !alone ? Real(1) / diagonal : Real(0);
-    system.residual[i] = alone ? Real(0) : compression_rate(workspace, velocity.data(), i) / time_step;
-    dilation[i] = whole && !alone ? std::min(fluid.density[i] * volume / mass[i] - 1, Real(0)) : Real(0);
-    if (alone) fluid.kappa_tension[i] = 0;
+  });
+  const Real volume = model.particle_volume;
+
+  // The velocities: B M⁻¹ Bᵀ p = B v / Δt; each whole particle's dilation, (ρ/ρ0 − 1) where below ρ0,
+  // aside for the positions.
+  auto& dilation = workspace.scratch_real;
+  dilation.assign(count, Real(0));
+  const double any_dilation = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+    if (system.inverse_diagonal[i] == 0) {  // air to the projection
+      system.residual[i] = 0;
+      fluid.kappa_tension[i] = 0;
+      return;
+    }
+    bool whole = !system.at_surface[i];
+    for (const Index j : lists.of(i)) whole = whole && !system.at_surface[j];
+    system.residual[i] = compression_rate(workspace, velocity.data(), i) / time_step;
+    dilation[i] = whole ? std::min(fluid.density[i] * volume / mass[i] - 1, Real(0)) : Real(0);
     sums[0] += dilation[i] < 0 ? 1 : 0;
   })[0];
   const double tolerance = kAbsoluteToleranceFraction * double(model.settings.divergence_tolerance);

@@ -6,6 +6,7 @@
 
 #include <array>
 
+#include "m3dp/core/deterministic_sums.hpp"
 #include "m3dp/sph/simd/neighbor_sums_avx2.hpp"
 #include "m3dp/sph/stages.hpp"
 
@@ -13,30 +14,8 @@ namespace m3dp::sph::stages::weiler2018 {
 
 inline constexpr Real kDimensionFactor = 2 * (3 + 2);  // 2(d+2), d = 3
 
-/// Runs range_body(range, sums) over ranges of the particles and returns the N sums (double), added in a
-/// fixed order: the same on every run, so two identical simulations stay identical.
-template <std::size_t N, class RangeBody>
-std::array<double, N> deterministic_range_sums(std::size_t count, RangeBody&& range_body) {
-  using Sums = std::array<double, N>;
-  return tbb::parallel_deterministic_reduce(
-      tbb::blocked_range<std::size_t>(0, count, 256), Sums{},
-      [&](const tbb::blocked_range<std::size_t>& range, Sums sums) {
-        range_body(range, sums);
-        return sums;
-      },
-      [](Sums a, const Sums& b) {
-        for (std::size_t n = 0; n < N; ++n) a[n] += b[n];
-        return a;
-      });
-}
-
-/// body(i, sums) for every particle.
-template <std::size_t N, class Body>
-std::array<double, N> deterministic_sums(std::size_t count, Body&& body) {
-  return deterministic_range_sums<N>(count, [&](const tbb::blocked_range<std::size_t>& range, std::array<double, N>& sums) {
-    for (std::size_t i = range.begin(); i != range.end(); ++i) body(i, sums);
-  });
-}
+using m3dp::deterministic_range_sums;
+using m3dp::deterministic_sums;
 
 /// y = A x, x in the system's padded_operand (padded: one SIMD operation per neighbour; the positions
 /// are the density pass's padded copies, unchanged until advection).
@@ -52,20 +31,8 @@ class ViscousOperator {
 
   /// (A x)_i.
   [[nodiscard]] Vec3 row(std::size_t i) const {
-    const Vec4 position_i = position_[i];
-    const Vec4 x_i = operand_[i];
-    Vec4 result = Vec4::Zero();
-    const std::size_t first = lists_.first(i);
-    const Index* neighbor = lists_.indices.data() + first;
-    const Real* coefficient = coefficient_ + first;
-    for (Index k = 0; k < lists_.counts[i]; ++k) {
-      const Index j = neighbor[k];
-      const Vec4 r = position_i - position_[j];
-      result += (coefficient[k] * r.dot(x_i - operand_[j])) * r;
-    }
-    // The walls' pairs (fixed velocities, on the right-hand side) leave c r rᵀ x_i, summed in own_block.
-    const Vec3 row = result.head<3>() + own_block_[i] * x_i.head<3>();
-    return stress_product_ ? Vec3(row + stress_product_[i]) : row;
+    const Vec3 pair_part = pair_row(i);
+    return stress_product_ ? Vec3(pair_part + stress_product_[i]) : pair_part;
   }
 
   /// visit(i, (A x)_i) for the particles of a range, in order: the AVX-512 or AVX2 sweep where there is one.
@@ -102,18 +69,24 @@ class ViscousOperator {
       return;
     }
 #endif
-    for (std::size_t i = range.begin(); i != range.end(); ++i) {
-      const Vec4 position_i = position_[i];
-      const Vec4 x_i = operand_[i];
-      Vec4 result = Vec4::Zero();
-      const std::size_t first = lists_.first(i);
-      for (Index k = 0; k < lists_.counts[i]; ++k) {
-        const Index j = lists_.indices[first + k];
-        const Vec4 r = position_i - position_[j];
-        result += (coefficient_[first + k] * r.dot(x_i - operand_[j])) * r;
-      }
-      visit(i, Vec3(result.head<3>() + own_block_[i] * x_i.head<3>()));
+    for (std::size_t i = range.begin(); i != range.end(); ++i) visit(i, pair_row(i));
+  }
+
+  /// The pair form's and the walls' (A x)_i.
+  [[nodiscard]] Vec3 pair_row(std::size_t i) const {
+    const Vec4 position_i = position_[i];
+    const Vec4 x_i = operand_[i];
+    Vec4 result = Vec4::Zero();
+    const std::size_t first = lists_.first(i);
+    const Index* neighbor = lists_.indices.data() + first;
+    const Real* coefficient = coefficient_ + first;
+    for (Index k = 0; k < lists_.counts[i]; ++k) {
+      const Index j = neighbor[k];
+      const Vec4 r = position_i - position_[j];
+      result += (coefficient[k] * r.dot(x_i - operand_[j])) * r;
     }
+    // The walls' pairs (fixed velocities, on the right-hand side) leave c r rᵀ x_i, summed in own_block.
+    return Vec3(result.head<3>() + own_block_[i] * x_i.head<3>());
   }
 
   const Vec4* position_;
@@ -125,8 +98,8 @@ class ViscousOperator {
 };
 
 /// The stress form's share of A times the system's padded operand x into stress_product (a no-op
-/// without it; weiler2018_stress.cpp): −Δt θ c V Σ_j (τ_i + τ_j) V∇W_ij with τ = μ (G + Gᵀ) of x,
-/// G_i = c Σ_j (x_j − x_i) ⊗ V∇W_ij. Run before each product of a new operand.
+/// without it; weiler2018_stress.cpp): −Δt θ V Σ_j (τ_i M_iᵀ + τ_j M_jᵀ) V∇W_ij with τ = μ (G + Gᵀ) of
+/// x and G_i its renormalised gradient. Run before each product of a new operand.
 void prepare_stress_product(const Model& model, const State& state, Workspace& workspace);
 /// The stress form's gradient corrections M_i of this step's positions (weiler2018_stress.cpp).
 void prepare_gradient_correction(const Model& model, const State& state, Workspace& workspace);

@@ -9,8 +9,11 @@
 // for linear fields inside and at a free surface alike (Bonet & Lok 1999), regularised where B_i is
 // nearly singular (a particle with few neighbours). F = −∂E/∂v
 // of E = Σ_i V μ_i |G_i + G_iᵀ|²/4, so −Δt F adds a symmetric positive semi-definite part to the
-// system and conjugate gradients still apply. Walls keep the pair form's no-
-// slip term; resting particles have no stress of their own (their velocity gradient is not taken).
+// system and conjugate gradients still apply. A wall the material does not slip on (sticks_to_walls)
+// is in the gradient at its own velocity, Σ_b (v_b − v_i) ⊗ V_b∇W_ib: the part in v_b goes to the
+// right-hand side (the stress of the walls' motion alone), the one in v_i stays in the operator; other
+// walls are air to the stress form (their friction is the pair form's wall term, which stays whole).
+// Resting particles have no stress of their own (their velocity gradient is not taken).
 // (Two-pass SPH viscosity: Watkins, Bhattal, Francis, Turner & Whitworth 1996, A&AS 119, 177; the
 // symmetric form as Bonet & Lok 1999.)
 #include "m3dp/core/parallel.hpp"
@@ -22,6 +25,29 @@ namespace {
 /// Whether particle i's material does not slip on walls (the stress form then sees them).
 bool sticks_to_walls(const Model& model, const State& state, std::size_t i) {
   return model.phases[state.fluid.phase[i]].sticks_to_walls;
+}
+
+/// P_i = μ_i (G + Gᵀ) M_iᵀ of particle i's gradient G (already renormalised).
+Mat3 corrected_stress(const State& state, const Workspace& workspace, std::size_t i, const Mat3& gradient) {
+  const Mat3& correction = workspace.viscosity_system.gradient_correction[i];
+  return state.fluid.viscosity[i] * (gradient + gradient.transpose()) * correction.transpose();
+}
+
+/// Σ_j (P_i + P_j) V∇W_ij + P_i Σ_b V_b∇W_ib of the stresses in system.stress (P_j = 0 at resting j):
+/// the stress form's force on i over V.
+Vec3 stress_divergence(const State& state, const Workspace& workspace, std::size_t i) {
+  const auto& system = workspace.viscosity_system;
+  const auto& lists = workspace.fluid_neighbors;
+  const Vec4* position = workspace.solver_position.data();
+  const std::size_t count = state.active_count, first = lists.first(i);
+  const Mat3 stress_i = system.stress[i];
+  Vec3 force = Vec3::Zero();
+  for (Index k = 0; k < lists.counts[i]; ++k) {
+    const Index j = lists.indices[first + k];
+    const Vec3 along = workspace.fluid_pair_gradient[first + k] * (position[i] - position[j]).head<3>();
+    force += (std::size_t(j) < count ? Mat3(stress_i + system.stress[j]) : stress_i) * along;
+  }
+  return force + stress_i * system.no_slip_wall_sum[i];
 }
 }  // namespace
 
@@ -74,7 +100,6 @@ void prepare_stress_product(const Model& model, const State& state, Workspace& w
   const Vec4* position = workspace.solver_position.data();
   const Vec4* operand = system.padded_operand.data();
   const Real* pair_gradient = workspace.fluid_pair_gradient.data();
-  const Real* viscosity = state.fluid.viscosity.data();
   parallel_for_each_index(count, [&](std::size_t i) {
     Mat3 gradient = Mat3::Zero();
     const std::size_t first = lists.first(i);
@@ -84,36 +109,19 @@ void prepare_stress_product(const Model& model, const State& state, Workspace& w
       gradient += (operand[j] - operand[i]).head<3>() * along.transpose();
     }
     gradient -= operand[i].head<3>() * system.no_slip_wall_sum[i].transpose();  // the walls' part in v_i
-    gradient = gradient * system.gradient_correction[i];
-    system.stress[i] = viscosity[i] * (gradient + gradient.transpose()) * system.gradient_correction[i].transpose();
+    system.stress[i] = corrected_stress(state, workspace, i, gradient * system.gradient_correction[i]);
   }, 512);
   const Real scale = -state.time_step * model.settings.stress_form_viscosity * model.particle_volume;
-  parallel_for_each_index(count, [&](std::size_t i) {
-    Vec3 force = Vec3::Zero();
-    const std::size_t first = lists.first(i);
-    const Mat3 stress_i = system.stress[i];
-    for (Index k = 0; k < lists.counts[i]; ++k) {
-      const Index j = lists.indices[first + k];
-      const Vec3 along = pair_gradient[first + k] * (position[i] - position[j]).head<3>();
-      const Mat3 pair_stress = std::size_t(j) < count ? Mat3(stress_i + system.stress[j]) : stress_i;
-      force += pair_stress * along;
-    }
-    force += stress_i * system.no_slip_wall_sum[i];
-    system.stress_product[i] = scale * force;
-  }, 512);
+  parallel_for_each_index(count, [&](std::size_t i) { system.stress_product[i] = scale * stress_divergence(state, workspace, i); }, 512);
 }
 
 void add_stress_form_walls_to_rhs(const Model& model, const State& state, Workspace& workspace) {
   auto& system = workspace.viscosity_system;
   if (system.stress_product.empty()) return;
   const std::size_t count = state.active_count;
-  const auto& lists = workspace.fluid_neighbors;
   const auto& walls = workspace.boundary_neighbors;
-  const Vec4* position = workspace.solver_position.data();
-  const Real* pair_gradient = workspace.fluid_pair_gradient.data();
-  bool any_moving_wall = false;
-  // The stress of the walls' velocities alone, Σ_b v_b ⊗ V_b∇W_ib M_i, into system.stress.
-  parallel_for_each_index(count, [&](std::size_t i) {
+  // The stress of the walls' velocities alone, Σ_b v_b ⊗ V_b∇W_ib M_i, into system.stress; whether any is not zero.
+  const double moving = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
     Mat3 gradient = Mat3::Zero();
     if (system.no_slip_wall_sum[i].squaredNorm() > 0) {
       const std::size_t wall_first = walls.first(i);
@@ -123,26 +131,14 @@ void add_stress_form_walls_to_rhs(const Model& model, const State& state, Worksp
         const Vec3 along = workspace.boundary_pair_gradient[wall_first + k] * (state.fluid.position[i] - state.boundary.position[b]);
         gradient += state.boundary.velocity[b] * along.transpose();
       }
-      gradient = gradient * system.gradient_correction[i];
     }
-    system.stress[i] = state.fluid.viscosity[i] * (gradient + gradient.transpose()) * system.gradient_correction[i].transpose();
-  }, 512);
-  for (std::size_t i = 0; i < count && !any_moving_wall; ++i) any_moving_wall = !system.stress[i].isZero(0);
-  if (!any_moving_wall) return;
-  // b_i += Δt θ V Σ_j (P_i + P_j) V∇W_ij + Δt θ V P_i Σ_b V_b∇W_ib (minus the operator's sign).
+    system.stress[i] = corrected_stress(state, workspace, i, gradient * system.gradient_correction[i]);
+    sums[0] += gradient.isZero(0) ? 0 : 1;
+  })[0];
+  if (moving == 0) return;
+  // b_i += Δt θ V (Σ_j (P_i + P_j) V∇W_ij + P_i Σ_b V_b∇W_ib) (minus the operator's sign).
   const Real scale = state.time_step * model.settings.stress_form_viscosity * model.particle_volume;
-  parallel_for_each_index(count, [&](std::size_t i) {
-    Vec3 force = Vec3::Zero();
-    const std::size_t first = lists.first(i);
-    const Mat3 stress_i = system.stress[i];
-    for (Index k = 0; k < lists.counts[i]; ++k) {
-      const Index j = lists.indices[first + k];
-      const Vec3 along = pair_gradient[first + k] * (position[i] - position[j]).head<3>();
-      force += (std::size_t(j) < count ? Mat3(stress_i + system.stress[j]) : stress_i) * along;
-    }
-    force += stress_i * system.no_slip_wall_sum[i];
-    system.rhs[i] += scale * force;
-  }, 512);
+  parallel_for_each_index(count, [&](std::size_t i) { system.rhs[i] += scale * stress_divergence(state, workspace, i); }, 512);
 }
 
 }  // namespace m3dp::sph::stages::weiler2018
