@@ -6,7 +6,7 @@
 // engine's name for it where that differs, and how it fills a Scene; its default is read from a
 // default Scene (the settings structs), never written twice. Elements whose meaning is special
 // (boxes, vectors, names of other things) have rows without a setter: documented and checked as
-// children here, read by hand in scene.cpp.
+// children here, read by hand by the reader's element files (scene_reader.hpp lists them).
 #include <functional>
 #include <optional>
 #include <span>
