@@ -420,12 +420,18 @@ one step belong together (ids tells which particle a row is: the order changes b
         py::dict result;
         result["commanded"] = balance.commanded;
         result["emitted"] = balance.emitted;
+        result["primed"] = balance.primed;
+        result["in_bores"] = balance.in_bores;
+        result["laid"] = balance.laid;
         result["lost_at_nozzles"] = balance.lost_at_nozzles;
         result["removed"] = balance.removed;
         result["in_particles"] = balance.in_particles;
         return result;
       }, "Where the printed volume went so far (m³), as summary.json's volume_m3: commanded (asked of the nozzles), "
-         "emitted, lost_at_nozzles (asked while blocked, never emitted), removed (left the bounds), in_particles (now).")
+         "emitted (the bores' priming included), primed (what filled the bores before their first layer), in_bores "
+         "(in the bores now), laid (left the exits: emitted - in_bores), lost_at_nozzles (asked while blocked, never "
+         "emitted), removed (left the bounds), in_particles (now). commanded = laid + lost_at_nozzles + in_bores - "
+         "primed, within a disc of particles a nozzle.")
       .def_property_readonly("printed_mesh", [](PySimulation& self) -> py::object {
         const auto& mesh = self.simulation().printed_mesh();
         if (!mesh) return py::none();
@@ -624,6 +630,9 @@ one step belong together (ids tells which particle a row is: the order changes b
         result["volume_commanded_m3"] = engine.volume_commanded;
         result["volume_emitted_m3"] = double(engine.particles_emitted) * double(self.simulation().solver().model().particle_volume);
         result["volume_lost_m3"] = engine.volume_lost;
+        result["volume_primed_m3"] = engine.volume_primed;
+        result["volume_in_bore_m3"] = double(m3dp::sph::particles_in_bore(self.simulation().solver(), python::head_index(self, head))) *
+                                      double(self.simulation().solver().model().particle_volume);
         result["blocked"] = engine.blocked_since >= 0;
         result["blocked_time_s"] = engine.blocked_time;
         // Who moves it (its path, external commands, or its way back to its path) and, under a
@@ -640,7 +649,7 @@ one step belong together (ids tells which particle a row is: the order changes b
       }, py::arg("head"), "The nozzle exit's pose (material leaves along its −z), velocity (m/s), whether it extrudes, "
                           "its flow (m³/s), that flow over the nominal, for a nozzle with a bore the pump's "
                           "extrusion force (N) and pressure (Pa; 0 without a bore), the volume it was asked for, "
-                          "emitted and lost (m³), whether it is blocked now and for how long it was in all (s).")
+                          "emitted, lost, that primed its bore and in its bore now (m³), whether it is blocked now and for how long it was in all (s).")
       .def("set_extrusion", [](PySimulation& self, const std::string& head, std::optional<bool> extruding, std::optional<double> flow_scale) {
         sim::Simulation::HeadCommand command;
         command.extruding = extruding;

@@ -134,6 +134,15 @@ assert.ok(lastCount > 0, "no particles in the last frame");
 // Times: frames advance, every frame has its transforms, particles, joints and numbers.
 const runTimes = byTopic("/run").map((message) => message.value.time);
 for (let i = 1; i < runTimes.length; ++i) assert.ok(runTimes[i] > runTimes[i - 1], `/run time goes back at ${i}`);
+// The nozzle's volume balance on /run: what was asked for left the exit, was lost while blocked, or
+// went into the bore beyond what primed it, within the layers due but not yet emitted.
+for (const nozzle of byTopic("/run").at(-1).value.nozzles) {
+  const { volume_commanded: commanded, volume_laid: laid, volume_in_bore: inBore, volume_primed: primed, volume_lost: lost } = nozzle;
+  assert.ok([commanded, laid, inBore, primed, lost].every(Number.isFinite), `${nozzle.name}: ${JSON.stringify(nozzle)}`);
+  assert.ok(inBore >= 0 && (primed > 0) === (inBore > 0), `${nozzle.name}: ${inBore} m³ in its bore, ${primed} primed it`);
+  if (commanded > 0) assert.ok(laid > 0 && Math.abs(commanded - (laid + lost + inBore - primed)) < 0.25 * commanded,
+    `${nozzle.name}: ${commanded} m³ commanded, ${laid} laid, ${lost} lost, ${inBore} in the bore, ${primed} primed it`);
+}
 for (const topic of ["/tf", "/particles", "/joints"]) assert.ok(Math.abs(byTopic(topic).length - runTimes.length) <= 1, `${topic}: ${byTopic(topic).length} messages for ${runTimes.length} frames`);
 const joints = byTopic("/joints").at(-1).value;
 assert.equal(joints.robot, "ur10");

@@ -236,6 +236,11 @@ std::string encode_run_stats(const RunStats& stats) {
     out.set_y(nozzle.position.y());
     out.set_z(nozzle.position.z());
     out.set_tracking_error(nozzle.tracking_error);
+    out.set_volume_commanded(nozzle.volume_commanded);
+    out.set_volume_laid(nozzle.volume_laid);
+    out.set_volume_in_bore(nozzle.volume_in_bore);
+    out.set_volume_lost(nozzle.volume_lost);
+    out.set_volume_primed(nozzle.volume_primed);
   }
   message.set_step(stats.step);
   for (const double density : stats.material_density) message.add_material_density(density);

@@ -75,6 +75,9 @@ struct NozzleStatus {
   double volume_rate = 0;  // m³/s
   Vec3 position = Vec3::Zero();
   double tracking_error = 0;  // m from the path's point now
+  // Its volume balance so far (m³): asked for, out of the exit, in its bore now, lost while blocked,
+  // and what filled its bore before its first layer.
+  double volume_commanded = 0, volume_laid = 0, volume_in_bore = 0, volume_lost = 0, volume_primed = 0;
 };
 struct RunStats {
   double time = 0, real_time_factor = 0;

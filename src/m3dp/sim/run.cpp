@@ -195,12 +195,20 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
   const auto& volume = summary.volume;
   if (volume.commanded > 0 || volume.emitted > 0) {
     constexpr double kCm3 = 1e6;  // cm³ per m³
-    text += fmt::format("  volume      {:.4g} cm3 commanded, {:.4g} emitted, {:.4g} lost at blocked nozzles, {:.4g} left the bounds",
-                        kCm3 * volume.commanded, kCm3 * volume.emitted, kCm3 * volume.lost_at_nozzles, kCm3 * volume.removed);
-    if (!summary.meshes.empty() && volume.emitted > 0) {
+    // What was asked for against where it went: out of the exits, lost while blocked, and (nozzles
+    // with a bore) what went into the bores beyond what primed them, which were filled apart.
+    text += fmt::format("  volume      {:.4g} cm3 commanded: {:.4g} laid", kCm3 * volume.commanded, kCm3 * volume.laid);
+    if (volume.primed > 0 || volume.in_bores > 0)
+      text += fmt::format(", {:.4g} on its way through the bores", kCm3 * (volume.in_bores - volume.primed));
+    text += fmt::format(", {:.4g} lost at blocked nozzles", kCm3 * volume.lost_at_nozzles);
+    if (volume.primed > 0 || volume.in_bores > 0)
+      text += fmt::format(" (the bores hold {:.4g}, {:.4g} of it filled them before the first layer)", kCm3 * volume.in_bores,
+                          kCm3 * volume.primed);
+    text += fmt::format("; {:.4g} left the bounds", kCm3 * volume.removed);
+    if (!summary.meshes.empty() && volume.in_particles > 0) {
       const auto& last_mesh = summary.meshes.back();
-      text += fmt::format("; last mesh ({:.3f} s) {:.4g} cm3, {:.1f} % of the emitted", last_mesh.time, kCm3 * last_mesh.volume,
-                          100 * last_mesh.volume / volume.emitted);
+      text += fmt::format("; last mesh ({:.3f} s) {:.4g} cm3, {:.1f} % of the particles' volume", last_mesh.time, kCm3 * last_mesh.volume,
+                          100 * last_mesh.volume / volume.in_particles);
     }
     text += "\n";
   }

@@ -91,7 +91,10 @@ struct RunSummary {
   /// Where the printed volume went (m³): volume = mass / rest density, d³ a particle.
   struct VolumeBalance {
     double commanded = 0;        // the flow the paths or G-code asked of the nozzles: π D²/4 · U · flow scale · time
-    double emitted = 0;          // particles the nozzles emitted
+    double emitted = 0;          // particles the nozzles emitted, the bores' priming included
+    double primed = 0;           // what filled the bores before their first layer (emitted, not commanded)
+    double in_bores = 0;         // particles inside the nozzles' bores at the end
+    double laid = 0;             // what left the exits: emitted − in_bores
     double lost_at_nozzles = 0;  // asked for while a nozzle was blocked, never emitted
     double removed = 0;          // particles that left the bounds
     double in_particles = 0;     // particles at the end, at their rest density
@@ -103,6 +106,7 @@ struct RunSummary {
     double volume_commanded = 0, volume_emitted = 0, volume_lost = 0;  // m³
     double blocked_time = 0;                                           // s in all
     double volume_primed = 0;                                          // m³ that filled a bore (in volume_emitted)
+    double volume_in_bore = 0, volume_laid = 0;                        // m³ in the bore at the end, and what left the exit
     double extrusion_pressure = -1, extrusion_pressure_max = -1;       // Pa at the end and the largest; < 0: no bore
     sph::NozzleState::Blockage longest_blockage;                       // duration 0: never blocked
   };

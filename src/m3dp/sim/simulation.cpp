@@ -333,11 +333,15 @@ Simulation::VolumeBalance Simulation::volume_balance() const {
   const auto& state = solver_.state();
   const double particle_volume = solver_.model().particle_volume;
   VolumeBalance balance;
-  for (const auto& nozzle : state.nozzles) {
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+    const auto& nozzle = state.nozzles[n];
     balance.commanded += nozzle.volume_commanded;
     balance.emitted += double(nozzle.particles_emitted) * particle_volume;
+    balance.primed += nozzle.volume_primed;
+    balance.in_bores += double(sph::particles_in_bore(solver_, n)) * particle_volume;
     balance.lost_at_nozzles += nozzle.volume_lost;
   }
+  balance.laid = balance.emitted - balance.in_bores;
   balance.removed = double(state.particles_removed_total) * particle_volume;
   balance.in_particles = double(solver_.fluid().size()) * particle_volume;
   return balance;

@@ -142,10 +142,12 @@ class Simulation {
   }
 
   /// Where the printed volume went so far (m³; a particle is d³, at its rest density): what the
-  /// paths or commands asked of the nozzles, what they emitted, what they could not (blocked), what
-  /// left the bounds, and what the particles hold now.
+  /// paths or commands asked of the nozzles, what they emitted (the bores' priming included), what
+  /// fills their bores now and what primed them, what left their exits (laid = emitted − in_bores),
+  /// what they could not emit (blocked), what left the bounds, and what the particles hold now.
+  /// commanded = laid + lost_at_nozzles + (in_bores − primed), within a disc of particles a nozzle.
   struct VolumeBalance {
-    double commanded = 0, emitted = 0, lost_at_nozzles = 0, removed = 0, in_particles = 0;
+    double commanded = 0, emitted = 0, primed = 0, in_bores = 0, laid = 0, lost_at_nozzles = 0, removed = 0, in_particles = 0;
   };
   [[nodiscard]] VolumeBalance volume_balance() const;
   /// More than this fraction of the material ever present (initial and emitted, by mass) has left

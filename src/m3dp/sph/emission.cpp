@@ -193,9 +193,8 @@ void drive_pistons(const Model& model, State& state, bool measure) {
     const NozzleGeometry& geometry = model.nozzle_geometry[n];
     if (!geometry.has_bore()) continue;
     const bool driving = nozzle.extruding && nozzle.flow_scale > 0;
-    const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
-    const Vec3 top = nozzle.pose.position - settings.bore_length * axis;
-    const Real radius_squared = settings.inner_diameter * settings.inner_diameter / 4;
+    const BoreRegion bore(model, nozzle, n);
+    const Vec3& axis = bore.axis;
     // The discs advance a spacing each layer period (their section is π D²/4 within rounding).
     const Real disc_speed = static_cast<Real>(diameter / geometry.layer_period);
     const Vec3 piston_velocity = nozzle.velocity + disc_speed * nozzle.flow_scale * axis;
@@ -206,11 +205,7 @@ void drive_pistons(const Model& model, State& state, bool measure) {
       std::size_t ahead = 0, in_bore = 0;
     };
     const std::size_t count = state.active_count;
-    auto in_bore = [&](std::size_t i, Real& depth) {
-      const Vec3 offset = fluid.position[i] - top;
-      depth = offset.dot(axis);
-      return depth >= -diameter && depth <= settings.bore_length && (offset - depth * axis).squaredNorm() <= radius_squared;
-    };
+    auto in_bore = [&](std::size_t i, Real& depth) { return bore.contains(fluid.position[i], depth); };
     if (driving) {
       const Sums ahead = tbb::parallel_deterministic_reduce(
           tbb::blocked_range<std::size_t>(0, count, 2048), Sums{},

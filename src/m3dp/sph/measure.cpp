@@ -4,6 +4,11 @@
 #include <numeric>
 
 #include "m3dp/core/parallel.hpp"
+#include "m3dp/sph/stages.hpp"
+
+#include <tbb/parallel_reduce.h>
+
+#include <functional>
 
 namespace m3dp::sph {
 
@@ -65,6 +70,21 @@ DensityStatistics density_statistics(const Solver& solver, const std::vector<Rea
   statistics.median = percentile_of_sorted(error, 0.5);
   statistics.p99 = percentile_of_sorted(error, 0.99);
   return statistics;
+}
+
+std::size_t particles_in_bore(const Solver& solver, std::size_t nozzle) {
+  const Model& model = solver.model();
+  if (!model.nozzle_geometry[nozzle].has_bore()) return 0;
+  const stages::BoreRegion bore(model, solver.state().nozzles[nozzle], nozzle);
+  const auto& position = solver.fluid().position;
+  return tbb::parallel_reduce(
+      tbb::blocked_range<std::size_t>(0, position.size(), 4096), std::size_t(0),
+      [&](const tbb::blocked_range<std::size_t>& range, std::size_t count) {
+        Real depth = 0;
+        for (std::size_t i = range.begin(); i != range.end(); ++i) count += bore.contains(position[i], depth) ? 1 : 0;
+        return count;
+      },
+      std::plus<>());
 }
 
 }  // namespace m3dp::sph

@@ -27,4 +27,8 @@ double percentile_of_sorted(std::span<const double> sorted, double fraction);
 /// Of `density` (kg/m³, one per particle) against each particle's phase's rest density.
 DensityStatistics density_statistics(const Solver& solver, const std::vector<Real>& density);
 
+/// The fluid particles inside nozzle `nozzle`'s bore now (stages::BoreRegion), moving or resting; 0
+/// for a nozzle without a bore. The volume balance's material that has not left the exit.
+std::size_t particles_in_bore(const Solver& solver, std::size_t nozzle);
+
 }  // namespace m3dp::sph

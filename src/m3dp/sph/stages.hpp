@@ -38,6 +38,24 @@ void remove_out_of_bounds(const Model& model, State& state, Workspace& workspace
 // ---- emit (emission.cpp) ----
 /// Nozzle disc layers, where there is room in front of the nozzle.
 void emit_layers(const Model& model, State& state, Workspace& workspace);
+/// Nozzle `n`'s bore where the nozzle is now: from a spacing above its top (where discs come in)
+/// down to its exit plane, within its radius. What the pump drives and the volume balance counts.
+struct BoreRegion {
+  Vec3 top, axis;  // m; the axis points out of the exit
+  Real length = 0, radius_squared = 0, margin = 0;
+  BoreRegion(const Model& model, const NozzleState& nozzle, std::size_t n)
+      : top(nozzle.pose.position - model.nozzles[n].bore_length * nozzle.pose.rotate(Vec3(0, 0, -1))),
+        axis(nozzle.pose.rotate(Vec3(0, 0, -1))),
+        length(model.nozzles[n].bore_length),
+        radius_squared(model.nozzles[n].inner_diameter * model.nozzles[n].inner_diameter / 4),
+        margin(model.particle_diameter) {}
+  /// Whether `position` is inside; `depth` (m below the top) is set either way.
+  [[nodiscard]] bool contains(const Vec3& position, Real& depth) const {
+    const Vec3 offset = position - top;
+    depth = offset.dot(axis);
+    return depth >= -margin && depth <= length && (offset - depth * axis).squaredNorm() <= radius_squared;
+  }
+};
 
 // ---- reorder (rest_detection.cpp, reorder.cpp) ----
 /// Particles that rested long enough leave the active range; woken ones re-enter it.

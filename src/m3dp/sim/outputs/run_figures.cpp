@@ -76,6 +76,8 @@ class RunFigures final : public RunObserver {
       report.volume_lost = nozzle.volume_lost;
       report.blocked_time = nozzle.blocked_time;
       report.volume_primed = nozzle.volume_primed;
+      report.volume_in_bore = double(sph::particles_in_bore(solver, n)) * particle_volume;
+      report.volume_laid = report.volume_emitted - report.volume_in_bore;
       if (solver.model().nozzle_geometry[n].has_bore()) {
         report.extrusion_pressure = nozzle.extrusion_pressure;
         report.extrusion_pressure_max = nozzle.extrusion_pressure_max;
@@ -86,6 +88,9 @@ class RunFigures final : public RunObserver {
     const Simulation::VolumeBalance balance = simulation.volume_balance();
     summary.volume.commanded = balance.commanded;
     summary.volume.emitted = balance.emitted;
+    summary.volume.primed = balance.primed;
+    summary.volume.in_bores = balance.in_bores;
+    summary.volume.laid = balance.laid;
     summary.volume.lost_at_nozzles = balance.lost_at_nozzles;
     summary.volume.removed = balance.removed;
     summary.volume.in_particles = balance.in_particles;

@@ -36,10 +36,12 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                             {"steps_blocked", nozzle.steps_blocked},
                             {"volume_commanded_m3", nozzle.volume_commanded},
                             {"volume_emitted_m3", nozzle.volume_emitted},
+                            {"volume_laid_m3", nozzle.volume_laid},
                             {"volume_lost_m3", nozzle.volume_lost},
                             {"blocked_time_s", nozzle.blocked_time}};
     if (nozzle.extrusion_pressure >= 0) {
       entry["volume_primed_m3"] = nozzle.volume_primed;
+      entry["volume_in_bore_m3"] = nozzle.volume_in_bore;
       entry["extrusion_pressure_Pa"] = nozzle.extrusion_pressure;
       entry["extrusion_pressure_max_Pa"] = nozzle.extrusion_pressure_max;
     }
@@ -175,6 +177,9 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
       {"volume_m3",
        {{"commanded", summary.volume.commanded},
         {"emitted", summary.volume.emitted},
+        {"primed", summary.volume.primed},
+        {"in_bores", summary.volume.in_bores},
+        {"laid", summary.volume.laid},
         {"lost_at_nozzles", summary.volume.lost_at_nozzles},
         {"removed", summary.volume.removed},
         {"in_particles", summary.volume.in_particles},
