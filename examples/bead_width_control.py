@@ -16,6 +16,10 @@ Run from the project folder (the module from the build tree):
 
     PYTHONPATH=build/python python3 examples/bead_width_control.py
 
+Scored over flow errors from -20 % to +20 % as a study (its `control` function is the study's controller):
+
+    m3dp study examples/bead_width_study.toml -o out/bead_width_study
+
 Scene: examples/bead_width_wall.sdf (a UR10 prints six 6 mm layers of mortar, 0.2 m long, with a
 12 mm nozzle; the camera "top" looks straight down with its point cloud in the world frame).
 """
@@ -54,30 +58,61 @@ def layer_width(sim, layer):
     return float(np.median(spans)) if spans else float("nan")
 
 
+class WidthController:
+    """The loop of one print: when a layer ends, measures it and sets the next layer's flow. `real_flow`
+    is the fraction of the asked flow the nozzle delivers (the disturbance)."""
+
+    def __init__(self, sim, closed_loop=True, real_flow=0.85, verbose=False):
+        self.closed_loop, self.real_flow, self.verbose = closed_loop, real_flow, verbose
+        self.asked = [1.0]  # the flow asked of each layer, as a fraction of the nominal
+        self.widths = []
+        self.was_extruding = False
+        sim.set_extrusion("nozzle", flow_scale=real_flow * self.asked[-1])
+
+    def update(self, sim):
+        """Called as the print goes (every step, or every period of a study's controller)."""
+        extruding = sim.nozzle("nozzle")["extruding"]
+        if self.was_extruding and not extruding:  # a layer has ended: measure it, then set the next one's flow
+            self.widths.append(layer_width(sim, len(self.widths) + 1))
+            if len(self.widths) < LAYERS:
+                wanted = self.asked[-1] * DESIGN_WIDTH / self.widths[-1] if self.closed_loop else 1.0
+                self.asked.append(min(max(wanted, 0.5), 2.0))
+                sim.set_extrusion("nozzle", flow_scale=self.real_flow * self.asked[-1])
+            if self.verbose:
+                print(f"  t = {sim.time:5.2f} s  layer {len(self.widths)}: {self.widths[-1] * 1000:5.2f} mm wide "
+                      f"(design {DESIGN_WIDTH * 1000:.2f} mm)"
+                      + (f", next layer's flow asked {self.asked[-1]:.3f}" if len(self.widths) < LAYERS else ""))
+        self.was_extruding = extruding
+
+
 def print_wall(closed_loop, real_flow=0.85, threads=2, verbose=False):
     """Prints the wall; returns each layer's measured width (m), the flow asked of each layer and
     the run's summary."""
     sim = m3dp.Simulation(SCENE, threads=threads)
-    asked = [1.0]  # the flow asked of each layer, as a fraction of the nominal
-    widths = []
-    was_extruding = False
-    sim.set_extrusion("nozzle", flow_scale=real_flow * asked[-1])
+    controller = WidthController(sim, closed_loop, real_flow, verbose)
     while sim.time < sim.end_time:
         sim.step()
-        extruding = sim.nozzle("nozzle")["extruding"]
-        if was_extruding and not extruding:  # a layer has ended: measure it, then set the next one's flow
-            widths.append(layer_width(sim, len(widths) + 1))
-            if len(widths) < LAYERS:
-                wanted = asked[-1] * DESIGN_WIDTH / widths[-1] if closed_loop else 1.0
-                asked.append(min(max(wanted, 0.5), 2.0))
-                sim.set_extrusion("nozzle", flow_scale=real_flow * asked[-1])
-            if verbose:
-                print(f"  t = {sim.time:5.2f} s  layer {len(widths)}: {widths[-1] * 1000:5.2f} mm wide "
-                      f"(design {DESIGN_WIDTH * 1000:.2f} mm)"
-                      + (f", next layer's flow asked {asked[-1]:.3f}" if len(widths) < LAYERS else ""))
-        was_extruding = extruding
+        controller.update(sim)
     summary = sim.close()
-    return widths, asked, summary
+    return controller.widths, controller.asked, summary
+
+
+_study_controllers = {}
+
+
+def control(sim, run):
+    """The loop as a study's controller (examples/bead_width_study.toml): the study's flow_scale is the
+    real flow (the disturbance); called every period, it returns the run's score so far: the last
+    layer's width off the design (relative), and the flow it asked."""
+    real_flow = float(run["parameters"].get("flow_scale", 1.0))
+    if id(sim) not in _study_controllers:
+        _study_controllers[id(sim)] = WidthController(sim, True, real_flow)
+    controller = _study_controllers[id(sim)]
+    controller.update(sim)
+    if not controller.widths:
+        return None
+    return {"layers": len(controller.widths), "width_error": controller.widths[-1] / DESIGN_WIDTH - 1,
+            "flow_asked": controller.asked[-1]}
 
 
 def main():
