@@ -85,7 +85,7 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
 
   const std::string timing = read_text(directory / "timing.csv");
   EXPECT_EQ(timing.rfind("step,time_s,dt_s,particles", 0), 0u);
-  // Which limit set each step (column 9): for water settling in a tank, gravity's (a particle moves
+  // Which limit set each step (column 10): for water settling in a tank, gravity's (a particle moves
   // at most 1 % of a spacing a step from rest) or the CFL condition's, never the smallest step.
   EXPECT_NE(timing.find(",density_error,dt_set_by,"), std::string::npos);
   std::map<std::string, int> set_by;
@@ -95,7 +95,7 @@ TEST(Outputs, RunFolderHasFramesTimingAndSummary) {
   while (std::getline(rows, row)) {
     std::stringstream cells(row);
     std::string cell;
-    for (int column = 0; column < 9; ++column) std::getline(cells, cell, ',');
+    for (int column = 0; column < 10; ++column) std::getline(cells, cell, ',');
     ++set_by[cell];
   }
   for (const auto& [limit, steps] : set_by) std::printf("steps set by %s: %d\n", limit.c_str(), steps);

@@ -65,7 +65,7 @@ node "$here/mcap_reads_run.js" "$killed" "$urdf" > /dev/null
 /usr/bin/python3 - "$out/whole" "$killed" <<'PY'
 import csv, json, sys
 whole, resumed = sys.argv[1:]
-simulated = ["step", "time_s", "dt_s", "particles", "density_iterations", "divergence_iterations", "viscosity_iterations", "density_error"]
+simulated = ["step", "time_s", "dt_s", "particles", "moving_particles", "density_iterations", "divergence_iterations", "viscosity_iterations", "density_error"]
 rows = [[[row[c] for c in simulated] for row in csv.DictReader(open(f"{folder}/timing.csv"))] for folder in (whole, resumed)]
 assert rows[0] == rows[1], "timing.csv's simulated columns differ"
 wall = {"wall_time_s", "real_time_factor", "particle_steps_per_second", "render_seconds", "rays_per_second", "seconds", "encode_seconds",

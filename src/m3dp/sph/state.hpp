@@ -226,6 +226,10 @@ struct Workspace {
   std::vector<Real> boundary_pair_gradient;
 
   std::vector<Real> kappa;           // (n) m κ of the current solver iteration
+  // (n) ρ/ρ0 − 1 the density solves leave a particle embedded in resting material: the compression
+  // rest detection lets material keep (SolverSettings::rest_compression), by how far its neighbourhood
+  // rests beyond a half-space (0 on a layer laid on resting material, the whole deep inside it).
+  std::vector<Real> rest_allowance;
   // Positions and velocities padded to Vec4 (w = 0) for the solvers' sweeps: one aligned load and one
   // SIMD operation per neighbour. The positions are packed once a step, in the density pass, and read
   // until advection by the pressure solves, the shear rates and the implicit viscosity; the velocities

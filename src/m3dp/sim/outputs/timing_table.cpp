@@ -21,7 +21,7 @@ class TimingTable final : public RunObserver {
   explicit TimingTable(const std::filesystem::path& output_directory) : file_(output_directory / "timing.csv") {}
 
   void start(const Simulation& /*simulation*/) override {
-    std::string header = "step,time_s,dt_s,particles,density_iterations,divergence_iterations,viscosity_iterations,density_error,dt_set_by";
+    std::string header = "step,time_s,dt_s,particles,moving_particles,density_iterations,divergence_iterations,viscosity_iterations,density_error,dt_set_by";
     for (const auto name : sph::kStageNames) header += fmt::format(",ms_{}", name);
     // ms_cameras: the cameras' rendering, a part of ms_output (the outputs that asked for images).
     header += ",ms_coupling,ms_world,ms_output,ms_cameras,ms_total\n";
@@ -34,8 +34,9 @@ class TimingTable final : public RunObserver {
     std::FILE* file = file_.get();
     const sph::StepStats& stats = report.stats;
     const auto& solver = simulation.solver();
-    fmt::print(file, "{},{:.8g},{:.6g},{},{},{},{},{:.4g},{}", solver.state().step, solver.time(), stats.time_step,
-               solver.fluid().size(), stats.density_iterations, stats.divergence_iterations, stats.viscosity_iterations,
+    // moving_particles: those the step simulated (the rest stood as resting neighbours).
+    fmt::print(file, "{},{:.8g},{:.6g},{},{},{},{},{},{:.4g},{}", solver.state().step, solver.time(), stats.time_step,
+               solver.fluid().size(), solver.fluid().size() - stats.particles_at_rest, stats.density_iterations, stats.divergence_iterations, stats.viscosity_iterations,
                stats.density_error, sph::kTimeStepBoundNames[static_cast<std::size_t>(stats.time_step_bound)]);
     for (const double ms : stats.stage_ms.ms) fmt::print(file, ",{:.4f}", ms);
     const double camera_ms = simulation.scene().cameras.empty() ? 0.0 : simulation.cameras().take_render_ms();

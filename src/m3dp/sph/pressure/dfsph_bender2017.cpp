@@ -58,6 +58,7 @@ struct SolverView {
   const Real* factor;
   Real* density_advected;
   Real* kappa;  // m_i κ_i of the current iteration (mass-weighted: see the update)
+  const Real* rest_allowance;  // ρ/ρ0 − 1 a particle may keep (Workspace::rest_allowance)
   const Workspace::WallSums* wall_sums;
   const std::uint16_t* neighbor_count;
   const Index* fluid_neighbor;           // fluid lists, particle i's from fluid_first[i]
@@ -84,6 +85,7 @@ SolverView pack_for_solve(State& state, Workspace& workspace) {
                     fluid.dfsph_factor.data(),
                     fluid.density_advected.data(),
                     workspace.kappa.data(),
+                    workspace.rest_allowance.data(),
                     workspace.solver_wall_sums.data(),
                     fluid.neighbor_count.data(),
                     workspace.fluid_neighbors.indices.data(),
@@ -243,6 +245,13 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
                                     [&](const auto& phase) { return phase.density == model.phases.front().density; });
 #endif
   const Real boundary_neighbor_weight = model.settings.boundary_spacing_factor * model.settings.boundary_spacing_factor;
+  // Resting material (indices from active_count on) is in the neighbour lists but does not move.
+  const std::size_t active = state.active_count;
+  const bool any_resting = active < fluid.size();
+  workspace.rest_allowance.resize(fluid.size());  // written for every active particle below
+  // Half what rest detection lets resting material keep: a woken particle left at the whole could
+  // never rest again (it rests at or below it), and the woken band grew layer by layer.
+  const Real rest_compression = Real(0.5) * model.settings.rest_compression;
   state.last_step.max_density_error = with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
                        return tbb::parallel_reduce(
                            tbb::blocked_range<std::size_t>(0, state.active_count, 128), Real(0),
@@ -279,6 +288,30 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
                                  const Vec3 gradient = pair_gradient * r;
                                  gradient_sum += gradient;
                                  gradient_squares += (mass_i / fluid.mass[j]) * gradient.squaredNorm();
+                               }
+                               // Resting neighbours do not move under the solve (their κ is 0 and their
+                               // velocity fixed): like walls, they take no share of the diagonal's sum of
+                               // squares, or a layer laid on resting material gets half the κ it needs
+                               // and the solve stalls (a 60 s wall: 4 iterations on the floor, 36-40 on
+                               // the first layer). Deeper in resting material (over half the neighbourhood
+                               // resting) the diagonal keeps half its sum: Jacobi diverged without it.
+                               workspace.rest_allowance[i] = 0;
+                               if (any_resting) {
+                                 Real resting_squares = 0;
+                                 Index resting = 0;
+                                 for (Index k2 = 0; k2 < fluid_lists.counts[i]; ++k2) {
+                                   const Index j = fluid_lists.indices[fluid_first + k2];
+                                   if (j < active) continue;
+                                   const Vec3 gradient = workspace.fluid_pair_gradient[fluid_first + k2] * (position_i - fluid.position[j]);
+                                   resting_squares += (mass_i / fluid.mass[j]) * gradient.squaredNorm();
+                                   ++resting;
+                                 }
+                                 gradient_squares = std::max(gradient_squares - resting_squares, Real(0.5) * gradient_squares);
+                                 // A particle woken inside resting material cannot lose the compression it
+                                 // rested with (its few moving neighbours would have to carry it): the
+                                 // solve leaves it what rest detection allowed, as deep as it is embedded.
+                                 const Real share = fluid_lists.counts[i] > 0 ? Real(resting) / Real(fluid_lists.counts[i]) : Real(0);
+                                 workspace.rest_allowance[i] = rest_compression * std::clamp(2 * share - 1, Real(0), Real(1));
                                }
                                const std::size_t boundary_first = boundary_lists.first(i);
                                // The walls' sums for the solves' sweeps (Workspace::WallSums).
@@ -374,7 +407,8 @@ void solve_divergence(const Model& model, State& state, Workspace& workspace) {
 namespace {
 
 /// ρ*/ρ0 = ρ/ρ0 + Δt · (rate of change) of every active particle into view.density_advected, clamped
-/// at 1: the solver only pushes, never pulls (free surface). Returns the mean of ρ*/ρ0 − 1.
+/// at `floor` plus the particle's rest allowance: the solver only pushes, never pulls (free surface).
+/// Returns the mean of ρ*/ρ0 less that clamp.
 Real update_predicted_density(const Model& model, const State& state, const SolverView& view, Real time_step,
                               Real floor = 1) {
   const std::size_t count = state.active_count;
@@ -384,8 +418,9 @@ Real update_predicted_density(const Model& model, const State& state, const Solv
              [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
                return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
                         const Real predicted = view.density[i] * volume / view.mass[i] + time_step * rate;
-                        view.density_advected[i] = max_without_branch(predicted, floor);
-                        return view.density_advected[i] - floor;
+                        const Real floor_i = floor + view.rest_allowance[i];
+                        view.density_advected[i] = max_without_branch(predicted, floor_i);
+                        return view.density_advected[i] - floor_i;
                       });
              },
              std::plus<Real>()) /
@@ -404,7 +439,7 @@ int iterate_density(const Model& model, State& state, Workspace& workspace, cons
   int iterations = 0;
   while ((iterations < min_iterations || mean_error > settings.density_tolerance) && iterations < settings.max_density_iterations) {
     parallel_for_each_index(count, [&](std::size_t i) {
-      const Real kappa = (view.density_advected[i] - floor) * view.factor[i] * inverse_time_step_squared;
+      const Real kappa = (view.density_advected[i] - floor - view.rest_allowance[i]) * view.factor[i] * inverse_time_step_squared;
       if (kappa_total) (*kappa_total)[i] += kappa;
       view.kappa[i] = view.mass[i] * kappa;
     });
@@ -432,7 +467,7 @@ void solve_density(const Model& model, State& state, Workspace& workspace) {
     // gains energy at large time steps.
     update_predicted_density(model, state, view, time_step);
     parallel_for_each_index(count, [&](std::size_t i) {
-      kappa_total[i] = view.density_advected[i] > Real(1) ? Real(0.5) * kappa_total[i] : Real(0);
+      kappa_total[i] = view.density_advected[i] > Real(1) + view.rest_allowance[i] ? Real(0.5) * kappa_total[i] : Real(0);
       view.kappa[i] = view.mass[i] * kappa_total[i];
     });
     apply_pressure_velocity_update(view, state, workspace, time_step);
