@@ -205,6 +205,9 @@ TEST(Outputs, AMeshThatCannotBeWrittenFailsTheRun) {
   const auto summary = sim::run_simulation(simulation, options);
   EXPECT_EQ(summary.status, sim::RunStatus::failed);
   EXPECT_NE(summary.error.find("mesh at t = 0.08"), std::string::npos) << summary.error;
+  // It names the output that failed, and that the simulation itself completed.
+  EXPECT_NE(summary.error.find("the printed-material meshes failed: "), std::string::npos) << summary.error;
+  EXPECT_NE(summary.error.find("the simulation completed; every other output was written"), std::string::npos) << summary.error;
   EXPECT_NE(summary.error.find("mesh_000001.stl"), std::string::npos) << summary.error;
   EXPECT_NEAR(summary.simulated_time, 0.1, 0.01);  // the simulation itself went on to the end
   EXPECT_EQ(summary.meshes_written, 1u);           // t = 0.04 only
@@ -212,6 +215,42 @@ TEST(Outputs, AMeshThatCannotBeWrittenFailsTheRun) {
   EXPECT_EQ(json["status"], "failed");
   EXPECT_EQ(json["error"], summary.error);
   EXPECT_NE(sim::format_summary(summary, directory).find("Run failed"), std::string::npos);
+  fs::remove_all(directory);
+}
+
+TEST(Outputs, APourInPlaceIsNotMeasuredAndTheRunCompletes) {
+  // A nozzle that pours where it stands (its path 1 mm long over 1 s): the commanded flow over the
+  // path's speed designs a bead 0.6 m wide (213 m for the bench's 0.3 m nozzle), whose fill grid threw
+  // std::bad_alloc at the end of the run and failed it (issue 56). The report says why it measures nothing, and the run completes.
+  const scene::Scene scene = scene::load_scene_from_string(R"(<?xml version="1.0"?>
+<sdf version="1.9"><world name="pour">
+  <model name="floor"><static>true</static><link name="floor"><collision name="floor">
+    <pose>0 0 -0.01 0 0 0</pose><geometry><box><size>0.3 0.3 0.02</size></box></geometry>
+  </collision></link></model>
+  <plugin name="m3dp" filename="m3dp">
+    <solver><particle_radius unit="mm">2</particle_radius><end_time>0.3</end_time>
+      <bounds><min>-0.15 -0.15 -0.05</min><max>0.15 0.15 0.2</max></bounds></solver>
+    <material name="paste"><density>1500</density><viscosity>100</viscosity></material>
+    <print_head name="nozzle" material="paste">
+      <nozzle><inner_diameter unit="mm">20</inner_diameter><exit_speed>0.1</exit_speed></nozzle>
+      <path speed="0.001"><line><start>0 0 0.05</start><end>0.001 0 0.05</end></line></path>
+    </print_head>
+  </plugin>
+</world></sdf>)", "pour.sdf");
+  sim::Simulation simulation(scene);
+  const fs::path directory = fresh_directory("pour_in_place");
+  const auto summary = run_into(simulation, directory);
+  EXPECT_EQ(summary.status, sim::RunStatus::completed) << summary.error;
+  ASSERT_TRUE(summary.quality.has_value());
+  EXPECT_TRUE(summary.quality->file.empty());
+  EXPECT_NE(summary.quality->note.find("head 'nozzle' extrudes along 1 mm of path, less than its bead is wide"), std::string::npos)
+      << summary.quality->note;
+  EXPECT_NE(summary.quality->note.find("a pour in place"), std::string::npos) << summary.quality->note;
+  EXPECT_FALSE(fs::exists(directory / "quality.json"));
+  const auto json = nlohmann::json::parse(read_text(directory / "summary.json"));
+  EXPECT_EQ(json["status"], "completed");
+  EXPECT_EQ(json["quality"]["note"], summary.quality->note);
+  EXPECT_NE(sim::format_summary(summary, directory).find("quality     not measured: head 'nozzle'"), std::string::npos);
   fs::remove_all(directory);
 }
 

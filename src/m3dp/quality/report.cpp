@@ -66,7 +66,24 @@ std::vector<LayerFigures> layer_figures(const Design& design, const std::vector<
 }
 }  // namespace
 
+void check_measurable(const std::vector<HeadDesign>& designs) {
+  for (const HeadDesign& head : designs) {
+    double length = 0, widest = 0;
+    const Bead* wide = nullptr;
+    for (const Bead& bead : head.design.beads) {
+      length += bead.length();
+      if (bead.width > widest) widest = bead.width, wide = &bead;
+    }
+    if (wide && !(length >= widest))
+      throw UnmeasurableDesign(fmt::format(
+          "head '{}' extrudes along {:.3g} mm of path, less than its bead is wide ({:.3g} m: a section of {:.3g} m2, the flow over "
+          "the path's speed, {:.3g} m high): a pour in place, not a bead, so the quality report has nothing to measure",
+          head.name, 1e3 * length, widest, wide->area, wide->height));
+  }
+}
+
 Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, double spacing, double time) {
+  check_measurable(designs);
   Report report;
   report.time = time;
   report.particle_diameter = printed.particle_diameter;

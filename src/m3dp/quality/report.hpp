@@ -6,6 +6,7 @@
 
 #include <optional>
 
+#include "m3dp/core/error.hpp"
 #include "m3dp/quality/buildability.hpp"
 #include "m3dp/quality/deviation.hpp"
 #include "m3dp/quality/sections.hpp"
@@ -79,7 +80,18 @@ class PrintHeights {
   std::vector<Buildability> heads_;
 };
 
+/// A design the report cannot measure: a head whose extruding path is shorter than its bead is wide
+/// (a pour in place, a dab), whose beads are no beads (the commanded flow over a near-zero speed
+/// designs a bead hundreds of metres wide). what() says which head and why.
+class UnmeasurableDesign : public Error {
+ public:
+  using Error::Error;
+};
+/// Throws UnmeasurableDesign for such a design.
+void check_measurable(const std::vector<HeadDesign>& designs);
+
 /// Measures `printed` against the heads' designs, a section every `spacing` (m) along each bead.
+/// Throws UnmeasurableDesign first for a design it cannot measure.
 [[nodiscard]] Report measure(const std::vector<HeadDesign>& designs, const Printed& printed, double spacing, double time);
 
 /// quality.json's text (SI units in the keys) and quality.csv's (a row per section).

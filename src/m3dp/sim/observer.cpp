@@ -1,5 +1,7 @@
 #include "m3dp/sim/observer.hpp"
 
+#include <fmt/format.h>
+
 #include <chrono>
 #include <cmath>
 #include <exception>
@@ -73,18 +75,25 @@ void ObserverSchedule::resume(const Simulation& simulation, StateReader& in) {
 void ObserverSchedule::finish(const Simulation& simulation, RunSummary& summary) {
   // Every observer finishes even when one before it fails, each filling its own section of the
   // summary; then the summary, whole (a failure included), is reported.
+  // A failure names the output that failed (the others' files stand), and says whether the simulation
+  // itself had reached its end.
+  const bool simulated = summary.status == RunStatus::completed;
+  auto failed = [&](const Entry& entry, const std::exception& error) {
+    summary.fail(fmt::format("{} failed: {}{}", entry.observer->name(), error.what(),
+                             simulated ? " (the simulation completed; every other output was written)" : ""));
+  };
   for (Entry& entry : entries_) {
     try {
       entry.observer->finish(simulation, summary);
     } catch (const std::exception& error) {
-      summary.fail(error.what());
+      failed(entry, error);
     }
   }
   for (Entry& entry : entries_) {
     try {
       entry.observer->report(simulation, summary);
     } catch (const std::exception& error) {
-      summary.fail(error.what());
+      failed(entry, error);
     }
   }
 }

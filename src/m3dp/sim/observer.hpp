@@ -4,6 +4,7 @@
 // printed-material meshes; cameras, recordings and live streams the same way). Observers read the
 // simulation; only its step changes it.
 #include <memory>
+#include <string_view>
 
 #include "m3dp/core/periodic.hpp"
 #include <vector>
@@ -23,6 +24,8 @@ struct StepReport {
 class RunObserver {
  public:
   virtual ~RunObserver() = default;
+  /// What it is, for messages: "the quality report (quality.json)".
+  [[nodiscard]] virtual std::string_view name() const { return "an output"; }
   /// Simulated seconds between observations (at multiples of it); 0: after every step.
   [[nodiscard]] virtual double period() const { return 0; }
   /// Whether its time is the run's output time (timing.csv's ms_output): files it writes.

@@ -221,6 +221,8 @@ std::string format_summary(const RunSummary& summary, const std::filesystem::pat
                         quality->stood ? std::string("stood")
                                        : fmt::format("fell short at layer {} ({:.2f} s)", quality->shortfall_layer, quality->shortfall_time),
                         quality->file);
+  if (const auto& quality = summary.quality; quality && quality->file.empty() && !quality->note.empty())
+    text += fmt::format("  quality     not measured: {}\n", quality->note);
   if (const auto& quality = summary.quality; quality && quality->heads.size() > 1) {
     text += "  quality     by head:";
     for (const auto& head : quality->heads)

@@ -43,6 +43,7 @@ void write_point_cloud(const std::filesystem::path& file, const std::vector<sens
 
 class CameraFiles final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the camera pictures (cameras/)"; }
   explicit CameraFiles(std::filesystem::path folder) : folder_(std::move(folder)) {}
   // Every step: each camera has its own rate.
   [[nodiscard]] double period() const override { return 0; }

@@ -10,6 +10,7 @@ namespace {
 
 class DensityCheck final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the density check"; }
   explicit DensityCheck(double period) : period_(period) {}
   [[nodiscard]] double period() const override { return period_; }
   // Its time is output time: at the frames, it is the measuring of the density they write.

@@ -15,6 +15,7 @@ using Clock = std::chrono::steady_clock;
 
 class Pace final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the pace"; }
   explicit Pace(double pace) : pace_(pace) {}
   [[nodiscard]] bool is_output() const override { return false; }
   void start(const Simulation& simulation) override {

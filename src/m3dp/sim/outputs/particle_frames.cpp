@@ -12,6 +12,7 @@ namespace {
 
 class ParticleFrames final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the particle frames (particles.pvd)"; }
   ParticleFrames(const std::filesystem::path& output_directory, double period)
       : folder_(output_directory / "particles"), collection_(output_directory / "particles.pvd"), period_(period) {
     std::filesystem::create_directories(folder_);

@@ -1,6 +1,7 @@
 // meshes/mesh_NNNNNN.EXT: the printed material's surface meshes, which the simulation makes every
 // <meshing><period> and puts into the world (printed_body.hpp) whether or not a run writes them; this
 // output has them written into the run folder, and the final state's too, and reports them.
+#include "m3dp/core/error.hpp"
 #include "m3dp/sim/outputs/outputs.hpp"
 #include "m3dp/sim/printed_body.hpp"
 #include "m3dp/sim/simulation.hpp"
@@ -11,6 +12,7 @@ namespace {
 
 class PrintedMesh final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the printed-material meshes"; }
   PrintedMesh(PrintedBody& body, const RunOptions& options) : body_(body) {
     // Where the meshes go, and whether the solver waits for each (a reproducible run) or steps on.
     body_.set_output(options.output_directory / "meshes", options.wait_for_meshes || options.hash);
@@ -30,7 +32,8 @@ class PrintedMesh final : public RunObserver {
     summary.meshes_skipped = body_.skipped();
     summary.meshes_inserted = simulation.printed_mesh_version();
     // A mesh that could not be made or written leaves a gap in meshes/: the run did not do all it was asked.
-    if (!body_.error().empty()) summary.fail(body_.error());
+    // It is thrown, so that the run names this output and says the simulation completed.
+    if (!body_.error().empty()) throw Error(body_.error());
   }
 
  private:

@@ -13,6 +13,7 @@ namespace {
 
 class Progress final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the progress bar"; }
   explicit Progress(double end_time) : end_time_(end_time) {}
   [[nodiscard]] bool is_output() const override { return false; }
   void start(const Simulation& /*simulation*/) override { wall_start_ = std::chrono::steady_clock::now(); }

@@ -23,6 +23,7 @@ std::vector<toolpath::Trajectory> paths_of(const Simulation& simulation) {
 
 class QualityReport final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the quality report (quality.json)"; }
   QualityReport(const Simulation& simulation, std::filesystem::path folder)
       : folder_(std::move(folder)),
         period_(simulation.scene().output.quality_period),
@@ -47,7 +48,14 @@ class QualityReport final : public RunObserver {
     }
     if (heights_.whole().history().empty() || heights_.whole().history().back().time < simulation.time())
       heights_.observe(simulation.time(), simulation.solver().fluid().position);
-    quality::Report report = print_quality(simulation, kSpacing);
+    quality::Report report;
+    try {
+      report = print_quality(simulation, kSpacing);
+    } catch (const quality::UnmeasurableDesign& unmeasurable) {
+      result.note = unmeasurable.what();  // skipped: the summary says why
+      summary.quality = result;
+      return;
+    }
     complete_and_write_report(report, simulation.scene(), design_, simulation.solver().fluid().position, heights_, folder_);
     result.file = "quality.json";
     double width = 0, design_width = 0, height = 0, design_height = 0, measured = 0;

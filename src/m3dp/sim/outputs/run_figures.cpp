@@ -14,6 +14,7 @@ namespace {
 
 class RunFigures final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the run's figures"; }
   [[nodiscard]] bool is_output() const override { return false; }
   void start(const Simulation& /*simulation*/) override { wall_start_ = std::chrono::steady_clock::now(); }
   // The sums go on across a resume; the wall time counts the run's segments, not the time it stood.

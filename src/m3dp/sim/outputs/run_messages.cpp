@@ -95,6 +95,7 @@ struct Sinks {
 
 class RunMessages final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the recording and live stream (run.mcap)"; }
   RunMessages(const std::filesystem::path& mcap_file, std::optional<std::uint16_t> serve_port, double period, double live_rate,
               const std::vector<scene::CameraEntry>& cameras, bool print_heads, const RunOptions& options)
       : period_(period), live_interval_(live_rate > 0 ? 1 / live_rate : 0), topics_(run_topics()) {

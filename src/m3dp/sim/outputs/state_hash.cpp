@@ -59,6 +59,7 @@ class StateHasher {
 
 class StateHash final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the state hashes"; }
   explicit StateHash(const std::filesystem::path& output_directory) : file_(output_directory / "hashes.csv") {}
 
   void start(const Simulation& /*simulation*/) override { file_.create("step,time_s,fluid,bodies,robots,state\n"); }

@@ -217,6 +217,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
 
 class SummaryFile final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the summary (summary.json)"; }
   SummaryFile(const Simulation& simulation, std::filesystem::path output_directory)
       : simulation_(&simulation), output_directory_(std::move(output_directory)) {}
   [[nodiscard]] double period() const override { return 0; }

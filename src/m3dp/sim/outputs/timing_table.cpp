@@ -18,6 +18,7 @@ namespace {
 
 class TimingTable final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the timing table (timing.csv)"; }
   explicit TimingTable(const std::filesystem::path& output_directory) : file_(output_directory / "timing.csv") {}
 
   void start(const Simulation& /*simulation*/) override {

@@ -28,6 +28,7 @@ std::vector<io::FieldTuple> pose_fields(const Pose& pose) {
 
 class WorldFrames final : public RunObserver {
  public:
+  [[nodiscard]] std::string_view name() const override { return "the world frames (world.pvd)"; }
   WorldFrames(const std::filesystem::path& output_directory, double period)
       : folder_(output_directory / "world"), collection_(output_directory / "world.pvd"), period_(period) {}
   [[nodiscard]] double period() const override { return period_; }
