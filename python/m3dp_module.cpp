@@ -278,6 +278,7 @@ void translate_errors(py::module_& module) {
   static py::exception<Error> error(module, "Error", PyExc_RuntimeError);
   static py::exception<SimulationError> simulation_error(module, "SimulationError", error.ptr());
   static py::exception<InputError> input_error(module, "InputError", error.ptr());
+  static py::exception<quality::UnmeasurableDesign> unmeasurable(module, "UnmeasurableDesign", error.ptr());
   py::register_exception_translator([](std::exception_ptr thrown) {
     try {
       if (thrown) std::rethrow_exception(thrown);
@@ -291,6 +292,8 @@ void translate_errors(py::module_& module) {
       PyErr_SetObject(input_error.ptr(), instance.ptr());
     } catch (const SimulationError& problem) {
       simulation_error(problem.what());
+    } catch (const quality::UnmeasurableDesign& problem) {
+      unmeasurable(problem.what());
     } catch (const Error& problem) {
       error(problem.what());
     }
@@ -460,7 +463,7 @@ one step belong together (ids tells which particle a row is: the order changes b
           const auto& sections = report.heads[h].sections;
           const auto count = static_cast<py::ssize_t>(sections.size());
           py::array_t<std::int32_t> layer(count);
-          py::array_t<double> at({count, py::ssize_t(3)}), width(count), height(count), area(count), across(count), up(count);
+          py::array_t<double> at({count, py::ssize_t(3)}), width(count), height(count), extent(count), area(count), across(count), up(count);
           py::array_t<std::int64_t> particles(count);
           for (py::ssize_t i = 0; i < count; ++i) {
             const auto& section = sections[std::size_t(i)];
@@ -468,6 +471,7 @@ one step belong together (ids tells which particle a row is: the order changes b
             for (py::ssize_t k = 0; k < 3; ++k) at.mutable_at(i, k) = section.at[k];
             width.mutable_at(i) = section.width;
             height.mutable_at(i) = section.height;
+            extent.mutable_at(i) = section.extent;
             area.mutable_at(i) = section.area;
             across.mutable_at(i) = section.offset_across;
             up.mutable_at(i) = section.offset_up;
@@ -478,6 +482,7 @@ one step belong together (ids tells which particle a row is: the order changes b
           arrays["at_m"] = at;
           arrays["width_m"] = width;
           arrays["height_m"] = height;
+          arrays["extent_m"] = extent;
           arrays["area_m2"] = area;
           arrays["offset_across_m"] = across;
           arrays["offset_up_m"] = up;
@@ -488,8 +493,10 @@ one step belong together (ids tells which particle a row is: the order changes b
       }, py::arg("spacing") = 0.01,
          "The print now against each head's path as it is (paths given at run time included): quality.json's figures "
          "(per head and layer: designed and measured width, height, area, offsets; the fill's designed, printed, over "
-         "and under volumes, m³), and per head section_arrays, numpy arrays of every section every `spacing` m along the "
-         "beads (layer, at_m, width_m, height_m, area_m2, offset_across_m, offset_up_m, particles: 0 where nothing is).")
+         "and under volumes, m³; a layer's height is its rise over the layers under it, its extent its particles' bottom "
+         "to top; the design is what each head had laid by now), and per head section_arrays, numpy arrays of every section "
+         "every `spacing` m along the beads (layer, at_m, width_m, height_m, extent_m, area_m2, offset_across_m, offset_up_m, "
+         "particles: 0 where nothing is).")
       .def_property_readonly("head_names", [](PySimulation& self) {
         std::vector<std::string> names;
         for (const auto& head : self.simulation().scene().print_heads) names.push_back(head.name);

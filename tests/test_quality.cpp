@@ -263,3 +263,60 @@ TEST(Quality, AGcodeDesignHasTheSlicersOwnWidths) {
   std::printf("%.1f %% of %.2f m of extrusion within 2 %% of PrusaSlicer's planned width\n", 100 * matching / length, length);
   EXPECT_GT(matching, 0.95 * length);
 }
+
+TEST(Quality, ALayerIsAsHighAsItRisesOverTheOneUnderIt) {
+  // Two layers of the same line; the second sags 2 mm into the first (its particles from 1 mm below
+  // the first's top), its top 5 mm over the first's: 5 mm high, 7 mm from bottom to top.
+  toolpath::PathSegment first, second;
+  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
+  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
+  first.speed = second.speed = Real(kTravelSpeed);
+  const quality::Design design = quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+  const double d = 0.0005;
+  std::vector<Vec3> points;
+  std::vector<std::int32_t> layers;
+  for (double x = d / 2; x < kLength; x += d)
+    for (double y = -0.004 + d / 2; y < 0.004; y += d) {
+      for (double z = d / 2; z < 0.004; z += d) points.emplace_back(Real(x), Real(y), Real(z)), layers.push_back(0);  // top 4 mm
+      for (double z = 0.004 - 0.002 + d / 2; z < 0.009; z += d) points.emplace_back(Real(x), Real(y), Real(z)), layers.push_back(1);
+    }
+  const auto sections = quality::measure_sections(design, quality::Printed{points, layers, d}, 0.01);
+  std::size_t upper = 0;
+  for (const auto& section : sections) {
+    if (section.layer != 1 || section.particles == 0) continue;
+    ++upper;
+    EXPECT_NEAR(section.height, 0.005, 1e-6);  // 9 mm − 4 mm
+    EXPECT_NEAR(section.extent, 0.007, 1e-6);  // 9 mm − 2 mm
+  }
+  EXPECT_GT(upper, 5u);
+  for (const auto& section : sections) {
+    if (section.layer == 0 && section.particles > 0) {
+      EXPECT_NEAR(section.height, section.extent, 1e-12);  // on the bed
+    }
+  }
+}
+
+TEST(Quality, ARunStoppedEarlyIsJudgedOnWhatWasLaidByThen) {
+  // Two layers there and back; stopped 30 % into the first, the design is 30 % of the first bead.
+  toolpath::PathSegment first, second;
+  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
+  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
+  first.speed = second.speed = Real(kTravelSpeed);
+  const quality::Design design = quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+  ASSERT_EQ(design.beads.size(), 2u);
+  const double into = design.beads[0].start_time + 0.3 * (design.beads[0].end_time - design.beads[0].start_time);
+  const quality::Design laid = quality::laid_by(design, into);
+  ASSERT_EQ(laid.beads.size(), 1u);
+  EXPECT_EQ(laid.layer_z.size(), 1u);
+  EXPECT_NEAR(laid.beads[0].length(), 0.3 * kLength, 1e-9);
+  EXPECT_NEAR(laid.beads[0].volume(), 0.3 * design.beads[0].volume(), 1e-12);
+  // Past the end, the whole design.
+  const quality::Design whole = quality::laid_by(design, design.beads[1].end_time + 1);
+  EXPECT_EQ(whole.beads.size(), 2u);
+  EXPECT_EQ(whole.layer_z.size(), 2u);
+  // The fill of the laid part printed exactly: nothing under, as the whole design would say 70 % of
+  // the first bead and all the second were.
+  const std::vector<Vec3> printed = lattice_bead(design.beads[0], 0.0005, kWidth, 0, 0, 0.3 * kLength);
+  const auto fill = quality::measure_fill(laid, quality::Printed{printed, {}, 0.0005});
+  EXPECT_LT(fill.under, 0.05 * fill.designed);
+}

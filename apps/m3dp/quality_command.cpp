@@ -6,6 +6,7 @@
 #include <sys/wait.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -25,6 +26,29 @@ void add_quality_options(CLI::App& command, QualityOptions& options) {
 }
 
 namespace {
+/// summary.json's content, or null when there is none (or it does not parse).
+nlohmann::json read_summary(const fs::path& folder) {
+  const fs::path summary_file = folder / "summary.json";
+  if (!fs::exists(summary_file)) return nullptr;
+  std::ifstream stream(summary_file);
+  std::stringstream text;
+  text << stream.rdbuf();
+  const auto summary = nlohmann::json::parse(text.str(), nullptr, false);
+  return summary.is_discarded() ? nlohmann::json(nullptr) : summary;
+}
+
+/// Each head's path clock at `time` (s): summary.json's at the run's end when the frame is the run's
+/// last (a robot may lag its path), else the frame's time.
+double path_time_of(const nlohmann::json& summary, const std::string& head, double time) {
+  if (!summary.is_object() || !summary.contains("simulated_time_s") || !summary["simulated_time_s"].is_number() ||
+      std::abs(summary["simulated_time_s"].get<double>() - time) > 1e-6 || !summary.contains("nozzles") || !summary["nozzles"].is_array())
+    return time;
+  for (const auto& nozzle : summary["nozzles"])
+    if (nozzle.is_object() && nozzle.value("name", "") == head && nozzle.contains("path_time_s") && nozzle["path_time_s"].is_number())
+      return nozzle["path_time_s"].get<double>();
+  return time;
+}
+
 /// The scene the run was made from: the one summary.json names (paths in it resolve from there), else
 /// the run folder's copy.
 fs::path run_scene(const fs::path& folder) {
@@ -80,7 +104,11 @@ int quality_command(const QualityOptions& options) {
   std::vector<toolpath::Trajectory> paths;
   for (const auto& head : scene.print_heads) paths.push_back(head.trajectory);
   const quality::Printed printed{frame.positions, frame.layer, 2 * double(scene.solver.particle_radius)};
-  const std::vector<quality::HeadDesign> designs = sim::head_designs(scene, paths);
+  std::vector<quality::HeadDesign> designs = sim::head_designs(scene, paths);
+  // Judged against what was laid by the last frame (a run stopped before its path ends), on each
+  // path's clock (summary.json's at the run's end; else the frame's time).
+  const nlohmann::json summary = read_summary(folder);
+  for (auto& head : designs) head.design = quality::laid_by(head.design, path_time_of(summary, head.name, entries.back().time));
   quality::Report report = quality::measure(designs, printed, options.spacing, entries.back().time);
   // The printed height against the design's, frame by frame (did it stand?), and the surface's
   // distance to the design at the end.

@@ -53,7 +53,8 @@ def quality_figures(report: dict) -> dict:
         sums, weights = {}, {}
         for layer in head.get("layers", []):
             weight = layer.get("stations", 0) - layer.get("stations_empty", 0)
-            for key in ("design_width_m", "width_m", "design_height_m", "height_m", "design_area_m2", "area_m2", "offset_across_m", "offset_up_m"):
+            for key in ("design_width_m", "width_m", "design_height_m", "height_m", "extent_m", "design_area_m2", "area_m2", "offset_across_m",
+                        "offset_up_m"):
                 value = layer.get(key)
                 if isinstance(value, (int, float)) and math.isfinite(value) and weight > 0:
                     sums[key] = sums.get(key, 0.0) + value * weight
@@ -162,7 +163,10 @@ def run(folder: Path) -> dict:
             (folder / "dataset" / "frames.json").write_text(json.dumps(frames, indent=1))
         figures = dict(controller_figures)
         if "quality" in spec["figures"]:
-            figures.update(quality_figures(simulation.quality(spec["quality_spacing"])))
+            try:
+                figures.update(quality_figures(simulation.quality(spec["quality_spacing"])))
+            except m3dp.UnmeasurableDesign as problem:  # nothing laid that is a bead yet (a pour, a run cut short): no quality figures
+                result["quality_note"] = str(problem)
         summary = simulation.close()
         if "summary" in spec["figures"]:
             figures.update(summary_figures(summary))

@@ -126,7 +126,9 @@ def _worker_name() -> str:
 
 
 def _row(run: dict, result: dict, wall_time: float, worker: str, attempts: int) -> dict:
-    row = {"run": run["key"], "status": result.get("status", "failed"), "reason": result.get("reason", "")}
+    # A completed run whose print the quality report could not measure says why in its reason.
+    reason = result.get("reason", "") or (f"quality not measured: {result['quality_note']}" if result.get("quality_note") else "")
+    row = {"run": run["key"], "status": result.get("status", "failed"), "reason": reason}
     row.update(run["parameters"])
     row.update({"repeat": run["repeat"], "seed": run["seed"]})
     row.update(result.get("figures", {}))

@@ -366,6 +366,11 @@ def test_the_strand_printability_example_runs_and_maps(tmp_path):
     rows = read_csv(out)
     assert len(rows) == 16 and all(row["status"] == "ok" for row in rows), [row["reason"] for row in rows]
     assert all(float(row["summary.volume_m3.laid"]) > 0 for row in rows)
+    # Judged on what was laid by 0.15 s: the slowest strand's 7.5 mm is no bead yet (21 mm wide), and
+    # its row says so instead of giving quality figures; the fastest's 30 mm is measured.
+    slowest = [row for row in rows if row[SPEED] == "0.05"]
+    assert all("quality not measured: head 'head' extrudes along" in row["reason"] for row in slowest), slowest[0]["reason"]
+    assert all(float(row["quality.width_m"]) > 0 for row in rows if row[SPEED] == "0.2")
     for plot in ("map_status.png", "map_quality.width_m.png"):
         with Image.open(out / "plots" / plot) as image:
             assert image.size[0] > 100 and image.size[1] > 100

@@ -51,6 +51,25 @@ Design design_of(const toolpath::Trajectory& path, const Nozzle& nozzle) {
   return design;
 }
 
+Design laid_by(const Design& design, double path_time) {
+  Design laid;
+  for (const Bead& bead : design.beads) {
+    if (bead.start_time >= path_time) continue;
+    Bead part = bead;
+    if (bead.end_time > path_time) {
+      // The nozzle moves along a bead at its constant speed: cut where it was at path_time.
+      const double fraction = (path_time - bead.start_time) / (bead.end_time - bead.start_time);
+      part.end = bead.start + fraction * (bead.end - bead.start);
+      part.end_time = path_time;
+    }
+    laid.beads.push_back(part);
+  }
+  std::int32_t layers = 0;
+  for (const Bead& bead : laid.beads) layers = std::max(layers, bead.layer + 1);
+  laid.layer_z.assign(design.layer_z.begin(), design.layer_z.begin() + std::min<std::ptrdiff_t>(layers, std::ssize(design.layer_z)));
+  return laid;
+}
+
 bool inside(const Bead& bead, const Vec3d& point) {
   const Vec3d along = bead.end - bead.start;
   const double length = along.norm();

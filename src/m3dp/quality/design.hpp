@@ -43,6 +43,11 @@ struct Design {
 /// than a tenth of the bore), each with its layer, section and width.
 [[nodiscard]] Design design_of(const toolpath::Trajectory& path, const Nozzle& nozzle);
 
+/// What of `design` its nozzle had laid by `path_time` (s, on the path's clock): the beads begun by
+/// then, the one under way cut where the nozzle was, the layers they are in. A run stopped before its
+/// path ends (<end_time>, --until) is judged against this.
+[[nodiscard]] Design laid_by(const Design& design, double path_time);
+
 /// Whether `point` (m) lies inside the bead's rounded box swept along it (no caps at its ends).
 [[nodiscard]] bool inside(const Bead& bead, const Vec3d& point);
 

@@ -39,6 +39,7 @@ std::vector<LayerFigures> layer_figures(const Design& design, const std::vector<
     }
     figures.width += section.width;
     figures.height += section.height;
+    figures.extent += section.extent;
     figures.area += section.area;
     figures.offset_across += section.offset_across;
     figures.offset_up += section.offset_up;
@@ -54,6 +55,7 @@ std::vector<LayerFigures> layer_figures(const Design& design, const std::vector<
     if (measured > 0) {
       figures.width /= measured;
       figures.height /= measured;
+      figures.extent /= measured;
       figures.area /= measured;
       figures.offset_across /= measured;
       figures.offset_up /= measured;
@@ -77,7 +79,8 @@ void check_measurable(const std::vector<HeadDesign>& designs) {
     if (wide && !(length >= widest))
       throw UnmeasurableDesign(fmt::format(
           "head '{}' extrudes along {:.3g} mm of path, less than its bead is wide ({:.3g} m: a section of {:.3g} m2, the flow over "
-          "the path's speed, {:.3g} m high): a pour in place, not a bead, so the quality report has nothing to measure",
+          "the path's speed, {:.3g} m high): a pour in place, or a print stopped before its bead was longer than wide, so the "
+          "quality report has nothing to measure",
           head.name, 1e3 * length, widest, wide->area, wide->height));
   }
 }
@@ -185,6 +188,7 @@ std::string report_json(const Report& report) {
                         {"height_m", layer.height},
                         {"height_min_m", layer.height_min},
                         {"height_max_m", layer.height_max},
+                        {"extent_m", layer.extent},
                         {"area_m2", layer.area},
                         {"offset_across_m", layer.offset_across},
                         {"offset_across_largest_m", layer.offset_across_max},
@@ -196,7 +200,9 @@ std::string report_json(const Report& report) {
   const nlohmann::json json = {
       {"definition", "sections across each designed bead (a slicer's rounded box of the commanded flow over the speed and the "
                      "layer's height) every spacing along it, of the particles printed in its layer, each a cube of the particle "
-                     "diameter; fill on a grid of half the particle diameter"},
+                     "diameter; a layer's height is the rise of its top over the top of the layers under it (on the bed, its "
+                     "extent), its extent its particles' bottom to top; fill on a grid of half the particle diameter; the design "
+                     "is what was laid by the time measured"},
       {"time_s", report.time},
       {"particles", report.particles},
       {"particle_diameter_m", report.particle_diameter},
@@ -220,12 +226,12 @@ std::string report_json(const Report& report) {
 }
 
 std::string report_csv(const Report& report) {
-  std::string csv = "head,layer,x_m,y_m,z_m,particles,width_m,height_m,area_m2,offset_across_m,offset_up_m\n";
+  std::string csv = "head,layer,x_m,y_m,z_m,particles,width_m,height_m,area_m2,offset_across_m,offset_up_m,extent_m\n";
   for (const HeadReport& head : report.heads)
     for (const Section& section : head.sections)
-      csv += fmt::format("{},{},{:.6g},{:.6g},{:.6g},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g}\n", head.name, section.layer, section.at.x(),
-                         section.at.y(), section.at.z(), section.particles, section.width, section.height, section.area,
-                         section.offset_across, section.offset_up);
+      csv += fmt::format("{},{},{:.6g},{:.6g},{:.6g},{},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g},{:.6g}\n", head.name, section.layer,
+                         section.at.x(), section.at.y(), section.at.z(), section.particles, section.width, section.height, section.area,
+                         section.offset_across, section.offset_up, section.extent);
   return csv;
 }
 

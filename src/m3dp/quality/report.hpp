@@ -25,7 +25,8 @@ struct LayerFigures {
   std::size_t stations = 0, empty = 0;         // sections, and those with nothing printed
   double design_width = 0, design_height = 0, design_area = 0;  // m, m, m² (the layer's beads, mean)
   double width = 0, width_min = 0, width_max = 0;               // m, over the sections with material
-  double height = 0, height_min = 0, height_max = 0;            // m
+  double height = 0, height_min = 0, height_max = 0;            // m: the rise over the layers under it
+  double extent = 0;                                            // m, mean: its particles' bottom to top
   double area = 0;                                              // m², mean
   double offset_across = 0, offset_across_max = 0;  // m: mean, and the largest by magnitude (signed)
   double offset_up = 0;                             // m, mean: its top off the designed top

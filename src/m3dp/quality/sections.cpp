@@ -85,14 +85,21 @@ std::vector<Section> measure_sections(const Design& design, const Printed& print
     // The particles that may belong to this bead: its layer, within a bead width across and a layer
     // height above or below it.
     std::vector<Vec3d> local;  // (along, across, z)
-    const Vec3d reach(bead.width + d, bead.width + d, 2 * bead.height);
+    // And the earlier layers' particles under it (with layers known), whose top its rise is taken from.
+    std::vector<Vec3d> below;
+    const Vec3d reach(bead.width + d, bead.width + d, 3 * bead.height);
     cells.each_in(bead.start.cwiseMin(bead.end) - reach, bead.start.cwiseMax(bead.end) + reach, [&](std::size_t i) {
-      if (!printed.layers.empty() && printed.layers[i] != bead.layer) return;
+      const bool earlier = !printed.layers.empty() && printed.layers[i] >= 0 && printed.layers[i] < bead.layer;
+      if (!printed.layers.empty() && printed.layers[i] != bead.layer && !earlier) return;
       const Vec3d p = printed.positions[i].cast<double>() - bead.start;
       const double s = p.dot(frame.tangent), y = p.dot(frame.across);
       if (s < -d || s > length + d || std::abs(y) > bead.width) return;
       const double z = printed.positions[i].z();
       const double top = bead.start.z() + s / length * (bead.end.z() - bead.start.z());
+      if (earlier) {
+        if (z >= top - 3 * bead.height && z <= top) below.emplace_back(s, y, z);
+        return;
+      }
       if (z < top - 2 * bead.height || z > top + bead.height) return;
       local.emplace_back(s, y, z);
     });
@@ -112,7 +119,14 @@ std::vector<Section> measure_sections(const Design& design, const Printed& print
       }
       if (section.particles > 0) {
         section.width = y_max - y_min + d;
-        section.height = z_max - z_min + d;
+        section.extent = z_max - z_min + d;
+        // The rise over what is under it: the top of the earlier layers across this section's span
+        // (the extent reaches into the layer below wherever the bead sags into it). On the bed, or
+        // with nothing printed under it, the extent.
+        double below_top = -std::numeric_limits<double>::infinity();
+        for (const Vec3d& p : below)
+          if (std::abs(p.x() - s) < d && p.y() >= y_min - d / 2 && p.y() <= y_max + d / 2) below_top = std::max(below_top, p.z());
+        section.height = std::isfinite(below_top) ? z_max - below_top : section.extent;
         section.area = double(section.particles) * d * d * d / (2 * d);
         section.offset_across = (y_max + y_min) / 2;
         section.offset_up = z_max + d / 2 - section.at.z();

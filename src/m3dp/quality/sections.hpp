@@ -25,7 +25,9 @@ struct Section {
   std::size_t bead = 0;                   // index in Design::beads
   std::int32_t layer = 0;
   Vec3d at = Vec3d::Zero();               // m, the station on the path
-  double width = 0, height = 0;           // m: across the bead (horizontal), and bottom to top
+  double width = 0;                       // m, across the bead (horizontal)
+  double height = 0;                      // m: its top's rise over the top of the layers under it (on the bed: its extent)
+  double extent = 0;                      // m, its particles' bottom to top (reaching into the layer below where it sags)
   double area = 0;                        // m², the material's volume per length there
   double offset_across = 0;               // m, the section's middle off the path, to the left of travel
   double offset_up = 0;                   // m, its top off the designed top (the nozzle's path)

@@ -23,11 +23,18 @@ std::vector<quality::HeadDesign> head_designs(const scene::Scene& scene, std::sp
 }
 
 namespace {
+}  // namespace
+
 std::vector<quality::HeadDesign> designs_now(const Simulation& simulation) {
   std::vector<toolpath::Trajectory> paths;
   for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) paths.push_back(simulation.head_path(h));
-  return head_designs(simulation.scene(), paths);
+  std::vector<quality::HeadDesign> designs = head_designs(simulation.scene(), paths);
+  // What each head had laid by now on its path's clock: a run stopped early is judged on that.
+  for (std::size_t h = 0; h < designs.size(); ++h) designs[h].design = quality::laid_by(designs[h].design, simulation.path_time(h));
+  return designs;
 }
+
+namespace {
 quality::Report measure_now(const Simulation& simulation, const std::vector<quality::HeadDesign>& designs, double spacing) {
   const auto& fluid = simulation.solver().fluid();
   const quality::Printed printed{fluid.position, fluid.print_layer, double(simulation.solver().particle_diameter())};

@@ -14,6 +14,8 @@ class Simulation;
 
 /// Every print head's design: its path (one per head, in scene order) laid by its nozzle, on a plate at z = 0.
 [[nodiscard]] std::vector<quality::HeadDesign> head_designs(const scene::Scene& scene, std::span<const toolpath::Trajectory> paths);
+/// The heads' designs as laid by now: each head's path (as the simulation has it) up to its path clock.
+[[nodiscard]] std::vector<quality::HeadDesign> designs_now(const Simulation& simulation);
 
 /// The simulation's printed material now against its heads' paths as they are (paths given at run
 /// time included), a section every `spacing` (m).

@@ -107,6 +107,7 @@ struct RunSummary {
     double blocked_time = 0;                                           // s in all
     double volume_primed = 0;                                          // m³ that filled a bore (in volume_emitted)
     double volume_in_bore = 0, volume_laid = 0;                        // m³ in the bore at the end, and what left the exit
+    double path_time = 0;                                              // s on its path's clock at the end (what it had laid by then)
     double extrusion_pressure = -1, extrusion_pressure_max = -1;       // Pa at the end and the largest; < 0: no bore
     sph::NozzleState::Blockage longest_blockage;                       // duration 0: never blocked
   };

@@ -27,7 +27,6 @@ class QualityReport final : public RunObserver {
   QualityReport(const Simulation& simulation, std::filesystem::path folder)
       : folder_(std::move(folder)),
         period_(simulation.scene().output.quality_period),
-        design_(quality::combined(head_designs(simulation.scene(), paths_of(simulation)))),
         heights_(head_designs(simulation.scene(), paths_of(simulation)), double(simulation.solver().particle_diameter())) {}
   [[nodiscard]] double period() const override { return period_; }
   // The first look at the start, as the particle frames' first frame.
@@ -56,7 +55,9 @@ class QualityReport final : public RunObserver {
       summary.quality = result;
       return;
     }
-    complete_and_write_report(report, simulation.scene(), design_, simulation.solver().fluid().position, heights_, folder_);
+    // The surface against what was laid by now (a run stopped before its path ends).
+    complete_and_write_report(report, simulation.scene(), quality::combined(designs_now(simulation)), simulation.solver().fluid().position,
+                              heights_, folder_);
     result.file = "quality.json";
     double width = 0, design_width = 0, height = 0, design_height = 0, measured = 0;
     for (const auto& head : report.heads) {
@@ -89,7 +90,6 @@ class QualityReport final : public RunObserver {
  private:
   std::filesystem::path folder_;
   double period_;
-  quality::Design design_;
   quality::PrintHeights heights_;
 };
 

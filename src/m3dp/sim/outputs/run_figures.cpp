@@ -79,6 +79,7 @@ class RunFigures final : public RunObserver {
       report.volume_primed = nozzle.volume_primed;
       report.volume_in_bore = double(sph::particles_in_bore(solver, n)) * particle_volume;
       report.volume_laid = report.volume_emitted - report.volume_in_bore;
+      report.path_time = simulation.path_time(n);
       if (solver.model().nozzle_geometry[n].has_bore()) {
         report.extrusion_pressure = nozzle.extrusion_pressure;
         report.extrusion_pressure_max = nozzle.extrusion_pressure_max;

@@ -37,6 +37,7 @@ nlohmann::json summary_json(const RunSummary& summary, const Simulation& simulat
                             {"volume_commanded_m3", nozzle.volume_commanded},
                             {"volume_emitted_m3", nozzle.volume_emitted},
                             {"volume_laid_m3", nozzle.volume_laid},
+                            {"path_time_s", nozzle.path_time},
                             {"volume_lost_m3", nozzle.volume_lost},
                             {"blocked_time_s", nozzle.blocked_time}};
     if (nozzle.extrusion_pressure >= 0) {
