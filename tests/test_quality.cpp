@@ -30,6 +30,15 @@ quality::Design line_design(double length = kLength) {
   return quality::design_of(toolpath::Trajectory({line}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
 }
 
+/// Two layers of the line, there and back, the second one layer height higher.
+quality::Design two_layer_design() {
+  toolpath::PathSegment first, second;
+  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
+  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
+  first.speed = second.speed = Real(kTravelSpeed);
+  return quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+}
+
 /// Particles on a lattice of spacing `d` filling `bead` (its rounded box widened to `width`,
 /// moved `shift` across) over [from, to] of its length.
 std::vector<Vec3> lattice_bead(quality::Bead bead, double d, double width, double shift, double from, double to) {
@@ -136,11 +145,7 @@ TEST(Quality, ABeadTenPercentTooWideIsOverFillOfThatMuch) {
 
 TEST(Quality, SectionsTakeTheirOwnLayer) {
   // Two layers of the same line; a section of the first sees only the first's particles.
-  toolpath::PathSegment first, second;
-  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
-  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
-  first.speed = second.speed = Real(kTravelSpeed);
-  const quality::Design design = quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+  const quality::Design design = two_layer_design();
   ASSERT_EQ(design.beads.size(), 2u);
   ASSERT_EQ(design.layer_z.size(), 2u);
   EXPECT_EQ(design.beads[1].layer, 1);
@@ -267,11 +272,7 @@ TEST(Quality, AGcodeDesignHasTheSlicersOwnWidths) {
 TEST(Quality, ALayerIsAsHighAsItRisesOverTheOneUnderIt) {
   // Two layers of the same line; the second sags 2 mm into the first (its particles from 1 mm below
   // the first's top), its top 5 mm over the first's: 5 mm high, 7 mm from bottom to top.
-  toolpath::PathSegment first, second;
-  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
-  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
-  first.speed = second.speed = Real(kTravelSpeed);
-  const quality::Design design = quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+  const quality::Design design = two_layer_design();
   const double d = 0.0005;
   std::vector<Vec3> points;
   std::vector<std::int32_t> layers;
@@ -298,11 +299,7 @@ TEST(Quality, ALayerIsAsHighAsItRisesOverTheOneUnderIt) {
 
 TEST(Quality, ARunStoppedEarlyIsJudgedOnWhatWasLaidByThen) {
   // Two layers there and back; stopped 30 % into the first, the design is 30 % of the first bead.
-  toolpath::PathSegment first, second;
-  first.curve = toolpath::LineCurve{Vec3(0, 0, Real(kHeight)), Vec3(Real(kLength), 0, Real(kHeight))};
-  second.curve = toolpath::LineCurve{Vec3(Real(kLength), 0, Real(2 * kHeight)), Vec3(0, 0, Real(2 * kHeight))};
-  first.speed = second.speed = Real(kTravelSpeed);
-  const quality::Design design = quality::design_of(toolpath::Trajectory({first, second}, 0), quality::Nozzle{kBore, kExitSpeed, 0});
+  const quality::Design design = two_layer_design();
   ASSERT_EQ(design.beads.size(), 2u);
   const double into = design.beads[0].start_time + 0.3 * (design.beads[0].end_time - design.beads[0].start_time);
   const quality::Design laid = quality::laid_by(design, into);
