@@ -51,7 +51,10 @@ void Buildability::observe(double time, std::span<const Vec3> positions) {
   auto key = [&](double x, double y) {
     return (std::int64_t(std::floor(x / cell_)) << 32) ^ (std::int64_t(std::floor(y / cell_)) & 0xffffffff);
   };
-  std::unordered_map<std::int64_t, double> tops;  // printed top per laid cell
+  struct Column {
+    double designed = 0, printed = 0;  // m above the plate: the design's top laid by now, the highest material
+  };
+  std::unordered_map<std::int64_t, Column> columns;  // per laid cell
   std::vector<double> designed;
   for (const Cell& cell : footprint_) {
     double top = -std::numeric_limits<double>::infinity();
@@ -59,23 +62,27 @@ void Buildability::observe(double time, std::span<const Vec3> positions) {
       if (laid <= time) top = std::max(top, z);
     if (!std::isfinite(top)) continue;
     designed.push_back(top - plate_z_);
-    tops.emplace(key(cell.centre.x(), cell.centre.y()), plate_z_);
+    columns.emplace(key(cell.centre.x(), cell.centre.y()), Column{top - plate_z_, 0.0});
   }
   const double radius = cell_ / 4;  // a particle's radius
   for (const Vec3& p : positions) {
-    const auto found = tops.find(key(p.x(), p.y()));
-    if (found != tops.end()) found->second = std::max(found->second, double(p.z()) + radius);
+    const auto found = columns.find(key(p.x(), p.y()));
+    if (found != columns.end()) found->second.printed = std::max(found->second.printed, double(p.z()) + radius - plate_z_);
   }
-  std::vector<double> printed;
-  printed.reserve(tops.size());
-  for (const auto& [cell, top] : tops) printed.push_back(top - plate_z_);
+  // Each cell against its own design: while a layer is being laid, half the footprint is a layer
+  // higher than the rest, and the medians of the two heights apart flipped between them (a wall of
+  // 10 mm layers "fell short" at 12 of 20 mm halfway round its second layer).
+  std::vector<double> ratios;
+  ratios.reserve(columns.size());
+  for (const auto& [cell, column] : columns)
+    if (column.designed > 0) ratios.push_back(column.printed / column.designed);
   auto median = [](std::vector<double>& values) {
     if (values.empty()) return 0.0;
     std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(values.size() / 2), values.end());
     return values[values.size() / 2];
   };
   sample.designed = median(designed);
-  sample.printed = median(printed);
+  sample.printed = median(ratios) * sample.designed;
   history_.push_back(sample);
   // Judged over enough of the footprint (a few bead widths of wall), not its first cells alone.
   constexpr std::size_t kLeastCells = 25;

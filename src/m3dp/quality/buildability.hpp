@@ -18,7 +18,7 @@ struct HeightSample {
   double time = 0;          // s
   std::int32_t layer = -1;  // the last layer the design has laid by then (-1: none)
   double designed = 0;      // m, the design's height above the plate then
-  double printed = 0;       // m, the printed height over its footprint
+  double printed = 0;       // m: the design's height times the median over its footprint of each cell's printed/designed
 };
 
 struct Shortfall {

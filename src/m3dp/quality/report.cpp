@@ -161,9 +161,10 @@ nlohmann::json height_json(const std::vector<HeightSample>& heights, const std::
                  {"layer", shortfall_found->layer},
                  {"designed_m", shortfall_found->designed},
                  {"printed_m", shortfall_found->printed}};
-  return {{"definition", "the printed height (the median over the design's footprint of each cell's highest "
-                         "material) against the design's laid by then, each particle frame; it fell short when "
-                         "below 90 % of the design's"},
+  return {{"definition", "the printed height against the design's laid by then, each particle frame: the design's "
+                         "(the median over its footprint of each cell's top) and the printed (that times the median "
+                         "over the footprint of each cell's highest material over the cell's designed top); it fell "
+                         "short when below 90 % of the design's"},
           {"stood", !shortfall_found.has_value()},
           {"shortfall", shortfall},
           {"history_columns", {"time_s", "layer", "designed_m", "printed_m"}},
