@@ -17,7 +17,9 @@
 
 #include "m3dp/core/memory.hpp"
 #include "m3dp/core/parallel.hpp"
+#include "m3dp/scene/scene.hpp"
 #include "m3dp/sim/presets.hpp"
+#include "m3dp/sim/print_quality.hpp"
 #include "m3dp/sim/run.hpp"
 #include "m3dp/sim/simulation.hpp"
 #include "m3dp/sim/strand_deposition.hpp"
@@ -31,8 +33,9 @@ void add_bench_options(CLI::App& command, BenchOptions& options) {
                      "of --layers layers: the cost of a step at the top layer against the second) or strand (a pressed "
                      "and a free mortar strand from a nozzle with a bore, and from the exit-plane inlet) or nozzle (a 5,000 Pa*s "
                      "paste from a 0.3 m nozzle onto a floor, as compared with SPlisHSPlasH) or plate (a short print on a 10 x 10 m "
-                     "floor: setup time, boundary particles, memory)")
-      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers", "strand", "nozzle", "plate"}))
+                     "floor: setup time, boundary particles, memory) or construction (a 0.5 m square mortar wall of --layers "
+                     "10 mm layers from a 20 mm nozzle, r = 1.5 mm: the real-time factor, iterations and stage times a layer)")
+      ->check(CLI::IsMember({"dam_break", "ur10_wall", "clay_print", "wall_layers", "strand", "nozzle", "plate", "construction"}))
       ->capture_default_str();
   command.add_option("--scene", options.scene_file, "ur10_wall, nozzle, plate: scene file to run instead of the project's");
   command.add_option("--particles", options.particles, "Fluid particles in the dam-break column or the clay slab")
@@ -40,7 +43,8 @@ void add_bench_options(CLI::App& command, BenchOptions& options) {
   command.add_option("--record", options.record, "ur10_wall: record run.mcap as the scene says (scene), or on, or off")
       ->check(CLI::IsMember({"scene", "on", "off"}))
       ->capture_default_str();
-  command.add_option("--layers", options.layers, "wall_layers: layers of the wall")->capture_default_str();
+  command.add_option("--layers", options.layers, "wall_layers, construction: layers of the wall")->capture_default_str();
+  command.add_option("--seconds", options.seconds, "construction: simulated seconds to run (default: the whole wall)");
   command.add_option("--max-viscosity", options.max_viscosity, "clay_print: cap of the clay's effective viscosity (Pa*s)")
       ->capture_default_str();
   command.add_option("--steps", options.steps, "Timed steps")->capture_default_str();
@@ -248,6 +252,89 @@ int bench_wall_layers(const BenchOptions& options) {
   return 0;
 }
 
+/// Issue 57's construction-scale wall: a 0.5 m square of 10 mm layers of a mortar (τ0 = 1.5 kPa,
+/// μp = 10 Pa·s, 2,100 kg/m³) from a 20 mm nozzle at 0.1 m/s (a 32 mm bead, 20 s a layer) on a
+/// no-slip 2 × 2 m floor, r = 1.5 mm. Per layer: the real-time factor, steps, moving particles,
+/// density and viscosity iterations, and the main stages' ms a step; at the end the layers' heights
+/// and widths as the quality report measures them.
+int bench_construction(const BenchOptions& options) {
+  const int layers = std::max(1, options.layers);
+  const double layer_time = 20.0, end_time = options.seconds > 0 ? options.seconds : layers * layer_time + 1.0;
+  const std::string text = fmt::format(R"(<?xml version="1.0"?>
+<sdf version="1.9"><world name="construction_wall">
+  <model name="floor"><static>true</static><link name="floor"><collision name="floor">
+    <pose>0 0 -0.01 0 0 0</pose><geometry><box><size>2 2 0.02</size></box></geometry>
+  </collision></link></model>
+  <plugin name="m3dp" filename="m3dp">
+    <solver><particle_radius unit="mm">1.5</particle_radius><end_time>{}</end_time>
+      <bounds><min>-1 -1 -0.05</min><max>1 1 {}</max></bounds></solver>
+    <material name="mortar"><density>2100</density>
+      <rheology model="bingham"><yield_stress>1500</yield_stress><plastic_viscosity>10</plastic_viscosity></rheology>
+      <boundary_viscosity>no_slip</boundary_viscosity></material>
+    <print_head name="nozzle" material="mortar">
+      <nozzle><inner_diameter unit="mm">20</inner_diameter><exit_speed>0.1019</exit_speed></nozzle>
+      <path speed="0.1"><wall><corner>-0.25 -0.25 0.01</corner><size>0.5 0.5</size><layers>{}</layers><layer_height>0.01</layer_height></wall></path>
+    </print_head>
+    <output><particles>false</particles></output>
+  </plugin>
+</world></sdf>)", end_time, 0.1 + 0.01 * layers, layers);
+  const scene::Scene scene = scene::load_scene_from_string(text, "construction_wall.sdf");
+  sim::Simulation simulation(scene);
+  const auto& solver = simulation.solver();
+  fmt::print("construction: a 0.5 m square mortar wall (1.5 kPa, 10 Pa*s), {} layers of 10 mm from a 20 mm nozzle at 0.1 m/s, "
+             "r = 1.5 mm, {:.0f} s simulated, {} threads\n",
+             layers, end_time, ThreadLimit::active_threads());
+  struct Layer {
+    double steps = 0, simulated = 0, wall = 0, moving = 0, density = 0, viscosity = 0;
+    sph::StageTimes stages;
+  };
+  std::vector<Layer> by_layer(static_cast<std::size_t>(layers));
+  const auto start = std::chrono::steady_clock::now();
+  while (simulation.time() < end_time - 1e-9) {
+    const double before = simulation.time();
+    const auto step_start = std::chrono::steady_clock::now();
+    const auto& stats = simulation.step();
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - step_start).count();
+    const int layer = solver.state().nozzles[0].print_layer;
+    if (layer < 0 || layer >= layers) continue;
+    Layer& entry = by_layer[static_cast<std::size_t>(layer)];
+    entry.steps += 1;
+    entry.simulated += simulation.time() - before;
+    entry.wall += wall;
+    entry.moving += double(solver.fluid().size() - stats.particles_at_rest);
+    entry.density += stats.density_iterations;
+    entry.viscosity += stats.viscosity_iterations;
+    entry.stages += stats.stage_ms;
+  }
+  const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  fmt::print("{:.1f} s simulated in {:.1f} s wall ({:.2f}x real time), {} particles at the end\n", simulation.time(), seconds,
+             simulation.time() / seconds, solver.fluid().size());
+  fmt::print("layer,real_time_factor,steps,moving_particles,density_iterations,viscosity_iterations,ms_per_step,ms_pressure,ms_viscosity,"
+             "ms_neighbors\n");
+  for (std::size_t l = 0; l < by_layer.size(); ++l) {
+    const Layer& entry = by_layer[l];
+    if (entry.steps == 0) continue;
+    const double n = entry.steps;
+    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f}\n", l + 1, entry.simulated / entry.wall, n, entry.moving / n,
+               entry.density / n, entry.viscosity / n, entry.stages.total() / n,
+               (entry.stages[sph::Stage::density] + entry.stages[sph::Stage::pressure]) / n, entry.stages[sph::Stage::viscosity] / n,
+               entry.stages[sph::Stage::neighbors] / n);
+  }
+  try {
+    const quality::Report report = sim::print_quality(simulation, 0.01);
+    fmt::print("layer,height_mm,design_height_mm,width_mm,design_width_mm\n");
+    for (const auto& layer : report.heads.front().layers)
+      if (layer.stations > layer.empty)
+        fmt::print("{},{:.2f},{:.2f},{:.2f},{:.2f}\n", layer.layer + 1, 1e3 * layer.height, 1e3 * layer.design_height, 1e3 * layer.width,
+                   1e3 * layer.design_width);
+    fmt::print("fill: {:.1f} cm3 designed, {:.1f} over, {:.1f} under\n", 1e6 * report.fill.designed, 1e6 * report.fill.over,
+               1e6 * report.fill.under);
+  } catch (const quality::UnmeasurableDesign& unmeasurable) {
+    fmt::print("quality: not measured: {}\n", unmeasurable.what());
+  }
+  return 0;
+}
+
 /// A pressed (g/D = 0.5, V/U = 1) and a free (g/D = 1.5, V/U = 1) strand of the demo's mortar (capped at
 /// 10⁴ Pa·s), D = 10 mm, 8 particles across, a 0.2 m line, each from a nozzle with a bore (2 D, lip 3 D)
 /// and from the exit-plane inlet: particle-steps per second in the strand's pass and the bore's cost.
@@ -284,6 +371,7 @@ int bench_command(const BenchOptions& options) {
   if (options.scenario == "ur10_wall") return bench_ur10_wall(options);
   if (options.scenario == "clay_print") return bench_clay_print(options);
   if (options.scenario == "strand") return bench_strand(options);
+  if (options.scenario == "construction") return bench_construction(options);
   if (options.scenario == "nozzle" || options.scenario == "plate") return bench_scene(options.scenario, options);
   sim::DamBreakSetup setup;
   setup.column_width = Real(0.5);

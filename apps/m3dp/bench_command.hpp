@@ -14,7 +14,8 @@ struct BenchOptions {
   int threads = 0;
   std::string kernel = "cubic_spline";
   double max_viscosity = 1e4;         // Pa·s, clay_print and wall_layers
-  int layers = 20;                    // wall_layers
+  int layers = 20;                    // wall_layers, construction
+  double seconds = 0;                 // construction: simulated s to run; 0: the whole wall
   std::string record = "scene";       // ur10_wall: run.mcap as the scene says, or "on" or "off"
 };
 
