@@ -638,8 +638,7 @@ one step belong together (ids tells which particle a row is: the order changes b
         result["volume_emitted_m3"] = double(engine.particles_emitted) * double(self.simulation().solver().model().particle_volume);
         result["volume_lost_m3"] = engine.volume_lost;
         result["volume_primed_m3"] = engine.volume_primed;
-        result["volume_in_bore_m3"] = double(m3dp::sph::particles_in_bore(self.simulation().solver(), python::head_index(self, head))) *
-                                      double(self.simulation().solver().model().particle_volume);
+        result["volume_in_bore_m3"] = self.simulation().nozzle_volumes(python::head_index(self, head)).in_bores;
         result["blocked"] = engine.blocked_since >= 0;
         result["blocked_time_s"] = engine.blocked_time;
         // Who moves it (its path, external commands, or its way back to its path) and, under a

@@ -51,17 +51,10 @@ double path_time_of(const nlohmann::json& summary, const std::string& head, doub
 
 /// The scene the run was made from: the one summary.json names (paths in it resolve from there), else
 /// the run folder's copy.
-fs::path run_scene(const fs::path& folder) {
-  const fs::path summary_file = folder / "summary.json";
-  if (fs::exists(summary_file)) {
-    std::ifstream stream(summary_file);
-    std::stringstream text;
-    text << stream.rdbuf();
-    const auto summary = nlohmann::json::parse(text.str(), nullptr, false);
-    if (!summary.is_discarded() && summary.contains("scene") && summary["scene"].is_string()) {
-      const fs::path original = summary["scene"].get<std::string>();
-      if (!original.empty() && fs::exists(original)) return original;
-    }
+fs::path run_scene(const fs::path& folder, const nlohmann::json& summary) {
+  if (summary.is_object() && summary.contains("scene") && summary["scene"].is_string()) {
+    const fs::path original = summary["scene"].get<std::string>();
+    if (!original.empty() && fs::exists(original)) return original;
   }
   if (fs::exists(folder / "scene.sdf")) return folder / "scene.sdf";
   throw InputError({folder.string(), 0}, "not a run folder: no summary.json naming its scene and no scene.sdf (m3dp run -o writes them)");
@@ -86,7 +79,8 @@ std::string plot_report(const fs::path& folder) {
 int quality_command(const QualityOptions& options) {
   const fs::path& folder = options.run_folder;
   if (!fs::is_directory(folder)) throw InputError({folder.string(), 0}, "no such run folder");
-  const scene::Scene scene = scene::load_scene(run_scene(folder));
+  const nlohmann::json summary = read_summary(folder);
+  const scene::Scene scene = scene::load_scene(run_scene(folder, summary));
   if (scene.print_heads.empty())
     throw InputError({scene.file.string(), 0}, "the scene has no print heads: no path was designed to measure the print against");
   const fs::path frames = folder / "particles.pvd";
@@ -107,7 +101,6 @@ int quality_command(const QualityOptions& options) {
   std::vector<quality::HeadDesign> designs = sim::head_designs(scene, paths);
   // Judged against what was laid by the last frame (a run stopped before its path ends), on each
   // path's clock (summary.json's at the run's end; else the frame's time).
-  const nlohmann::json summary = read_summary(folder);
   for (auto& head : designs) head.design = quality::laid_by(head.design, path_time_of(summary, head.name, entries.back().time));
   quality::Report report = quality::measure(designs, printed, options.spacing, entries.back().time);
   // The printed height against the design's, frame by frame (did it stand?), and the surface's

@@ -22,9 +22,6 @@ std::vector<quality::HeadDesign> head_designs(const scene::Scene& scene, std::sp
   return designs;
 }
 
-namespace {
-}  // namespace
-
 std::vector<quality::HeadDesign> designs_now(const Simulation& simulation) {
   std::vector<toolpath::Trajectory> paths;
   for (std::size_t h = 0; h < simulation.scene().print_heads.size(); ++h) paths.push_back(simulation.head_path(h));
@@ -34,13 +31,11 @@ std::vector<quality::HeadDesign> designs_now(const Simulation& simulation) {
   return designs;
 }
 
-namespace {
 quality::Report measure_now(const Simulation& simulation, const std::vector<quality::HeadDesign>& designs, double spacing) {
   const auto& fluid = simulation.solver().fluid();
   const quality::Printed printed{fluid.position, fluid.print_layer, double(simulation.solver().particle_diameter())};
   return quality::measure(designs, printed, spacing, simulation.time());
 }
-}  // namespace
 
 quality::Report print_quality(const Simulation& simulation, double spacing) {
   return measure_now(simulation, designs_now(simulation), spacing);

@@ -20,6 +20,8 @@ class Simulation;
 /// The simulation's printed material now against its heads' paths as they are (paths given at run
 /// time included), a section every `spacing` (m).
 [[nodiscard]] quality::Report print_quality(const Simulation& simulation, double spacing);
+/// The same against `designs` (designs_now's, made once by a caller that needs them too).
+[[nodiscard]] quality::Report measure_now(const Simulation& simulation, const std::vector<quality::HeadDesign>& designs, double spacing);
 
 /// The print now against its design on its printed surface (a mesh of it): the sections and fill of
 /// print_quality, the surface's deviation at each vertex and its statistics and histogram; what

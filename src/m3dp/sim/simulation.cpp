@@ -329,19 +329,32 @@ void Simulation::check_material_kept() const {
       state.time, state.step, state.particles_removed_total, 100 * state.mass_removed_total / ever, solver_.fluid().size()));
 }
 
+Simulation::VolumeBalance Simulation::nozzle_volumes(std::size_t n) const {
+  const auto& nozzle = solver_.state().nozzles[n];
+  const double particle_volume = solver_.model().particle_volume;
+  VolumeBalance volumes;
+  volumes.commanded = nozzle.volume_commanded;
+  volumes.emitted = double(nozzle.particles_emitted) * particle_volume;
+  volumes.primed = nozzle.volume_primed;
+  volumes.in_bores = double(sph::particles_in_bore(solver_, n)) * particle_volume;
+  volumes.laid = volumes.emitted - volumes.in_bores;
+  volumes.lost_at_nozzles = nozzle.volume_lost;
+  return volumes;
+}
+
 Simulation::VolumeBalance Simulation::volume_balance() const {
   const auto& state = solver_.state();
   const double particle_volume = solver_.model().particle_volume;
   VolumeBalance balance;
   for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
-    const auto& nozzle = state.nozzles[n];
-    balance.commanded += nozzle.volume_commanded;
-    balance.emitted += double(nozzle.particles_emitted) * particle_volume;
-    balance.primed += nozzle.volume_primed;
-    balance.in_bores += double(sph::particles_in_bore(solver_, n)) * particle_volume;
-    balance.lost_at_nozzles += nozzle.volume_lost;
+    const VolumeBalance nozzle = nozzle_volumes(n);
+    balance.commanded += nozzle.commanded;
+    balance.emitted += nozzle.emitted;
+    balance.primed += nozzle.primed;
+    balance.in_bores += nozzle.in_bores;
+    balance.laid += nozzle.laid;
+    balance.lost_at_nozzles += nozzle.lost_at_nozzles;
   }
-  balance.laid = balance.emitted - balance.in_bores;
   balance.removed = double(state.particles_removed_total) * particle_volume;
   balance.in_particles = double(solver_.fluid().size()) * particle_volume;
   return balance;

@@ -150,6 +150,8 @@ class Simulation {
     double commanded = 0, emitted = 0, primed = 0, in_bores = 0, laid = 0, lost_at_nozzles = 0, removed = 0, in_particles = 0;
   };
   [[nodiscard]] VolumeBalance volume_balance() const;
+  /// One nozzle's share of it (m³): lost_at_nozzles is its lost volume; removed and in_particles are not kept per nozzle (0).
+  [[nodiscard]] VolumeBalance nozzle_volumes(std::size_t nozzle) const;
   /// More than this fraction of the material ever present (initial and emitted, by mass) has left
   /// the bounds: the state blew up (or the bounds are wrong), and step() throws SimulationError.
   static constexpr double kLostFractionBlowUp = 0.5;

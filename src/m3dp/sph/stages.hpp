@@ -41,11 +41,11 @@ void emit_layers(const Model& model, State& state, Workspace& workspace);
 /// Nozzle `n`'s bore where the nozzle is now: from a spacing above its top (where discs come in)
 /// down to its exit plane, within its radius. What the pump drives and the volume balance counts.
 struct BoreRegion {
-  Vec3 top, axis;  // m; the axis points out of the exit
+  Vec3 axis, top;  // the axis points out of the exit; m
   Real length = 0, radius_squared = 0, margin = 0;
   BoreRegion(const Model& model, const NozzleState& nozzle, std::size_t n)
-      : top(nozzle.pose.position - model.nozzles[n].bore_length * nozzle.pose.rotate(Vec3(0, 0, -1))),
-        axis(nozzle.pose.rotate(Vec3(0, 0, -1))),
+      : axis(nozzle.pose.rotate(Vec3(0, 0, -1))),
+        top(nozzle.pose.position - model.nozzles[n].bore_length * axis),
         length(model.nozzles[n].bore_length),
         radius_squared(model.nozzles[n].inner_diameter * model.nozzles[n].inner_diameter / 4),
         margin(model.particle_diameter) {}

@@ -47,17 +47,17 @@ class QualityReport final : public RunObserver {
     }
     if (heights_.whole().history().empty() || heights_.whole().history().back().time < simulation.time())
       heights_.observe(simulation.time(), simulation.solver().fluid().position);
+    const std::vector<quality::HeadDesign> designs = designs_now(simulation);  // what was laid by now
     quality::Report report;
     try {
-      report = print_quality(simulation, kSpacing);
+      report = measure_now(simulation, designs, kSpacing);
     } catch (const quality::UnmeasurableDesign& unmeasurable) {
       result.note = unmeasurable.what();  // skipped: the summary says why
       summary.quality = result;
       return;
     }
-    // The surface against what was laid by now (a run stopped before its path ends).
-    complete_and_write_report(report, simulation.scene(), quality::combined(designs_now(simulation)), simulation.solver().fluid().position,
-                              heights_, folder_);
+    complete_and_write_report(report, simulation.scene(), quality::combined(designs), simulation.solver().fluid().position, heights_,
+                              folder_);
     result.file = "quality.json";
     double width = 0, design_width = 0, height = 0, design_height = 0, measured = 0;
     for (const auto& head : report.heads) {

@@ -61,7 +61,6 @@ class RunFigures final : public RunObserver {
     const auto bytes = [](const auto& array) { return double(array.capacity() * sizeof(array[0])); };
     summary.boundary_megabytes = 1e-6 * (bytes(boundary.local_position) + bytes(boundary.position) + bytes(boundary.velocity) +
                                          bytes(boundary.volume) + bytes(boundary.body) + bytes(boundary.nozzle_bore));
-    const double particle_volume = solver.model().particle_volume;
     for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
       sph::NozzleState nozzle = state.nozzles[n];
       nozzle.end_blockage(solver.time());  // one that lasts to the end counts too
@@ -72,13 +71,14 @@ class RunFigures final : public RunObserver {
       report.layers_emitted = nozzle.layers_emitted;
       report.particles_emitted = nozzle.particles_emitted;
       report.steps_blocked = nozzle.blocked_layers;
-      report.volume_commanded = nozzle.volume_commanded;
-      report.volume_emitted = double(nozzle.particles_emitted) * particle_volume;
-      report.volume_lost = nozzle.volume_lost;
+      const Simulation::VolumeBalance volumes = simulation.nozzle_volumes(n);
+      report.volume_commanded = volumes.commanded;
+      report.volume_emitted = volumes.emitted;
+      report.volume_lost = volumes.lost_at_nozzles;
       report.blocked_time = nozzle.blocked_time;
-      report.volume_primed = nozzle.volume_primed;
-      report.volume_in_bore = double(sph::particles_in_bore(solver, n)) * particle_volume;
-      report.volume_laid = report.volume_emitted - report.volume_in_bore;
+      report.volume_primed = volumes.primed;
+      report.volume_in_bore = volumes.in_bores;
+      report.volume_laid = volumes.laid;
       report.path_time = simulation.path_time(n);
       if (solver.model().nozzle_geometry[n].has_bore()) {
         report.extrusion_pressure = nozzle.extrusion_pressure;

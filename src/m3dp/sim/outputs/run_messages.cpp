@@ -460,16 +460,12 @@ class RunMessages final : public RunObserver {
       run.pressure_ms = stats->stage_ms[sph::Stage::pressure] + stats->stage_ms[sph::Stage::divergence];
       run.world_ms = simulation.last_world_ms();
     }
-    const auto& solver = simulation.solver();
     for (std::size_t n = 0; n < layout_.nozzles.size(); ++n) {
       const Vec3 wanted = simulation.head_path(n).sample(simulation.path_time(n)).position;
-      const auto& engine = solver.state().nozzles[n];
-      const double particle_volume = solver.model().particle_volume;
-      const double in_bore = double(sph::particles_in_bore(solver, n)) * particle_volume;
+      const Simulation::VolumeBalance volumes = simulation.nozzle_volumes(n);
       run.nozzles.push_back({layout_.nozzles[n].name, poses.nozzles[n].extruding, poses.nozzles[n].volume_rate, poses.nozzles[n].pose.position,
-                             double((poses.nozzles[n].pose.position - wanted).norm()), engine.volume_commanded,
-                             double(engine.particles_emitted) * particle_volume - in_bore, in_bore, engine.volume_lost,
-                             engine.volume_primed});
+                             double((poses.nozzles[n].pose.position - wanted).norm()), volumes.commanded, volumes.laid, volumes.in_bores,
+                             volumes.lost_at_nozzles, volumes.primed});
     }
     run.step = static_cast<std::uint64_t>(simulation.solver().state().step);
     for (const auto& phase : simulation.solver().parameters().phases) run.material_density.push_back(phase.density);

@@ -251,7 +251,7 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
   workspace.rest_allowance.resize(fluid.size());  // written for every active particle below
   // Half what rest detection lets resting material keep: a woken particle left at the whole could
   // never rest again (it rests at or below it), and the woken band grew layer by layer.
-  const Real rest_compression = Real(0.5) * model.settings.rest_compression;
+  const Real woken_allowance = Real(0.5) * model.settings.rest_compression;
   state.last_step.max_density_error = with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
                        return tbb::parallel_reduce(
                            tbb::blocked_range<std::size_t>(0, state.active_count, 128), Real(0),
@@ -311,7 +311,7 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
                                  // rested with (its few moving neighbours would have to carry it): the
                                  // solve leaves it what rest detection allowed, as deep as it is embedded.
                                  const Real share = fluid_lists.counts[i] > 0 ? Real(resting) / Real(fluid_lists.counts[i]) : Real(0);
-                                 workspace.rest_allowance[i] = rest_compression * std::clamp(2 * share - 1, Real(0), Real(1));
+                                 workspace.rest_allowance[i] = woken_allowance * std::clamp(2 * share - 1, Real(0), Real(1));
                                }
                                const std::size_t boundary_first = boundary_lists.first(i);
                                // The walls' sums for the solves' sweeps (Workspace::WallSums).
