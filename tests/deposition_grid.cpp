@@ -5,10 +5,13 @@
 //   build/tests/deposition_grid [-o FILE] [--quick] [--cap PA_S] [--across N] [--gap G/D --speed V/U]
 //                               [--no-rest] [--particles PREFIX] [--bore L/D (0: the exit-plane inlet)]
 //                               [--material bingham|newtonian] [--yield-stress PA] [--plastic-viscosity PA_S]
-//                               [--surface floor|layer]
+//                               [--surface floor|layer] [--viscosity PA_S] [--tension] [--stress-form SHARE]
 // (--gap and --speed: that one point of the grid only; --particles: each strand's particles at the
 // end as PREFIX_MATERIAL_G_V_SURFACE.csv; --material newtonian with --gap/--speed lays a free
-// Newtonian rope too; --yield-stress and --plastic-viscosity change the mortar's Bingham figures.)
+// Newtonian rope too; --yield-stress and --plastic-viscosity change the mortar's Bingham figures,
+// --viscosity the Newtonian paste's; --tension and --stress-form turn on the tension projection and the
+// implicit viscosity's stress form, issue 55. least_area and greatest_area are the smallest and largest
+// stations' sections over the nominal one: a torn rope has a station near 0.)
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -24,7 +27,8 @@ namespace deposition = m3dp::sim::deposition;
 
 int main(int argc, char** argv) {
   std::string output, particles_csv, only_material, only_surface;
-  bool quick = false, rest_detection = true;
+  bool quick = false, rest_detection = true, tension = false;
+  double stress_form = 0, newtonian_viscosity = 0;
   double cap = 0, across = 8, only_gap = 0, only_speed = 0, bore = 2, yield_stress = 0, plastic_viscosity = 0;
   for (int k = 1; k < argc; ++k) {
     if (!std::strcmp(argv[k], "-o") && k + 1 < argc) output = argv[++k];
@@ -40,8 +44,11 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[k], "--surface") && k + 1 < argc) only_surface = argv[++k];
     else if (!std::strcmp(argv[k], "--yield-stress") && k + 1 < argc) yield_stress = std::atof(argv[++k]);
     else if (!std::strcmp(argv[k], "--plastic-viscosity") && k + 1 < argc) plastic_viscosity = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--viscosity") && k + 1 < argc) newtonian_viscosity = std::atof(argv[++k]);
+    else if (!std::strcmp(argv[k], "--tension")) tension = true;
+    else if (!std::strcmp(argv[k], "--stress-form") && k + 1 < argc) stress_form = std::atof(argv[++k]);
     else {
-      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D] [--material bingham|newtonian] [--yield-stress PA] [--plastic-viscosity PA_S] [--surface floor|layer]\n",
+      std::fprintf(stderr, "usage: %s [-o FILE] [--quick] [--cap PA_S] [--across PARTICLES_PER_BORE] [--gap G_OVER_D --speed V_OVER_U] [--no-rest] [--particles PREFIX] [--bore LENGTH_OVER_D] [--material bingham|newtonian] [--yield-stress PA] [--plastic-viscosity PA_S] [--surface floor|layer] [--viscosity PA_S] [--tension] [--stress-form SHARE]\n",
                    argv[0]);
       return 2;
     }
@@ -55,7 +62,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "cannot write %s\n", output.c_str());
     return 1;
   }
-  std::fprintf(out, "material,regime,surface,g_over_D,V_over_U,area_ratio,height_mm,reference_height_mm,width_mm,reference_width_mm,"
+  std::fprintf(out, "material,regime,surface,g_over_D,V_over_U,area_ratio,least_area,greatest_area,height_mm,reference_height_mm,width_mm,reference_width_mm,"
                     "landed,extrusion_pressure_Pa,blocked_steps,particles,seconds\n");
   std::vector<double> gaps = quick ? std::vector<double>{0.5, 1.5} : std::vector<double>{0.25, 0.5, 0.75, 1.0, 1.5, 2.0};
   std::vector<double> speeds = quick ? std::vector<double>{1} : std::vector<double>{0.5, 1, 1.5, 2};
@@ -71,6 +78,9 @@ int main(int argc, char** argv) {
           strand.material = bingham ? deposition::printable_mortar() : deposition::stiff_newtonian_paste();
           if (bingham && yield_stress > 0) strand.material.rheology.yield_stress = Real(yield_stress);
           if (bingham && plastic_viscosity > 0) strand.material.rheology.viscosity = Real(plastic_viscosity);
+          if (!bingham && newtonian_viscosity > 0) strand.material.rheology.viscosity = Real(newtonian_viscosity);
+          strand.tension = tension;
+          strand.stress_form = stress_form;
           strand.gap_ratio = gap;
           strand.speed_ratio = speed;
           strand.particles_across = across;
@@ -89,8 +99,9 @@ int main(int argc, char** argv) {
           const double round = strand.diameter * std::sqrt(1 / speed);
           const double reference_height = pressed ? gap * strand.diameter : round;
           const double reference_width = pressed ? deposition::rounded_box_width(strand) : round;
-          std::fprintf(out, "%s,%s,%s,%.2f,%.2f,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.1f,%llu,%zu,%.1f\n", bingham ? "bingham_mortar" : "newtonian_paste",
+          std::fprintf(out, "%s,%s,%s,%.2f,%.2f,%.4f,%.4f,%.4f,%.3f,%.3f,%.3f,%.3f,%.3f,%.1f,%llu,%zu,%.1f\n", bingham ? "bingham_mortar" : "newtonian_paste",
                        pressed ? "pressed" : "free", on_layer ? "layer" : "floor", gap, speed, result.area / deposition::nominal_area(strand),
+                       result.least_area / deposition::nominal_area(strand), result.greatest_area / deposition::nominal_area(strand),
                        1e3 * result.height, 1e3 * reference_height, 1e3 * result.width, 1e3 * reference_width, result.landed,
                        result.extrusion_pressure, result.blocked_layers, result.particles, result.seconds);
           std::fflush(out);

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
 #include <fstream>
 #include <cmath>
 #include <vector>
@@ -88,6 +89,8 @@ StrandResult lay_strand(const StrandCase& strand) {
   parameters.settings.particle_radius = Real(d / 2);
   parameters.settings.max_time_step = Real(2e-3);
   parameters.settings.rest_detection = strand.rest_detection;
+  parameters.settings.tension = strand.tension;
+  parameters.settings.stress_form_viscosity = Real(strand.stress_form);
   parameters.settings.bounds.min = Vec3(Real(-0.1), Real(-0.1), Real(-0.05));
   parameters.settings.bounds.max = Vec3(Real(length + 0.1), Real(0.1), Real(0.1));
   material::Material material = strand.material;
@@ -183,15 +186,19 @@ StrandResult lay_strand(const StrandCase& strand) {
           << (i >= solver.state().active_count) << ',' << (fluid.id[i] >= first_id) << '\n';
   }
   result.bottom = bottom;
-  int landed = 0;
+  int landed = 0, filled = 0;
   for (const Station& station : stations) {
-    result.width += (station.y_max - station.y_min + d) / kStations;
     result.height += station.column * d * d * d / (2 * d * (high - low) / kStations) / kStations;
-    result.top += (station.top + d / 2 - bottom) / kStations;
+    if (station.y_max < station.y_min) continue;  // empty: a torn rope's gap (no width, no top)
+    ++filled;
+    result.width += station.y_max - station.y_min + d;
+    result.top += station.top + d / 2 - bottom;
     // On the surface: its lowest particle's centre no more than a particle diameter above it.
     if (station.lowest - d / 2 <= bottom + d / 2) ++landed;
   }
   result.landed = double(landed) / kStations;
+  result.width /= std::max(filled, 1);
+  result.top /= std::max(filled, 1);
   result.counted_area = double(count) * d * d * d / (high - low);
   // The section of the particles' surface, the union of spheres of radius 1.31 r (the fair surface of
   // their volume: see test_materials' strands), at the stations' centres.
@@ -200,8 +207,13 @@ StrandResult lay_strand(const StrandCase& strand) {
   spheres.method = surface::Method::spherical;
   spheres.sphere_radius = Real(1.31 * d / 2);
   const TriangleMesh mesh = surface::reconstruct_surface(strand_points, spheres);
-  for (int k = 0; k < kStations; ++k)
-    result.area += surface::cross_section_area(mesh, 0, low + (high - low) * (k + 0.5) / kStations) / kStations;
+  result.least_area = std::numeric_limits<double>::infinity();
+  for (int k = 0; k < kStations; ++k) {
+    const double area = surface::cross_section_area(mesh, 0, low + (high - low) * (k + 0.5) / kStations);
+    result.area += area / kStations;
+    result.least_area = std::min(result.least_area, area);
+    result.greatest_area = std::max(result.greatest_area, area);
+  }
   // The quality module on the same strand: its design is the printed line, its sections those in the window.
   toolpath::PathSegment line;
   line.curve = toolpath::LineCurve{Vec3(0, 0, Real(bottom + gap)), Vec3(Real(length), 0, Real(bottom + gap))};

@@ -24,16 +24,19 @@ struct StrandCase {
   bool on_layer = false;             // laid on a strand printed before (same material, pressed at g = D/2)
   double viscosity_cap = 0;          // Pa·s; 0: the material's own
   bool rest_detection = true;
+  bool tension = false;              // the tension projection (SolverSettings::tension)
+  double stress_form = 0;            // the implicit viscosity's stress-form share (SolverSettings::stress_form_viscosity)
   std::string particles_csv;         // where to write the particles at the end (x, y, z, id, at rest, of the strand
                                      // measured or the layer below); empty: nowhere
 };
 
 struct StrandResult {
   double area = 0;           // m², the section of the particles' surface (union of spheres of 1.31 r), steady part
+  double least_area = 0, greatest_area = 0;  // m², the smallest and largest of the stations' sections there
   double counted_area = 0;   // m², the particles' volume per length there
-  double width = 0;          // m
+  double width = 0;          // m, mean over the stations that hold material
   double height = 0;         // m, at the centreline: the material's volume per footprint (see lay_strand)
-  double top = 0;            // m, the highest particles' tops over the surface below
+  double top = 0;            // m, the highest particles' tops over the surface below (the same stations)
   double landed = 0;         // fraction of the steady part whose bottom lies on the surface below (within d)
   // The same steady part measured by the quality module (quality/sections.hpp) against the line as
   // designed: its sections' mean width, height (the material's extent up) and area.

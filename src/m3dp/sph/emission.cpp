@@ -182,9 +182,18 @@ constexpr double kPressureSmoothing = 0.05;
 
 /// The pump of each nozzle with a bore: material in the piston zone (the bore's top, where discs come
 /// in) moves with the nozzle at the commanded flow along the axis, unless the material ahead of it is
-/// compressed (a blocked exit). With `measure`, the force that took (Σ m Δv / Δt along the axis) is
-/// the nozzle's extrusion force, and over the bore's section its extrusion pressure.
-void drive_pistons(const Model& model, State& state, bool measure) {
+/// compressed (a blocked exit). After the solves, the force the step's drives took (Σ m Δv / Δt along
+/// the axis, from the drive before the viscosity solve on) is the nozzle's extrusion force, and over
+/// the bore's section its extrusion pressure.
+enum class PistonDrive {
+  before_pressure,   // drive_pumps: the impulses of this step start here
+  before_viscosity,  // hold_pumps: what the pressure solve did to the piston zones is added
+  after_solves,      // push_out_of_nozzles: added, and the force and the outflow measured
+};
+void drive_pistons(const Model& model, State& state, Workspace& workspace, PistonDrive call) {
+  const bool measure = call == PistonDrive::after_solves;
+  if (call == PistonDrive::before_pressure || workspace.piston_impulse.size() != state.nozzles.size())
+    workspace.piston_impulse.assign(state.nozzles.size(), 0.0);
   auto& fluid = state.fluid;
   const Real diameter = model.particle_diameter;
   for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
@@ -260,10 +269,11 @@ void drive_pistons(const Model& model, State& state, bool measure) {
           return sum;
         },
         std::plus<double>());
+    if (call != PistonDrive::before_pressure) workspace.piston_impulse[n] += impulse;
     if (measure && time_step > 0) {
       // The pump's push: what moving the piston zone took, and the material's push on the lid (last step's).
       const Vec3& lid_force = state.bodies[static_cast<std::size_t>(geometry.piston_body)].fluid_force;
-      nozzle.extrusion_force = static_cast<Real>(impulse / time_step) - lid_force.dot(axis);
+      nozzle.extrusion_force = static_cast<Real>(workspace.piston_impulse[n] / time_step) - lid_force.dot(axis);
       const double area = kPi * settings.inner_diameter * settings.inner_diameter / 4;
       const double blend = std::min(1.0, time_step / kPressureSmoothing);
       nozzle.extrusion_pressure += static_cast<Real>(blend * (nozzle.extrusion_force / area - nozzle.extrusion_pressure));
@@ -272,12 +282,42 @@ void drive_pistons(const Model& model, State& state, bool measure) {
   }
 }
 
+/// Marks (1) the active particles whose velocity a running pump sets in `driven`; whether any is.
+bool mark_piston_zones(const Model& model, const State& state, std::vector<std::uint8_t>& driven) {
+  driven.assign(state.fluid.size(), 0);
+  bool any = false;
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+    const NozzleState& nozzle = state.nozzles[n];
+    const NozzleGeometry& geometry = model.nozzle_geometry[n];
+    // As drive_pistons: a bore whose pump runs (extruding, flowing, not stalled).
+    if (!geometry.has_bore() || !nozzle.extruding || !(nozzle.flow_scale > 0) || nozzle.pump_stalled) continue;
+    const BoreRegion bore(model, nozzle, n);
+    for (std::size_t i = 0; i < state.active_count; ++i) {
+      Real depth = 0;
+      if (!bore.contains(state.fluid.position[i], depth) || depth > geometry.piston_depth) continue;
+      driven[i] = 1;
+      any = true;
+    }
+  }
+  return any;
+}
+
 }  // namespace
 
-void drive_pumps(const Model& model, State& state, Workspace& /*workspace*/) { drive_pistons(model, state, false); }
+void drive_pumps(const Model& model, State& state, Workspace& workspace) {
+  drive_pistons(model, state, workspace, PistonDrive::before_pressure);
+  workspace.any_piston_driven = false;
+}
 
-void push_out_of_nozzles(const Model& model, State& state, Workspace& /*workspace*/) {
-  drive_pistons(model, state, true);
+void hold_pumps(const Model& model, State& state, Workspace& workspace) {
+  workspace.any_piston_driven = false;
+  if (!model.settings.tension) return;
+  drive_pistons(model, state, workspace, PistonDrive::before_viscosity);
+  workspace.any_piston_driven = mark_piston_zones(model, state, workspace.piston_driven);
+}
+
+void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace) {
+  drive_pistons(model, state, workspace, PistonDrive::after_solves);
   // The extruder pushes: material in a nozzle's exit cross-section, up to one spacing in front of
   // it, leaves at least at the exit speed (a velocity inlet). Where the bead below fills the gap
   // (slow printing, small gaps) this squeezes it sideways; without it the new layers would find no

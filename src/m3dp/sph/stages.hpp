@@ -123,6 +123,12 @@ void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace)
 /// The pumps of nozzles with a bore drive their piston zones (before the density solve, so that it
 /// sees the flow; push_out_of_nozzles drives them again after the solves and measures the force).
 void drive_pumps(const Model& model, State& state, Workspace& workspace);
+/// With the tension projection (material that pulls), the pumps drive their piston zones again before
+/// the viscosity solve and mark them in Workspace::piston_driven: the viscosity solve and the
+/// projection hold them at the piston's velocity, as material of fixed velocity, so that the material
+/// below hangs from them. (Moved by the solves and set back after, they let a 300 Pa·s rope drawn at
+/// twice its speed slide off in free-falling slugs.)
+void hold_pumps(const Model& model, State& state, Workspace& workspace);
 /// x += Δt v.
 void advect_positions(const Model& model, State& state, Workspace& workspace);
 /// Elastic materials with a relaxation time: the reference shape creeps towards the current one.

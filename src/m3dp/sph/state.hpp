@@ -196,6 +196,11 @@ struct Workspace {
   SpatialHashGrid resting_grid;
   SpatialHashGrid recent_resting_grid;
   bool resting_grid_dirty = true;                // built from another state, or never
+  // (n) 1: a running pump sets this active particle's velocity (its piston zone, stages::hold_pumps);
+  // the viscosity solve and the tension projection hold it fixed. Whether any is, this step.
+  std::vector<std::uint8_t> piston_driven;
+  bool any_piston_driven = false;
+  std::vector<double> piston_impulse;  // per nozzle: Σ m Δv the pump gave its piston zone this step (N·s)
   std::size_t settled_begin = 0, settled_end = 0;
   std::uint64_t settled_builds = 0;               // how many times the settled slots were chosen (cameras keep their BVH until then)
   std::vector<Index> resting_grid_subset;

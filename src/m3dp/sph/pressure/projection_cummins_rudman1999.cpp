@@ -116,7 +116,7 @@ Real flat_surface_gradient_sum(const Model& model) {
 /// the lattice's disorder, and under tension it draws particles into pairs. It is weighted by how
 /// lopsided the neighbourhood is: fully from half a flat face's gradient sum, not at all below a quarter.
 Vec4 kept_pressure_velocity_change(const Workspace& workspace, const Real* mass, const Real* pressure, std::size_t i,
-                                   std::size_t active, Real flat_surface_sum) {
+                                   std::size_t active, const std::uint8_t* driven, Real flat_surface_sum) {
   const auto& lists = workspace.fluid_neighbors;
   const std::size_t first = lists.first(i);
   const Index* neighbor = lists.indices.data() + first;
@@ -124,27 +124,35 @@ Vec4 kept_pressure_velocity_change(const Workspace& workspace, const Real* mass,
   const Vec4* position = workspace.solver_position.data();
   const Vec4 position_i = position[i];
   const Real pressure_i = pressure[i];
-  Vec4 difference = Vec4::Zero(), gradient_sum = Vec4::Zero();
+  Vec4 difference = Vec4::Zero(), gradient_sum = Vec4::Zero(), fixed_sum = Vec4::Zero();
   for (Index k = 0; k < lists.counts[i]; ++k) {
     const Index j = neighbor[k];
     const Vec4 gradient = pair_gradient[k] * (position_i - position[j]);
+    if (std::size_t(j) >= active || (driven != nullptr && driven[j])) {
+      fixed_sum += gradient;
+      continue;
+    }
     gradient_sum += gradient;
-    difference += ((std::size_t(j) < active ? pressure[j] : Real(0)) - pressure_i) * gradient;
+    difference += (pressure[j] - pressure_i) * gradient;
   }
-  const Real lopsided = gradient_sum.norm() / flat_surface_sum;
+  const Real lopsided = (gradient_sum + fixed_sum).norm() / flat_surface_sum;
   const Real surface = std::clamp((lopsided - kSurfaceLopsidedness) / kSurfaceLopsidedness, Real(0), Real(1));
-  return (difference + (2 * surface * pressure_i) * gradient_sum) / mass[i];
+  // A neighbour of fixed velocity (resting, or driven by a pump) takes p_i ∇W_ij, as in the solve's
+  // operator (its own pressure is not an unknown): i is drawn towards it. The difference form there,
+  // (0 − p_i) ∇W_ij, pushed i away from it, and a slug in a bore fell off its piston zone.
+  return (difference + pressure_i * fixed_sum + (2 * surface * pressure_i) * gradient_sum) / mass[i];
 }
 
 /// Conjugate gradients on B M⁻¹ Bᵀ p = r from the right-hand side in system.residual (1/s²) and the
 /// inverse diagonal, p from 0 into system.solution; each step's velocity change, times Δt, subtracted
-/// from `change` (padded, active particles). Stops at the relative tolerance, or where the mean |r| Δt²
-/// is under `absolute` (a relative density change a step). Returns the iterations and the last mean.
+/// from `change` (padded, active particles; none at particles a pump drives). Stops at the relative
+/// tolerance, or where the mean |r| Δt² is under `absolute` (a relative density change a step). Returns the iterations and the last mean.
 struct ProjectionResult {
   int iterations = 0;
   double mean_change = 0;  // mean |r| Δt² at the end
 };
-ProjectionResult solve_projection(const Model& model, const State& state, Workspace& workspace, Vec4* change, double absolute) {
+ProjectionResult solve_projection(const Model& model, const State& state, Workspace& workspace, Vec4* change, double absolute,
+                                  bool any_driven) {
   const std::size_t count = state.active_count;
   auto& system = workspace.tension_system;
   const Real time_step = state.time_step;
@@ -169,7 +177,8 @@ ProjectionResult solve_projection(const Model& model, const State& state, Worksp
   while (residual_norm > kRelativeTolerance * rhs_norm && mean_change > absolute && result.iterations < model.settings.max_tension_iterations) {
     // q = B M⁻¹ Bᵀ d: the velocity change of the direction, then its compression rate.
     parallel_for_each_index(count, [&](std::size_t i) {
-      system.velocity_change[i] = pressure_velocity_change(workspace, mass, system.direction.data(), i, count);
+      system.velocity_change[i] = any_driven && workspace.piston_driven[i] ? Vec4::Zero()
+                                                                  : pressure_velocity_change(workspace, mass, system.direction.data(), i, count);
     });
     const double curvature = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       system.product[i] = compression_rate(workspace, system.velocity_change.data(), i);
@@ -213,10 +222,13 @@ void apply_tension_pressure(const Model& model, State& state, Workspace& workspa
   system.velocity_change.resize(fluid.size());
   const Real time_step = state.time_step;
   const Real flat_surface_sum = flat_surface_gradient_sum(model);
+  const std::uint8_t* driven = workspace.any_piston_driven ? workspace.piston_driven.data() : nullptr;
   parallel_for_each_index(count, [&](std::size_t i) {
-    system.velocity_change[i] = kept_pressure_velocity_change(workspace, fluid.mass.data(), system.solution.data(), i, count, flat_surface_sum);
+    system.velocity_change[i] = kept_pressure_velocity_change(workspace, fluid.mass.data(), system.solution.data(), i, count, driven, flat_surface_sum);
   });
-  parallel_for_each_index(count, [&](std::size_t i) { fluid.velocity[i] -= time_step * system.velocity_change[i].head<3>(); }, 4096);
+  parallel_for_each_index(count, [&](std::size_t i) {
+    if (driven == nullptr || !driven[i]) fluid.velocity[i] -= time_step * system.velocity_change[i].head<3>();
+  }, 4096);
 }
 
 void project_tension(const Model& model, State& state, Workspace& workspace) {
@@ -228,8 +240,12 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   for (auto* vector : {&system.residual, &system.solution, &system.direction, &system.preconditioned, &system.product, &system.inverse_diagonal})
     vector->resize(size);
   system.velocity_change.resize(size);
-  // The velocity change of a direction is zero at the resting particles (their velocities are fixed).
+  // The velocity change of a direction is zero at the resting particles (their velocities are fixed)
+  // and at those a pump drives (stages::hold_pumps): the pump sets their velocity after the solves,
+  // so a pull that counted on moving them would not hold the material below them. They are material
+  // of fixed velocity, as the resting particles are: no unknown there, their neighbours drawn to them.
   std::fill(system.velocity_change.begin() + static_cast<std::ptrdiff_t>(count), system.velocity_change.end(), Vec4::Zero());
+  const bool any_driven = workspace.any_piston_driven;
   auto& velocity = workspace.solver_velocity;
   velocity.resize(size);
   parallel_for_each_index(size, [&](std::size_t i) { velocity[i] = padded(fluid.velocity[i]); }, 4096);
@@ -257,12 +273,13 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
       const Index j = lists.indices[first + k];
       const Vec4 gradient = workspace.fluid_pair_gradient[first + k] * (position[i] - position[j]);
       gradient_sum += gradient;
-      if (std::size_t(j) < count) squares += gradient.squaredNorm() / mass[j];
+      if (std::size_t(j) < count && !(any_driven && workspace.piston_driven[j])) squares += gradient.squaredNorm() / mass[j];
     }
     system.at_surface[i] = gradient_sum.norm() > kSurfaceLopsidedness * flat_surface_sum || workspace.boundary_neighbors.counts[i] > 0;
     const Real diagonal = gradient_sum.squaredNorm() / mass[i] + squares;
     const bool alone = lists.counts[i] * 4 < std::size_t(model.full_neighbourhood);
-    system.inverse_diagonal[i] = diagonal > 0 && !alone ? Real(1) / diagonal : Real(0);
+    const bool fixed = any_driven && workspace.piston_driven[i];
+    system.inverse_diagonal[i] = diagonal > 0 && !alone && !fixed ? Real(1) / diagonal : Real(0);
   });
   const Real volume = model.particle_volume;
 
@@ -271,7 +288,7 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   auto& dilation = workspace.scratch_real;
   dilation.assign(count, Real(0));
   const double any_dilation = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-    if (system.inverse_diagonal[i] == 0) {  // air to the projection
+    if (system.inverse_diagonal[i] == 0) {  // air to the projection, or driven
       system.residual[i] = 0;
       fluid.kappa_tension[i] = 0;
       return;
@@ -283,7 +300,7 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
     sums[0] += dilation[i] < 0 ? 1 : 0;
   })[0];
   const double tolerance = kAbsoluteToleranceFraction * double(model.settings.divergence_tolerance);
-  const ProjectionResult divergence = solve_projection(model, state, workspace, velocity.data(), tolerance);
+  const ProjectionResult divergence = solve_projection(model, state, workspace, velocity.data(), tolerance, any_driven);
   // Only the pull is kept: compression is the density solve's (before the viscosity) and the volume
   // correction's. A push kept here as well was pushed twice where a falling stream landed, and grew
   // without bound (to 2·10⁵ m²/s² in the pile of the nozzle bench).
@@ -300,7 +317,7 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   auto& change = workspace.solver_velocity;  // the velocities are back in the particles
   parallel_for_each_index(size, [&](std::size_t i) { change[i] = Vec4::Zero(); }, 4096);
   parallel_for_each_index(count, [&](std::size_t i) { system.residual[i] = dilation[i] / (time_step * time_step); }, 4096);
-  const ProjectionResult taken_back = solve_projection(model, state, workspace, change.data(), tolerance);
+  const ProjectionResult taken_back = solve_projection(model, state, workspace, change.data(), tolerance, any_driven);
   state.last_step.tension_iterations += taken_back.iterations;
   parallel_for_each_index(count, [&](std::size_t i) { fluid.position[i] += time_step * change[i].head<3>(); }, 4096);
 }

@@ -20,12 +20,15 @@ int run_conjugate_gradients(const Model& model, State& state, Workspace& workspa
   CoarseViscosityLevel& coarse = system.coarse_level.get();
   const bool two_level = state.previous_viscosity_iterations > kCoarseLevelFromIterations &&
                          coarse.build(state, workspace, count, kAggregateSpacings * model.particle_diameter);
+  // Particles a pump drives keep their velocity: their residual and direction stay zero.
+  const std::uint8_t* driven = workspace.any_piston_driven ? workspace.piston_driven.data() : nullptr;
   // z = D⁻¹ r (+ the coarse correction) into system.preconditioned; returns r·z.
   auto precondition = [&]() {
     if (two_level) coarse.solve(workspace, system.residual);
     return deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       Vec3 z = system.inverse_diagonal[i] * system.residual[i];
       if (two_level) z += CoarseViscosityLevel::correction(workspace, i);
+      if (driven != nullptr && driven[i]) z = Vec3::Zero();
       system.preconditioned[i] = z;
       sums[0] += double(system.residual[i].dot(z));
     })[0];
@@ -51,7 +54,7 @@ int run_conjugate_gradients(const Model& model, State& state, Workspace& workspa
     const Real step = static_cast<Real>(residual_dot / curvature);
     const auto next = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       velocity[i] += step * system.padded_operand[i].head<3>();
-      system.residual[i] -= step * system.product[i];
+      if (driven == nullptr || !driven[i]) system.residual[i] -= step * system.product[i];
       sums[0] += double(system.residual[i].squaredNorm());
     });
     residual_norm = std::sqrt(next[0]);

@@ -15,8 +15,11 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
   const std::size_t count = state.active_count;
   const auto& settings = model.settings;
   prepare_stress_product(model, state, workspace);
+  // A particle a pump drives keeps its velocity (Workspace::piston_driven): no residual of its own, so
+  // conjugate gradients never move it; its pull on its neighbours stays in theirs.
+  const std::uint8_t* driven = workspace.any_piston_driven ? workspace.piston_driven.data() : nullptr;
   const auto start = product.row_sums<2>(count, [&](std::size_t i, const Vec3& row, std::array<double, 2>& sums) {
-    const Vec3 residual = system.rhs[i] - row;
+    const Vec3 residual = driven != nullptr && driven[i] ? Vec3::Zero() : Vec3(system.rhs[i] - row);
     system.residual[i] = residual;
     sums[0] += double(system.rhs[i].squaredNorm());
     sums[1] += double(residual.squaredNorm());
@@ -49,6 +52,7 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
       const Real beta = static_cast<Real>((sums[4] * sums[0] - sums[3] * sums[1]) / determinant);
       // r = b − A(α v_A + β v_B) = (1 − α − β) b + α r_A + β r_B.
       residual_norm = std::sqrt(deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+        if (driven != nullptr && driven[i]) return;  // kept as the pump drives it
         velocity[i] = alpha * velocity[i] + beta * fluid.viscous_velocity[i];
         system.residual[i] = (1 - alpha - beta) * system.rhs[i] + alpha * system.residual[i] + beta * system.product[i];
         sums[0] += double(system.residual[i].squaredNorm());
