@@ -116,11 +116,17 @@ void emit_layers(const Model& model, State& state, Workspace& workspace) {
       state.last_step.particles_emitted += geometry.disc_offsets.size();
     };
     if (geometry.has_bore() && !nozzle.primed) {
-      // A primed pump: the bore is filled at the first extrusion, disc by disc down to the tip,
-      // where nothing is in the way (a nozzle started in material keeps what is there).
+      // A primed pump: the bore is filled at the first extrusion, disc by disc down to the tip, where
+      // nothing is in the way (a nozzle started in material keeps what is there), from a spacing below
+      // the inlet. The first disc the pump brings comes to the inlet a layer period later, when the
+      // column has moved a spacing down: two spacings above it, at the kernel's edge. A column that
+      // pulls (tension) hangs from the pump and fell off it there, so with tension the bore is filled
+      // from the inlet itself; a push-only one is pushed, and one disc more in a bore whose exit is
+      // closed pressed material through the bed.
       nozzle.primed = true;
       const double disc_volume = static_cast<double>(geometry.disc_offsets.size()) * model.particle_volume;
-      for (Real depth = diameter; depth <= settings.bore_length - diameter / 2; depth += diameter) {
+      const Real first_depth = model.settings.tension ? Real(0) : diameter;
+      for (Real depth = first_depth; depth <= settings.bore_length - diameter / 2; depth += diameter) {
         centre = inlet + depth * axis;
         if (blocked_by(fluid.position, fluid_clearance_squared)) continue;
         emit_disc();
