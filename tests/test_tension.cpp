@@ -87,3 +87,48 @@ TEST(Tension, AColumnHangingUnderItsWeightThinsAsStokesSays) {
   }
   EXPECT_NEAR(result.break_time / break_time, 1, 0.1);
 }
+
+// No material gains tension at rest (issue 55): a squat cylinder of the Bingham paste (τ0 = 200 Pa, which
+// holds 8 mm: ρ g h/√3 = 95 Pa; R = 5 mm, r = 0.5 mm) set on a plate it sticks to, with tension and the
+// stress form, settles under its weight for 2 s. Its pressure stays that of a push: the least
+// particle's p (the three solves' κ, as Solver::pressure) is no lower than 2 % of ρ g h, and its
+// footprint does not draw in. (A Newtonian 1000 Pa·s one still spreads over these seconds, and a
+// spreading drop's top is rightly pulled: p = 2μ ∂w/∂z < 0 there, −8.5 Pa measured.)
+TEST(Tension, ARestingBeadHoldsNoPull) {
+  const Real d = Real(0.001), radius = Real(0.005), height = Real(0.008);
+  sph::Parameters parameters;
+  parameters.settings.particle_radius = d / 2;
+  parameters.settings.max_time_step = Real(2e-3);
+  parameters.settings.tension = true;
+  parameters.settings.stress_form_viscosity = Real(0.9);
+  parameters.settings.rest_detection = false;  // every particle in the solves: resting ones hold no κ at all
+  parameters.settings.bounds.min = Vec3(-1, -1, -1);
+  parameters.settings.bounds.max = Vec3(1, 1, 1);
+  material::Material paste = tension::bingham_paste(Real(1e5));
+  paste.sticks_to_walls = true;
+  parameters.phases.push_back(paste);
+  sph::Solver solver(parameters);
+  solver.add_particles(tension::cylinder_lattice(radius, 0, height, d), Vec3::Zero(), 0);
+  const BoxShape plate{Vec3(4 * radius, 4 * radius, 3 * d)};
+  solver.add_body("plate", sph::sample_box_surface(plate, d).points, Pose{Vec3(0, 0, -Real(1.5) * d), Quat::Identity()}, true);
+  auto footprint = [&]() {  // the mean distance from the axis of the particles in the lowest two layers
+    double sum = 0, n = 0;
+    for (const Vec3& p : solver.fluid().position)
+      if (p.z() < 2 * d) sum += p.head<2>().norm(), n += 1;
+    return sum / std::max(n, 1.0);
+  };
+  const double footprint0 = footprint();
+  double least_pressure = 0;
+  while (solver.time() < 2) {
+    solver.step();
+    if (solver.time() < 1) continue;
+    for (std::size_t i = 0; i < solver.fluid().size(); ++i) least_pressure = std::min(least_pressure, double(solver.pressure(i)));
+  }
+  const double weight_pressure = double(paste.density) * 9.81 * double(height);
+  double fastest = 0;
+  for (const Vec3& v : solver.fluid().velocity) fastest = std::max(fastest, double(v.norm()));
+  std::printf("resting bead: least pressure %.3g Pa over the last second (rho g h %.0f Pa); fastest particle %.3g mm/s; footprint %.3f -> %.3f mm\n",
+              least_pressure, weight_pressure, 1e3 * fastest, 1e3 * footprint0, 1e3 * footprint());
+  EXPECT_GT(least_pressure, -0.02 * weight_pressure);
+  EXPECT_GT(footprint(), footprint0 * 0.99) << "the bead drew in";
+}
