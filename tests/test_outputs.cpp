@@ -220,9 +220,9 @@ TEST(Outputs, AMeshThatCannotBeWrittenFailsTheRun) {
 
 TEST(Outputs, APourInPlaceIsNotMeasuredAndTheRunCompletes) {
   // A nozzle that pours where it stands (its path 1 mm long over 1 s, 0.3 mm of it laid by the end):
-  // the commanded flow over the
-  // path's speed designs a bead 0.64 m wide (213 m for the bench's 0.3 m nozzle), whose fill grid threw
-  // std::bad_alloc at the end of the run and failed it (issue 56). The report says why it measures nothing, and the run completes.
+  // the commanded flow over the path's speed designs a bead 0.64 m wide (213 m for the bench's 0.3 m
+  // nozzle), whose fill grid threw std::bad_alloc at the end of the run and failed it (issue 56). The
+  // report says why it measures nothing, and the run completes.
   const scene::Scene scene = scene::load_scene_from_string(R"(<?xml version="1.0"?>
 <sdf version="1.9"><world name="pour">
   <model name="floor"><static>true</static><link name="floor"><collision name="floor">

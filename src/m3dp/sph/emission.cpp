@@ -193,13 +193,16 @@ constexpr double kPressureSmoothing = 0.05;
 /// the bore's section its extrusion pressure.
 enum class PistonDrive {
   before_pressure,   // drive_pumps: the impulses of this step start here
-  before_viscosity,  // hold_pumps: what the pressure solve did to the piston zones is added
+  before_viscosity,  // hold_pumps: what the pressure solve did to the piston zones is added, and they
+                     // are marked in Workspace::piston_driven for the solves that hold them
   after_solves,      // push_out_of_nozzles: added, and the force and the outflow measured
 };
 void drive_pistons(const Model& model, State& state, Workspace& workspace, PistonDrive call) {
-  const bool measure = call == PistonDrive::after_solves;
+  const bool measure = call == PistonDrive::after_solves, mark = call == PistonDrive::before_viscosity;
   if (call == PistonDrive::before_pressure || workspace.piston_impulse.size() != state.nozzles.size())
     workspace.piston_impulse.assign(state.nozzles.size(), 0.0);
+  if (mark) workspace.piston_driven.assign(state.fluid.size(), 0);
+  workspace.any_piston_driven = false;
   auto& fluid = state.fluid;
   const Real diameter = model.particle_diameter;
   for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
@@ -271,10 +274,12 @@ void drive_pistons(const Model& model, State& state, Workspace& workspace, Pisto
             if (!in_bore(i, depth) || depth > geometry.piston_depth) continue;
             sum += static_cast<double>(fluid.mass[i] * (piston_velocity - fluid.velocity[i]).dot(axis));
             fluid.velocity[i] = piston_velocity;
+            if (mark) workspace.piston_driven[i] = 1;
           }
           return sum;
         },
         std::plus<double>());
+    if (mark) workspace.any_piston_driven = true;
     if (call != PistonDrive::before_pressure) workspace.piston_impulse[n] += impulse;
     if (measure && time_step > 0) {
       // The pump's push: what moving the piston zone took, and the material's push on the lid (last step's).
@@ -288,38 +293,15 @@ void drive_pistons(const Model& model, State& state, Workspace& workspace, Pisto
   }
 }
 
-/// Marks (1) the active particles whose velocity a running pump sets in `driven`; whether any is.
-bool mark_piston_zones(const Model& model, const State& state, std::vector<std::uint8_t>& driven) {
-  driven.assign(state.fluid.size(), 0);
-  bool any = false;
-  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
-    const NozzleState& nozzle = state.nozzles[n];
-    const NozzleGeometry& geometry = model.nozzle_geometry[n];
-    // As drive_pistons: a bore whose pump runs (extruding, flowing, not stalled).
-    if (!geometry.has_bore() || !nozzle.extruding || !(nozzle.flow_scale > 0) || nozzle.pump_stalled) continue;
-    const BoreRegion bore(model, nozzle, n);
-    for (std::size_t i = 0; i < state.active_count; ++i) {
-      Real depth = 0;
-      if (!bore.contains(state.fluid.position[i], depth) || depth > geometry.piston_depth) continue;
-      driven[i] = 1;
-      any = true;
-    }
-  }
-  return any;
-}
-
 }  // namespace
 
 void drive_pumps(const Model& model, State& state, Workspace& workspace) {
   drive_pistons(model, state, workspace, PistonDrive::before_pressure);
-  workspace.any_piston_driven = false;
 }
 
 void hold_pumps(const Model& model, State& state, Workspace& workspace) {
-  workspace.any_piston_driven = false;
-  if (!model.settings.tension) return;
+  if (!model.settings.tension) return;  // drive_pumps left nothing marked
   drive_pistons(model, state, workspace, PistonDrive::before_viscosity);
-  workspace.any_piston_driven = mark_piston_zones(model, state, workspace.piston_driven);
 }
 
 void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace) {
