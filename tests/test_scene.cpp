@@ -430,6 +430,40 @@ TEST(Scene, NozzleBoreAndLipAreReadAndChecked) {
                   "<nozzle_wall> must be one of: free_slip, no_slip; got 'sticky'");
 }
 
+// A bed holds what is laid on it (issue 56): a printed material that sets no wall friction sticks to
+// static walls and slips on moving bodies and the bore; a friction it sets (0 included), a material no
+// head lays, and a preset's setting are kept as written.
+TEST(Scene, PrintedMaterialSticksToStaticWallsByDefault) {
+  using m3dp::material::Wall;
+  const std::string unset = replaced(valid_scene(), R"(<boundary_viscosity unit="cP">2</boundary_viscosity>)", "");
+  const auto& printed = load_scene_from_string(unset, "unset.sdf").find_material("water")->material;
+  EXPECT_TRUE(printed.sticks_to(Wall::static_wall));
+  EXPECT_FALSE(printed.sticks_to(Wall::moving_body));
+  EXPECT_FALSE(printed.sticks_to(Wall::nozzle_bore));
+  EXPECT_FLOAT_EQ(printed.wall_viscosity(500, Wall::static_wall), 500) << "the material's own viscosity";
+  EXPECT_FLOAT_EQ(printed.wall_viscosity(500, Wall::moving_body), 0) << "free slip on a moving body";
+  EXPECT_TRUE(printed.has_wall_friction());
+
+  const auto& free_slip =
+      load_scene_from_string(replaced(valid_scene(), R"(<boundary_viscosity unit="cP">2</boundary_viscosity>)", "<boundary_viscosity>0</boundary_viscosity>"),
+                             "free_slip.sdf")
+          .find_material("water")
+          ->material;
+  EXPECT_FALSE(free_slip.sticks_to(Wall::static_wall)) << "a written 0 is free slip";
+  EXPECT_FALSE(free_slip.has_wall_friction());
+  const auto& navier = load_scene_from_string(valid_scene(), "navier.sdf").find_material("water")->material;
+  EXPECT_FALSE(navier.sticks_to(Wall::static_wall));
+  EXPECT_FLOAT_EQ(navier.wall_viscosity(500, Wall::static_wall), 0.002f) << "Navier slip as written";
+
+  // Not laid by a head (the head prints another material): slips as before.
+  std::string two = replaced(unset, R"(<print_head name="head" material="water">)", R"(<print_head name="head" material="paste">)");
+  two = replaced(two, R"(<material name="water">)", R"(<material name="paste"><density>1800</density><viscosity>300</viscosity></material>
+      <material name="water">)");
+  const auto scene = load_scene_from_string(two, "two.sdf");
+  EXPECT_FALSE(scene.find_material("water")->material.sticks_to(Wall::static_wall)) << "water in a block slips";
+  EXPECT_TRUE(scene.find_material("paste")->material.sticks_to(Wall::static_wall));
+}
+
 TEST(Scene, DynamicModelsAreReadAndChecked) {
   // The tank made dynamic: its box moves, its plane cannot.
   const std::string dynamic = replaced(valid_scene(), "<static>true</static>", "<static>false</static>");

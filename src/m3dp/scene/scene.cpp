@@ -42,10 +42,22 @@ std::uint16_t Scene::material_index(const std::string& name) const {
   return 0;
 }
 
+bool Scene::holds_on_beds(const MaterialEntry& entry) const {
+  const material::Material& material = entry.material;
+  const bool printed = std::any_of(print_heads.begin(), print_heads.end(), [&](const PrintHead& head) { return head.material == material.name; });
+  const bool set = material.sticks_to_walls || material.boundary_viscosity > 0 ||
+                   std::any_of(entry.fields.begin(), entry.fields.end(), [](const auto& field) { return field.first == "boundary_viscosity"; });
+  return printed && !set;
+}
+
 sph::Parameters solver_parameters(const Scene& scene) {
   sph::Parameters parameters;
   parameters.settings = scene.solver;
-  for (const auto& entry : scene.materials) parameters.phases.push_back(entry.material);
+  for (const auto& entry : scene.materials) {
+    parameters.phases.push_back(entry.material);
+    // Scenes made in code as read ones: a printed material that sets no wall friction holds on its bed.
+    if (scene.holds_on_beds(entry)) parameters.phases.back().sticks_to_static_walls = true;
+  }
   for (const auto& head : scene.print_heads)
     parameters.nozzles.push_back(
         sph::NozzleSettings{head.name, head.inner_diameter, head.exit_speed, scene.material_index(head.material), head.bore_length,

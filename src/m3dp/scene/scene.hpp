@@ -191,6 +191,10 @@ struct Scene {
   std::vector<std::filesystem::path> input_files;  // the files it reads beside itself: URDF, G-code, waypoints, meshes
 
   [[nodiscard]] const MaterialEntry* find_material(const std::string& name) const;
+  /// Whether a material sticks to static walls for want of a wall friction of its own: a print head
+  /// lays it, and neither the scene, its preset nor the code that made it sets one (a bed holds what
+  /// is laid on it; Material::sticks_to_static_walls).
+  [[nodiscard]] bool holds_on_beds(const MaterialEntry& entry) const;
   /// The material's index (the engine's phase); 0 for a name the loader did not accept.
   [[nodiscard]] std::uint16_t material_index(const std::string& name) const;
   [[nodiscard]] const RobotInclude* find_robot(const std::string& name) const;

@@ -408,8 +408,9 @@ std::vector<SchemaRow> make_rows() {
                                     "parameters (README, \"Materials\")");
   structure("material", "ageing", "structural build-up with age (Roussel 2006): the block below");
   structure("material", "boundary_viscosity",
-            "friction against walls, bodies and the nozzle: a viscosity (Pa·s, Navier slip), or no_slip (the material sticks); "
-            "default 0, free slip");
+            "friction against walls, bodies and the nozzle: a viscosity (Pa·s, Navier slip; 0: free slip), or no_slip (the "
+            "material sticks); default: a material a print head lays sticks to static walls (a bed, a floor hold what is "
+            "laid on them) and slips on moving bodies, any other slips everywhere");
   keyword("material", "nozzle_wall", {"free_slip", "no_slip"}, {},
           "the slip of a nozzle's bore (El Abbaoui et al. 2024 found free slip matches printed concrete better)",
           [](material::Material& material, std::size_t word) { material.nozzle_no_slip = word != 0; },

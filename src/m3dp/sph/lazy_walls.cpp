@@ -71,7 +71,7 @@ void append_tile(State& state, std::size_t f, std::size_t tile) {
       boundary.position.push_back(pose.apply(point));
       boundary.velocity.push_back(Vec3::Zero());
       boundary.body.push_back(face.body);
-      boundary.nozzle_bore.push_back(0);
+      boundary.wall_kind.push_back(material::Wall::static_wall);  // tiles are of static floors and walls
     }
 }
 

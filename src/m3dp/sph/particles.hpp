@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "m3dp/core/types.hpp"
+#include "m3dp/material/material.hpp"
 
 namespace m3dp::sph {
 
@@ -110,7 +111,7 @@ struct BoundaryParticles {
   std::vector<Vec3> velocity;        // (nb) m/s, world
   std::vector<Real> volume;          // (nb) m³, Ψ/ρ0 = 1 / Σ_k W_bk over the same body
   std::vector<Index> body;           // (nb) owning body
-  std::vector<std::uint8_t> nozzle_bore;  // (nb) 1: a nozzle's bore or tip, whose slip the material sets (Material::nozzle_no_slip)
+  std::vector<material::Wall> wall_kind;  // (nb) static wall, moving body or a nozzle's bore: which slip the material takes there
 
   [[nodiscard]] std::size_t size() const { return position.size(); }
 };

@@ -24,7 +24,7 @@ Solver::Solver(Parameters parameters) : model_(compile_model(std::move(parameter
         static_cast<std::int32_t>(add_body("nozzle/" + model_.nozzles[n].name + "/piston", geometry.piston_points, Pose{}, false));
     for (const std::int32_t index : {geometry.bore_body, geometry.piston_body}) {
       const BoundaryBody& body = state_.bodies[static_cast<std::size_t>(index)];
-      for (Index k = 0; k < body.particle_count; ++k) state_.boundary.nozzle_bore[body.first_particle + k] = 1;
+      for (Index k = 0; k < body.particle_count; ++k) state_.boundary.wall_kind[body.first_particle + k] = material::Wall::nozzle_bore;
     }
   }
 }
@@ -79,13 +79,13 @@ Index Solver::add_body(const std::string& name, std::span<const Vec3> local_poin
   const auto grow = [total](auto& array) {
     if (array.capacity() < total) array.reserve(std::max(total, 2 * array.capacity()));
   };
-  grow(boundary.local_position), grow(boundary.position), grow(boundary.velocity), grow(boundary.body), grow(boundary.nozzle_bore);
+  grow(boundary.local_position), grow(boundary.position), grow(boundary.velocity), grow(boundary.body), grow(boundary.wall_kind);
   for (const Vec3& local : local_points) {
     boundary.local_position.push_back(local);
     boundary.position.push_back(pose.apply(local));
     boundary.velocity.push_back(Vec3::Zero());
     boundary.body.push_back(body_index);
-    boundary.nozzle_bore.push_back(0);
+    boundary.wall_kind.push_back(is_static ? material::Wall::static_wall : material::Wall::moving_body);
   }
   stages::sum_boundary_volumes(model_, state_, body.first_particle, body_index, is_static);
   workspace_.static_boundary_dirty = true;

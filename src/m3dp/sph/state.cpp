@@ -168,7 +168,7 @@ void load_state(StateReader& in, State& state) {
   if (state.boundary.position.size() != boundary_particles || state.boundary.velocity.size() != boundary_particles ||
       state.boundary.volume.size() != boundary_particles || state.boundary.body.size() != boundary_particles)
     in.fail("another set of walls and bodies than the scene makes");
-  state.boundary.nozzle_bore.resize(boundary_particles, 0);  // tiles are floors and walls, never a bore
+  state.boundary.wall_kind.resize(boundary_particles, material::Wall::static_wall);  // tiles are floors and walls
   const auto bodies = in.get<std::uint64_t>();
   if (bodies != state.bodies.size()) in.fail("a different number of boundary bodies than the scene makes");
   for (BoundaryBody& body : state.bodies) {

@@ -60,7 +60,7 @@ class RunFigures final : public RunObserver {
     for (const Index body : boundary.body) summary.static_boundary_particles += state.bodies[body].is_static ? 1 : 0;
     const auto bytes = [](const auto& array) { return double(array.capacity() * sizeof(array[0])); };
     summary.boundary_megabytes = 1e-6 * (bytes(boundary.local_position) + bytes(boundary.position) + bytes(boundary.velocity) +
-                                         bytes(boundary.volume) + bytes(boundary.body) + bytes(boundary.nozzle_bore));
+                                         bytes(boundary.volume) + bytes(boundary.body) + bytes(boundary.wall_kind));
     for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
       sph::NozzleState nozzle = state.nozzles[n];
       nozzle.end_blockage(solver.time());  // one that lasts to the end counts too

@@ -46,7 +46,7 @@ void update_effective_viscosity(const Model& model, State& state, Workspace& wor
         const std::size_t boundary_first = boundary_lists.first(i);
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[boundary_first + k];
-          if (phase.wall_viscosity(fluid.viscosity[i], boundary.nozzle_bore[b] != 0) <= 0) continue;  // slips there
+          if (phase.wall_viscosity(fluid.viscosity[i], boundary.wall_kind[b]) <= 0) continue;  // slips there
           gradient += (calibration.boundary_gradient * workspace.boundary_pair_gradient[boundary_first + k] * (boundary.velocity[b] - velocity_i)) *
                       (position_i - boundary.position[b]).transpose();
         }
@@ -58,7 +58,7 @@ void update_effective_viscosity(const Model& model, State& state, Workspace& wor
       fluid.viscosity[i] = phase.rheology.effective_viscosity(
           shear_rate, phase.ageing.yield_stress(phase.rheology.yield_stress, age), phase.ageing.viscosity_scale(age));
     }
-    return std::max(fluid.viscosity[i], phase.wall_viscosity(fluid.viscosity[i])) / phase.density;
+    return std::max(fluid.viscosity[i], phase.largest_wall_viscosity(fluid.viscosity[i])) / phase.density;
   };
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
   const bool use_avx2 = any_shear_rate && avx2::available();

@@ -58,7 +58,7 @@ void add_gravity_and_explicit_viscosity(const Model& model, State& state, Worksp
         for (Index k = 0; k < boundary_lists.counts[i]; ++k) {
           const Index b = boundary_lists.indices[first + k];
           const Vec3 r = position_i - boundary.position[b];
-          const Real wall_viscosity = phase.wall_viscosity(fluid.viscosity[i], boundary.nozzle_bore[b] != 0);
+          const Real wall_viscosity = phase.wall_viscosity(fluid.viscosity[i], boundary.wall_kind[b]);
           const Vec3 a = kDimensionFactor * calibration.boundary * wall_viscosity * inverse_density_i * workspace.boundary_pair_gradient[first + k] *
                          (velocity_i - boundary.velocity[b]).dot(r) / (r.squaredNorm() + regularisation) * r;
           acceleration += a;

@@ -47,7 +47,7 @@ void solve_implicit_viscosity(const Model& model, State& state, Workspace& works
     if (phase.elasticity.enabled || phase.ageing.enabled()) return false;
     const Real mu = phase.rheology.model == material::RheologyModel::newtonian ? phase.rheology.viscosity
                                                                                  : phase.rheology.max_viscosity;
-    const Real largest = std::max(mu, phase.has_wall_friction() ? phase.wall_viscosity(mu) : Real(0));
+    const Real largest = std::max(mu, phase.has_wall_friction() ? phase.largest_wall_viscosity(mu) : Real(0));
     return 2 * Real(1.5) * state.time_step * largest / phase.density * model.viscosity_calibration.coupling < settings.viscosity_tolerance;
   });
   if (negligible) {

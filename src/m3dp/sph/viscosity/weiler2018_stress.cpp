@@ -22,9 +22,17 @@
 namespace m3dp::sph::stages::weiler2018 {
 
 namespace {
-/// Whether particle i's material does not slip on walls (the stress form then sees them).
+/// Whether particle i's material does not slip on some walls (the stress form then sees those).
 bool sticks_to_walls(const Model& model, const State& state, std::size_t i) {
-  return model.phases[state.fluid.phase[i]].sticks_to_walls;
+  const FluidPhase& phase = model.phases[state.fluid.phase[i]];
+  return phase.sticks_to_walls || phase.sticks_to_static_walls;
+}
+
+/// Whether the stress form sees wall particle b from particle i: a wall i sticks to, never a bore
+/// (the bore has its own slip setting).
+bool stress_form_sees(const Model& model, const State& state, std::size_t i, Index b) {
+  const material::Wall wall = state.boundary.wall_kind[b];
+  return wall != material::Wall::nozzle_bore && model.phases[state.fluid.phase[i]].sticks_to(wall);
 }
 
 /// P_i = μ_i (G + Gᵀ) M_iᵀ of particle i's gradient G (already renormalised).
@@ -75,7 +83,7 @@ void prepare_gradient_correction(const Model& model, const State& state, Workspa
       const std::size_t wall_first = walls.first(i);
       for (Index k = 0; k < walls.counts[i]; ++k) {
         const Index b = walls.indices[wall_first + k];
-        if (state.boundary.nozzle_bore[b] != 0) continue;  // the bore has its own slip setting
+        if (!stress_form_sees(model, state, i, b)) continue;
         const Vec3 offset = state.fluid.position[i] - state.boundary.position[b];
         const Vec3 along = workspace.boundary_pair_gradient[wall_first + k] * offset;
         moment -= offset * along.transpose();
@@ -127,7 +135,7 @@ void add_stress_form_walls_to_rhs(const Model& model, const State& state, Worksp
       const std::size_t wall_first = walls.first(i);
       for (Index k = 0; k < walls.counts[i]; ++k) {
         const Index b = walls.indices[wall_first + k];
-        if (state.boundary.nozzle_bore[b] != 0) continue;
+        if (!stress_form_sees(model, state, i, b)) continue;
         const Vec3 along = workspace.boundary_pair_gradient[wall_first + k] * (state.fluid.position[i] - state.boundary.position[b]);
         gradient += state.boundary.velocity[b] * along.transpose();
       }

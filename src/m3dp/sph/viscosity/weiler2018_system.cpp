@@ -65,7 +65,7 @@ void build_system(const Model& model, State& state, Workspace& workspace) {
       if (phase.has_wall_friction()) {
         const Index b = boundary_lists.indices[boundary_first + k];
         const Vec3 r = position_i - boundary.position[b];
-        coefficient = -time_step * kDimensionFactor * calibration.boundary * phase.wall_viscosity(fluid.viscosity[i], boundary.nozzle_bore[b] != 0) * volume_i *
+        coefficient = -time_step * kDimensionFactor * calibration.boundary * phase.wall_viscosity(fluid.viscosity[i], boundary.wall_kind[b]) * volume_i *
                       workspace.boundary_pair_gradient[boundary_first + k] / (r.squaredNorm() + regularisation);
         own_block += coefficient * r * r.transpose();
         rhs += (coefficient * r.dot(boundary.velocity[b])) * r;
