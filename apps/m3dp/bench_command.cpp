@@ -286,6 +286,7 @@ int bench_construction(const BenchOptions& options) {
              layers, end_time, ThreadLimit::active_threads());
   struct Layer {
     double steps = 0, simulated = 0, wall = 0, moving = 0, density = 0, viscosity = 0;
+    double settled_builds = 0, resting_changes = 0;  // the settled resting grid built anew; the resting set changed
     sph::StageTimes stages;
   };
   std::vector<Layer> by_layer(static_cast<std::size_t>(layers));
@@ -293,6 +294,7 @@ int bench_construction(const BenchOptions& options) {
   while (simulation.time() < end_time - 1e-9) {
     const double before = simulation.time();
     const auto step_start = std::chrono::steady_clock::now();
+    const std::uint64_t settled_before = solver.workspace().settled_builds, version_before = solver.workspace().fixed_grids_version;
     const auto& stats = simulation.step();
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - step_start).count();
     const int layer = solver.state().nozzles[0].print_layer;
@@ -305,20 +307,24 @@ int bench_construction(const BenchOptions& options) {
     entry.density += stats.density_iterations;
     entry.viscosity += stats.viscosity_iterations;
     entry.stages += stats.stage_ms;
+    entry.settled_builds += double(solver.workspace().settled_builds - settled_before);
+    entry.resting_changes += double(solver.workspace().fixed_grids_version != version_before);
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   fmt::print("{:.1f} s simulated in {:.1f} s wall ({:.2f}x real time), {} particles at the end\n", simulation.time(), seconds,
              simulation.time() / seconds, solver.fluid().size());
   fmt::print("layer,real_time_factor,steps,moving_particles,density_iterations,viscosity_iterations,ms_per_step,ms_pressure,ms_viscosity,"
-             "ms_neighbors\n");
+             "ms_neighbors,ms_other,settled_grid_builds,steps_resting_changed\n");
   for (std::size_t l = 0; l < by_layer.size(); ++l) {
     const Layer& entry = by_layer[l];
     if (entry.steps == 0) continue;
     const double n = entry.steps;
-    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f}\n", l + 1, entry.simulated / entry.wall, n, entry.moving / n,
-               entry.density / n, entry.viscosity / n, entry.stages.total() / n,
-               (entry.stages[sph::Stage::density] + entry.stages[sph::Stage::pressure]) / n, entry.stages[sph::Stage::viscosity] / n,
-               entry.stages[sph::Stage::neighbors] / n);
+    const double pressure = entry.stages[sph::Stage::density] + entry.stages[sph::Stage::pressure];
+    const double rest = entry.stages.total() - pressure - entry.stages[sph::Stage::viscosity] - entry.stages[sph::Stage::neighbors];
+    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f},{:.2f},{:.0f},{:.0f}\n", l + 1, entry.simulated / entry.wall, n,
+               entry.moving / n, entry.density / n, entry.viscosity / n, entry.stages.total() / n, pressure / n,
+               entry.stages[sph::Stage::viscosity] / n, entry.stages[sph::Stage::neighbors] / n, rest / n, entry.settled_builds,
+               entry.resting_changes);
   }
   try {
     const quality::Report report = sim::print_quality(simulation, 0.01);

@@ -109,19 +109,35 @@ void make_walls_within(const Model& model, State& state, Workspace& workspace, c
 
 void make_walls_near_material(const Model& model, State& state, Workspace& workspace) {
   const auto& fluid = state.fluid;
-  Aabb region = tbb::parallel_reduce(
-      tbb::blocked_range<std::size_t>(0, fluid.size(), 4096), Aabb{},
-      [&](const tbb::blocked_range<std::size_t>& range, Aabb box) {
-        for (std::size_t i = range.begin(); i != range.end(); ++i) box.extend(fluid.position[i]);
-        return box;
-      },
-      [](Aabb a, const Aabb& b) {
-        if (!b.empty()) {
-          a.extend(b.min);
-          a.extend(b.max);
-        }
-        return a;
-      });
+  const auto box_of = [&](std::size_t begin, std::size_t end) {
+    return tbb::parallel_reduce(
+        tbb::blocked_range<std::size_t>(begin, end, 4096), Aabb{},
+        [&](const tbb::blocked_range<std::size_t>& range, Aabb box) {
+          for (std::size_t i = range.begin(); i != range.end(); ++i) box.extend(fluid.position[i]);
+          return box;
+        },
+        [](Aabb a, const Aabb& b) {
+          if (!b.empty()) {
+            a.extend(b.min);
+            a.extend(b.max);
+          }
+          return a;
+        });
+  };
+  // The resting particles' box again only when they changed (they do not move): the active ones'
+  // every step.
+  const std::size_t active = state.active_count;
+  const Workspace::RestingCopy resting{workspace.fixed_grids_version, fluid.size(), active};
+  const Workspace::RestingCopy& taken = workspace.resting_box_of;
+  if (taken.version != resting.version || taken.size != resting.size || taken.active != resting.active) {
+    workspace.resting_box = box_of(active, fluid.size());
+    workspace.resting_box_of = resting;
+  }
+  Aabb region = box_of(0, active);
+  if (!workspace.resting_box.empty()) {
+    region.extend(workspace.resting_box.min);
+    region.extend(workspace.resting_box.max);
+  }
   for (std::size_t n = 0; n < state.nozzles.size(); ++n)
     if (state.nozzles[n].extruding) region.extend(state.nozzles[n].pose.position);
   workspace.material_region = region;

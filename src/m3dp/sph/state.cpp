@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <numeric>
 
+#include "m3dp/core/parallel.hpp"
 #include "m3dp/core/state_io.hpp"
 
 namespace m3dp::sph {
@@ -203,6 +204,15 @@ void load_state(StateReader& in, State& state) {
   in.get(state.recent_searches);
   in.get(state.neighbor_searches);
   in.get(state.previous_viscosity_iterations);
+}
+
+bool pack_padded(std::span<const Vec3> from, std::vector<Vec4>& to, std::size_t active, std::uint64_t version,
+                 Workspace::RestingCopy& copy) {
+  const bool whole = copy.version != version || copy.size != from.size() || copy.active != active || to.size() != from.size();
+  to.resize(from.size());
+  parallel_for_each_index(whole ? from.size() : active, [&](std::size_t i) { to[i] = padded(from[i]); }, 4096);
+  copy = Workspace::RestingCopy{version, from.size(), active};
+  return whole;
 }
 
 }  // namespace m3dp::sph

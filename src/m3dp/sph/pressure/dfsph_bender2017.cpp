@@ -76,8 +76,7 @@ struct SolverView {
 /// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
 SolverView pack_for_solve(State& state, Workspace& workspace) {
   auto& fluid = state.fluid;
-  workspace.solver_velocity.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) { workspace.solver_velocity[i] = padded(fluid.velocity[i]); }, 4096);
+  pack_padded(fluid.velocity, workspace.solver_velocity, state.active_count, workspace.fixed_grids_version, workspace.velocity_copy);
   return SolverView{workspace.solver_position.data(),
                     workspace.solver_velocity.data(),
                     fluid.density.data(),
@@ -227,17 +226,18 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
   const Real volume = model.particle_volume;  // every fluid particle's V = m/ρ0
   auto& fluid = state.fluid;
   // The solves' κ per iteration: zero for the resting particles, which every sweep reads as neighbours.
+  // Padded positions, for this pass's AVX2 sums and the solves' sweeps; the resting ones and their κ
+  // (0: they are fixed) only when the resting set changed.
+  const bool resting_packed =
+      pack_padded(fluid.position, workspace.solver_position, state.active_count, workspace.fixed_grids_version, workspace.position_copy);
   workspace.kappa.resize(fluid.size());
-  std::fill(workspace.kappa.begin() + static_cast<std::ptrdiff_t>(state.active_count), workspace.kappa.end(), Real(0));
+  if (resting_packed) std::fill(workspace.kappa.begin() + static_cast<std::ptrdiff_t>(state.active_count), workspace.kappa.end(), Real(0));
   const auto& boundary = state.boundary;
   const auto& fluid_lists = workspace.fluid_neighbors;
   const auto& boundary_lists = workspace.boundary_neighbors;
   workspace.fluid_pair_gradient.resize(fluid_lists.indices.size());
   workspace.boundary_pair_gradient.resize(boundary_lists.indices.size());
   workspace.solver_wall_sums.resize(fluid.size());
-  // Padded positions, for this pass's AVX2 sums and the solves' sweeps.
-  workspace.solver_position.resize(fluid.size());
-  parallel_for_each_index(fluid.size(), [&](std::size_t i) { workspace.solver_position[i] = padded(fluid.position[i]); }, 4096);
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
   const bool use_avx2 = avx2::available();
   // One rest density, so one mass (m = ρ0 V): the factor's mass ratios are all 1.

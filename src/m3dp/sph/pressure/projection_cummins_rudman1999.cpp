@@ -247,8 +247,7 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   std::fill(system.velocity_change.begin() + static_cast<std::ptrdiff_t>(count), system.velocity_change.end(), Vec4::Zero());
   const bool any_driven = workspace.any_piston_driven;
   auto& velocity = workspace.solver_velocity;
-  velocity.resize(size);
-  parallel_for_each_index(size, [&](std::size_t i) { velocity[i] = padded(fluid.velocity[i]); }, 4096);
+  pack_padded(fluid.velocity, velocity, count, workspace.fixed_grids_version, workspace.velocity_copy);
   const Real time_step = state.time_step;
   const Real* mass = fluid.mass.data();
   const auto& lists = workspace.fluid_neighbors;
@@ -316,6 +315,7 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   if (any_dilation == 0) return;
   auto& change = workspace.solver_velocity;  // the velocities are back in the particles
   parallel_for_each_index(size, [&](std::size_t i) { change[i] = Vec4::Zero(); }, 4096);
+  workspace.velocity_copy = {};  // no longer the velocities: packed whole next time
   parallel_for_each_index(count, [&](std::size_t i) { system.residual[i] = dilation[i] / (time_step * time_step); }, 4096);
   const ProjectionResult taken_back = solve_projection(model, state, workspace, change.data(), tolerance, any_driven);
   state.last_step.tension_iterations += taken_back.iterations;
