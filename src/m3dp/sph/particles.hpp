@@ -71,7 +71,7 @@ struct FluidParticles {
     for_each_field([&](auto& field) { field.reserve(capacity); });
   }
   void resize(std::size_t count) {
-    if (count < watched_end) watched_touched = true;
+    if (count < watched_end) watched_touched = touched_overflow = true;
     for_each_field([&](auto& field) { field.resize(count); });
   }
   /// Moves particle `from` into slot `to` (used by swap-removal).
@@ -88,19 +88,30 @@ struct FluidParticles {
   }
 
   // Watched slots: the neighbour stage keeps a grid of the settled resting particles, slots
-  // [watched_begin, watched_end); any swap, move or resize that reaches them marks that grid stale,
-  // so that it is built again only then and never compared particle by particle.
+  // [watched_begin, watched_end); any swap, move or resize that reaches them marks them touched
+  // (what keeps its own structure of them, cameras, builds it again). The touched slots are listed,
+  // up to kMostTouched, so that the neighbour stage takes those few out of its grid instead of
+  // sorting every resting particle again (a wall's interface wakes a few particles most steps);
+  // more, or a resize, overflow the list.
+  static constexpr std::size_t kMostTouched = 1024;
   std::size_t watched_begin = 0, watched_end = 0;
   bool watched_touched = false;
+  bool touched_overflow = false;
+  std::vector<Index> touched_slots;  // each touch once or more, in order
   void watch_slots(std::size_t begin, std::size_t end) {
     watched_begin = begin;
     watched_end = end;
-    watched_touched = false;
+    watched_touched = touched_overflow = false;
+    touched_slots.clear();
+    touched_slots.reserve(kMostTouched);
   }
 
  private:
   void note_touched(std::size_t slot) {
-    if (slot >= watched_begin && slot < watched_end) watched_touched = true;
+    if (slot < watched_begin || slot >= watched_end) return;
+    watched_touched = true;
+    if (touched_slots.size() < kMostTouched) touched_slots.push_back(static_cast<Index>(slot));
+    else touched_overflow = true;
   }
 };
 

@@ -202,6 +202,7 @@ struct Workspace {
   bool any_piston_driven = false;
   std::vector<double> piston_impulse;  // per nozzle: Σ m Δv the pump gave its piston zone this step (N·s)
   std::size_t settled_begin = 0, settled_end = 0;
+  std::vector<Index> settled_holes;  // settled slots changed since the build (sorted): out of resting_grid, in the recent one
   std::uint64_t settled_builds = 0;               // how many times the settled slots were chosen (cameras keep their BVH until then)
   std::vector<Index> resting_grid_subset;
   std::vector<Index> recent_resting_slots;        // the recent grid's particles as built: slots,

@@ -275,6 +275,19 @@ void SpatialHashGrid::build_points(std::span<const Vec3> positions, const Index*
   }, 2048);
 }
 
+void SpatialHashGrid::remove_point(std::size_t k, Index index) {
+  if (k >= point_bucket_.size()) return;
+  // Far, yet finite: its squared distance to any query stays a float (1e30), above every radius.
+  constexpr Real kFar = Real(1e15);
+  const BucketRange range = bucket_range_[point_bucket_[k]];
+  for (std::uint32_t slot = range.begin; slot < range.end; ++slot) {
+    if (sorted_index_[slot] != index) continue;
+    sorted_position_[slot] = Vec3::Constant(kFar);
+    sorted_x_[slot] = sorted_y_[slot] = sorted_z_[slot] = kFar;
+    return;
+  }
+}
+
 bool SpatialHashGrid::choose_dense_cells(std::span<const Vec3> positions, const Index* subset, std::size_t point_count) {
   struct Box {
     Vec3 low = Vec3::Constant(std::numeric_limits<Real>::max()), high = Vec3::Constant(std::numeric_limits<Real>::lowest());

@@ -79,6 +79,11 @@ class SpatialHashGrid {
   /// candidates, each point once: whole bucket ranges, copied, for the neighbour search.
   void append_points_around_cell(const std::array<std::int32_t, 3>& cell, NeighborLists::CandidateBuffer& buffer) const;
 
+  /// Takes point k of the last build (positions[index], index = subset[k] or k) out of every later
+  /// query without sorting again: its stored coordinates go far away, where no distance test keeps
+  /// it. For a kept grid of which a few points left (resting particles woken).
+  void remove_point(std::size_t k, Index index);
+
   [[nodiscard]] Real cell_size() const { return cell_size_; }
   /// Whether the last build chose dense cells (see the class comment) rather than hashed buckets.
   [[nodiscard]] bool dense() const { return dense_; }

@@ -84,10 +84,22 @@ void update_resting_grids(State& state, Workspace& workspace, Real cell_size) {
   const std::size_t active_count = state.active_count;
   const std::size_t resting_count = count - active_count;
   const std::size_t most_recent = most_recent_resting(resting_count);
-  // The settled grid holds while none of its slots changed and the recent ones stay few.
-  bool settled_valid = !workspace.resting_grid_dirty && !fluid.watched_touched && workspace.resting_grid.cell_size() == cell_size &&
+  // The settled grid holds while the recent ones stay few: the slots it holds that changed since (a
+  // woken particle swapped out, a resting one in) leave it and join the recent ones (holes).
+  auto& holes = workspace.settled_holes;
+  bool settled_valid = !workspace.resting_grid_dirty && !fluid.touched_overflow && workspace.resting_grid.cell_size() == cell_size &&
                        active_count <= workspace.settled_begin && workspace.settled_end <= count;
-  if (settled_valid && (workspace.settled_begin - active_count) + (count - workspace.settled_end) > most_recent) settled_valid = false;
+  if (settled_valid && !fluid.touched_slots.empty()) {
+    for (const Index slot : fluid.touched_slots) {
+      workspace.resting_grid.remove_point(slot - workspace.settled_begin, slot);
+      holes.push_back(slot);
+    }
+    fluid.touched_slots.clear();
+    std::sort(holes.begin(), holes.end());
+    holes.erase(std::unique(holes.begin(), holes.end()), holes.end());
+  }
+  if (settled_valid && (workspace.settled_begin - active_count) + (count - workspace.settled_end) + holes.size() > most_recent)
+    settled_valid = false;
   bool changed = false;
   if (!settled_valid) {
     // The lowest resting slots stay recent: an emission moves the first resting particle to the end,
@@ -98,6 +110,8 @@ void update_resting_grids(State& state, Workspace& workspace, Real cell_size) {
     std::iota(workspace.resting_grid_subset.begin(), workspace.resting_grid_subset.end(), static_cast<Index>(workspace.settled_begin));
     workspace.resting_grid.build(fluid.position, workspace.resting_grid_subset, cell_size);
     fluid.watch_slots(workspace.settled_begin, workspace.settled_end);
+    holes.clear();
+    holes.reserve(FluidParticles::kMostTouched + most_recent);
     ++workspace.settled_builds;
     workspace.resting_grid_dirty = false;
     changed = true;
@@ -106,6 +120,7 @@ void update_resting_grids(State& state, Workspace& workspace, Real cell_size) {
   auto& subset = workspace.resting_grid_subset;
   subset.clear();
   for (std::size_t i = active_count; i < workspace.settled_begin; ++i) subset.push_back(static_cast<Index>(i));
+  subset.insert(subset.end(), holes.begin(), holes.end());
   for (std::size_t i = workspace.settled_end; i < count; ++i) subset.push_back(static_cast<Index>(i));
   // Slots too: an emission of n particles moves the n lowest resting ones, in order, n slots up.
   bool recent_changed = changed || subset.size() != workspace.recent_resting_ids.size() ||
