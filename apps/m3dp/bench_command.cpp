@@ -287,6 +287,7 @@ int bench_construction(const BenchOptions& options) {
   struct Layer {
     double steps = 0, simulated = 0, wall = 0, moving = 0, density = 0, viscosity = 0;
     double settled_builds = 0, resting_changes = 0;  // the settled resting grid built anew; the resting set changed
+    double moving_below = 0, deepest = 0;  // moving particles in the layers under the one laid; how many layers down the deepest is
     sph::StageTimes stages;
   };
   std::vector<Layer> by_layer(static_cast<std::size_t>(layers));
@@ -309,22 +310,33 @@ int bench_construction(const BenchOptions& options) {
     entry.stages += stats.stage_ms;
     entry.settled_builds += double(solver.workspace().settled_builds - settled_before);
     entry.resting_changes += double(solver.workspace().fixed_grids_version != version_before);
+    // Where the moving material is: the bead being laid spans [0.01 layer, 0.01 (layer + 1)] m.
+    const double base = 0.01 * layer, margin = 0.0015;
+    double below = 0, lowest = base;
+    const auto& position = solver.fluid().position;
+    for (std::size_t i = 0; i < solver.state().active_count; ++i) {
+      const double z = position[i].z();
+      below += z < base - margin;
+      lowest = std::min(lowest, z);
+    }
+    entry.moving_below += below;
+    entry.deepest += (base - lowest) / 0.01;
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   fmt::print("{:.1f} s simulated in {:.1f} s wall ({:.2f}x real time), {} particles at the end\n", simulation.time(), seconds,
              simulation.time() / seconds, solver.fluid().size());
   fmt::print("layer,real_time_factor,steps,moving_particles,density_iterations,viscosity_iterations,ms_per_step,ms_pressure,ms_viscosity,"
-             "ms_neighbors,ms_other,settled_grid_builds,steps_resting_changed\n");
+             "ms_neighbors,ms_other,settled_grid_builds,steps_resting_changed,moving_in_layers_below,deepest_moving_layers_down\n");
   for (std::size_t l = 0; l < by_layer.size(); ++l) {
     const Layer& entry = by_layer[l];
     if (entry.steps == 0) continue;
     const double n = entry.steps;
     const double pressure = entry.stages[sph::Stage::density] + entry.stages[sph::Stage::pressure];
     const double rest = entry.stages.total() - pressure - entry.stages[sph::Stage::viscosity] - entry.stages[sph::Stage::neighbors];
-    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f},{:.2f},{:.0f},{:.0f}\n", l + 1, entry.simulated / entry.wall, n,
-               entry.moving / n, entry.density / n, entry.viscosity / n, entry.stages.total() / n, pressure / n,
-               entry.stages[sph::Stage::viscosity] / n, entry.stages[sph::Stage::neighbors] / n, rest / n, entry.settled_builds,
-               entry.resting_changes);
+    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f},{:.2f},{:.0f},{:.0f},{:.0f},{:.2f}\n", l + 1,
+               entry.simulated / entry.wall, n, entry.moving / n, entry.density / n, entry.viscosity / n, entry.stages.total() / n,
+               pressure / n, entry.stages[sph::Stage::viscosity] / n, entry.stages[sph::Stage::neighbors] / n, rest / n,
+               entry.settled_builds, entry.resting_changes, entry.moving_below / n, entry.deepest / n);
   }
   try {
     const quality::Report report = sim::print_quality(simulation, 0.01);
