@@ -435,8 +435,12 @@ TEST(Scene, NozzleBoreAndLipAreReadAndChecked) {
 // head lays, and a preset's setting are kept as written.
 TEST(Scene, PrintedMaterialSticksToStaticWallsByDefault) {
   using m3dp::material::Wall;
+  // As the engine takes them (m3dp::scene::solver_parameters applies the default).
+  const auto engine_material = [](const m3dp::scene::Scene& scene, const std::string& name) {
+    return m3dp::scene::solver_parameters(scene).phases.at(scene.material_index(name));
+  };
   const std::string unset = replaced(valid_scene(), R"(<boundary_viscosity unit="cP">2</boundary_viscosity>)", "");
-  const auto& printed = load_scene_from_string(unset, "unset.sdf").find_material("water")->material;
+  const auto printed = engine_material(load_scene_from_string(unset, "unset.sdf"), "water");
   EXPECT_TRUE(printed.sticks_to(Wall::static_wall));
   EXPECT_FALSE(printed.sticks_to(Wall::moving_body));
   EXPECT_FALSE(printed.sticks_to(Wall::nozzle_bore));
@@ -444,14 +448,13 @@ TEST(Scene, PrintedMaterialSticksToStaticWallsByDefault) {
   EXPECT_FLOAT_EQ(printed.wall_viscosity(500, Wall::moving_body), 0) << "free slip on a moving body";
   EXPECT_TRUE(printed.has_wall_friction());
 
-  const auto& free_slip =
+  const auto free_slip = engine_material(
       load_scene_from_string(replaced(valid_scene(), R"(<boundary_viscosity unit="cP">2</boundary_viscosity>)", "<boundary_viscosity>0</boundary_viscosity>"),
-                             "free_slip.sdf")
-          .find_material("water")
-          ->material;
+                             "free_slip.sdf"),
+      "water");
   EXPECT_FALSE(free_slip.sticks_to(Wall::static_wall)) << "a written 0 is free slip";
   EXPECT_FALSE(free_slip.has_wall_friction());
-  const auto& navier = load_scene_from_string(valid_scene(), "navier.sdf").find_material("water")->material;
+  const auto navier = engine_material(load_scene_from_string(valid_scene(), "navier.sdf"), "water");
   EXPECT_FALSE(navier.sticks_to(Wall::static_wall));
   EXPECT_FLOAT_EQ(navier.wall_viscosity(500, Wall::static_wall), 0.002f) << "Navier slip as written";
 
@@ -460,8 +463,8 @@ TEST(Scene, PrintedMaterialSticksToStaticWallsByDefault) {
   two = replaced(two, R"(<material name="water">)", R"(<material name="paste"><density>1800</density><viscosity>300</viscosity></material>
       <material name="water">)");
   const auto scene = load_scene_from_string(two, "two.sdf");
-  EXPECT_FALSE(scene.find_material("water")->material.sticks_to(Wall::static_wall)) << "water in a block slips";
-  EXPECT_TRUE(scene.find_material("paste")->material.sticks_to(Wall::static_wall));
+  EXPECT_FALSE(engine_material(scene, "water").sticks_to(Wall::static_wall)) << "water in a block slips";
+  EXPECT_TRUE(engine_material(scene, "paste").sticks_to(Wall::static_wall));
 }
 
 TEST(Scene, DynamicModelsAreReadAndChecked) {

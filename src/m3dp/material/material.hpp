@@ -27,7 +27,8 @@ struct Material {
   Real boundary_viscosity = 0;         // Pa·s, friction against walls, bodies and the nozzle (0 = free slip)
   bool sticks_to_walls = false;        // no slip: walls see the material's own effective viscosity instead
   // No slip against static walls only (a bed holds what is laid on it): what a scene's printed
-  // material takes when it sets no <boundary_viscosity>; moving bodies then see boundary_viscosity.
+  // material takes in the engine when it sets no <boundary_viscosity> (scene::solver_parameters);
+  // moving bodies then see boundary_viscosity.
   bool sticks_to_static_walls = false;
   // The nozzle's bore (a nozzle with walls): free slip by default, as El Abbaoui et al. 2024 found
   // printed concrete sections match best; true: no slip (the material's own viscosity at the bore).

@@ -76,7 +76,7 @@ std::optional<material::Material> SceneReader::read_material_values(const pugi::
   if (const pugi::xml_node ageing = element.child("ageing")) read_ageing(ageing, material);
   // A viscosity in Pa·s (Navier slip: the wall carries μ_b × slip rate), or no_slip: the material sticks.
   if (const pugi::xml_node wall = element.child("boundary_viscosity")) {
-    fields.emplace_back("boundary_viscosity", where(wall));  // set: a printed material takes no default (read_plugin)
+    fields.emplace_back("boundary_viscosity", where(wall));  // set: a printed material takes no default (Scene::holds_on_beds)
     if (trim(wall.child_value()) == "no_slip") {
       leaf_text(wall, {});
       material.sticks_to_walls = true;

@@ -27,7 +27,6 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
   for (const auto& block : child_elements(plugin, "fluid_block")) read_fluid_block(block);
   for (const auto& robot : child_elements(plugin, "robot")) read_robot_settings(robot);
   for (const auto& head : child_elements(plugin, "print_head")) read_print_head(head);
-  hold_printed_material_on_beds();
   if (const pugi::xml_node output = plugin.child("output")) read_output(output);
   if (const pugi::xml_node meshing = plugin.child("meshing")) read_meshing(meshing);
   for (const auto& camera : child_elements(plugin, "camera")) read_plugin_camera(camera);
@@ -39,13 +38,6 @@ void SceneReader::read_plugin(const pugi::xml_node& plugin) {
   check_materials();
   check_engine_parameters();
   check_sizes();
-}
-
-void SceneReader::hold_printed_material_on_beds() {
-  // A bed, a floor and a printed layer hold what is laid on them: a material a print head lays, whose
-  // scene (or preset) sets no <boundary_viscosity>, sticks to static walls and slips on moving bodies.
-  for (MaterialEntry& entry : scene_.materials)
-    if (scene_.holds_on_beds(entry)) entry.material.sticks_to_static_walls = true;
 }
 
 void SceneReader::check_sizes() {

@@ -55,7 +55,8 @@ sph::Parameters solver_parameters(const Scene& scene) {
   parameters.settings = scene.solver;
   for (const auto& entry : scene.materials) {
     parameters.phases.push_back(entry.material);
-    // Scenes made in code as read ones: a printed material that sets no wall friction holds on its bed.
+    // A bed, a floor and a printed layer hold what is laid on them: the one place the default is
+    // applied, for scenes read and scenes made in code alike.
     if (scene.holds_on_beds(entry)) parameters.phases.back().sticks_to_static_walls = true;
   }
   for (const auto& head : scene.print_heads)

@@ -247,8 +247,6 @@ class SceneReader {
   void check_materials();
   /// The engine's own check of what was read (sph::check_parameters), each problem at its field's line.
   void check_engine_parameters();
-  /// Printed materials that set no wall friction stick to static walls (Material::sticks_to_static_walls).
-  void hold_printed_material_on_beds();
   /// Refuses a scene whose particles (fluid blocks, what the print heads extrude, wall samples)
   /// would not fit in memory, at the line of the largest part, before anything is allocated.
   void check_sizes();

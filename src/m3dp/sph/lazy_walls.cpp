@@ -127,12 +127,8 @@ void make_walls_near_material(const Model& model, State& state, Workspace& works
   // The resting particles' box again only when they changed (they do not move): the active ones'
   // every step.
   const std::size_t active = state.active_count;
-  const Workspace::RestingCopy resting{workspace.fixed_grids_version, fluid.size(), active};
-  const Workspace::RestingCopy& taken = workspace.resting_box_of;
-  if (taken.version != resting.version || taken.size != resting.size || taken.active != resting.active) {
+  if (workspace.resting_box_of.take(workspace.fixed_grids_version, fluid.size(), active))
     workspace.resting_box = box_of(active, fluid.size());
-    workspace.resting_box_of = resting;
-  }
   Aabb region = box_of(0, active);
   if (!workspace.resting_box.empty()) {
     region.extend(workspace.resting_box.min);

@@ -208,10 +208,9 @@ void load_state(StateReader& in, State& state) {
 
 bool pack_padded(std::span<const Vec3> from, std::vector<Vec4>& to, std::size_t active, std::uint64_t version,
                  Workspace::RestingCopy& copy) {
-  const bool whole = copy.version != version || copy.size != from.size() || copy.active != active || to.size() != from.size();
+  const bool whole = copy.take(version, from.size(), active) || to.size() != from.size();
   to.resize(from.size());
   parallel_for_each_index(whole ? from.size() : active, [&](std::size_t i) { to[i] = padded(from[i]); }, 4096);
-  copy = Workspace::RestingCopy{version, from.size(), active};
   return whole;
 }
 

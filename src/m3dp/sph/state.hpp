@@ -244,10 +244,17 @@ struct Workspace {
   // What a padded copy holds of the resting particles (from active_count on): they neither move nor
   // change slot while the resting grids' version stands (update_resting_grids), and rest with zero
   // velocity, so their part is copied again only when it changed: a 20-layer wall rests 4·10⁵
-  // particles against ~10³ moving ones (stages::pack_padded).
+  // particles against ~10³ moving ones (pack_padded, make_walls_near_material).
   struct RestingCopy {
     std::uint64_t version = ~std::uint64_t(0);
     std::size_t size = 0, active = 0;
+    /// Records the resting set now (the resting grids' `version`, the particles, the active ones);
+    /// true when it differs from the one recorded before.
+    bool take(std::uint64_t now_version, std::size_t now_size, std::size_t now_active) {
+      const bool changed = version != now_version || size != now_size || active != now_active;
+      *this = RestingCopy{now_version, now_size, now_active};
+      return changed;
+    }
   };
   RestingCopy position_copy, velocity_copy;
   // The resting particles' box, and the resting set it was taken of (make_walls_near_material).
