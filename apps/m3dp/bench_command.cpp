@@ -44,7 +44,7 @@ void add_bench_options(CLI::App& command, BenchOptions& options) {
       ->check(CLI::IsMember({"scene", "on", "off"}))
       ->capture_default_str();
   command.add_option("--layers", options.layers, "wall_layers, construction: layers of the wall")->capture_default_str();
-  command.add_option("--seconds", options.seconds, "construction: simulated seconds to run (default: the whole wall)");
+  command.add_option("--seconds", options.seconds, "construction: simulated seconds to run (default: the whole wall); dam_break: run to this time instead of --steps");
   command.add_option("--max-viscosity", options.max_viscosity, "clay_print: cap of the clay's effective viscosity (Pa*s)")
       ->capture_default_str();
   command.add_option("--steps", options.steps, "Timed steps")->capture_default_str();
@@ -103,6 +103,55 @@ int bench_ur10_wall(const BenchOptions& options) {
 }
 }  // namespace
 
+
+/// What sets the CFL step (issue 57, goal 3): over windows of simulated time, the fastest particle's
+/// speed after each step, where it is, and the speed that 99.9 % of the particles stay under; the
+/// steps a CFL rule on that percentile would have taken say how much a few fast particles cost.
+class SpeedLog {
+ public:
+  SpeedLog(double window_seconds, double cfl_factor, double particle_diameter)
+      : window_(window_seconds), cfl_factor_(cfl_factor), diameter_(particle_diameter) {
+    fmt::print("what sets the step (after each step: the fastest particle, its height, the 99.9th percentile's speed)\n");
+    fmt::print("t_s,steps,mean_dt_ms,max_speed_m_s,fastest_z_m,p999_speed_m_s,steps_at_p999\n");
+  }
+  void add(const sph::State& state, double time_step) {
+    const auto& velocity = state.fluid.velocity;
+    speeds_.resize(velocity.size());
+    double fastest = 0;
+    std::size_t fastest_index = 0;
+    for (std::size_t i = 0; i < velocity.size(); ++i) {
+      speeds_[i] = velocity[i].norm();
+      if (speeds_[i] > fastest) fastest = speeds_[i], fastest_index = i;
+    }
+    double percentile = 0;
+    if (!speeds_.empty()) {
+      const auto nth = speeds_.begin() + static_cast<std::ptrdiff_t>(0.999 * double(speeds_.size() - 1));
+      std::nth_element(speeds_.begin(), nth, speeds_.end());
+      percentile = *nth;
+    }
+    ++steps_;
+    simulated_ += time_step;
+    if (fastest > max_speed_) max_speed_ = fastest, fastest_z_ = velocity.empty() ? 0 : state.fluid.position[fastest_index].z();
+    max_percentile_ = std::max(max_percentile_, percentile);
+    // The step a CFL rule on the percentile would take (as the solver's rule, at most 5 ms).
+    const double percentile_step = percentile > 1e-9 ? std::min(5e-3, cfl_factor_ * 0.4 * diameter_ / percentile) : 5e-3;
+    percentile_steps_ += time_step / std::max(percentile_step, time_step);
+    if (simulated_ >= window_ - 1e-12) flush(state.time);
+  }
+  void flush(double time) {
+    if (steps_ == 0) return;
+    fmt::print("{:.2f},{},{:.3f},{:.3f},{:.3f},{:.3f},{:.0f}\n", time, steps_, 1e3 * simulated_ / double(steps_), max_speed_,
+               fastest_z_, max_percentile_, percentile_steps_);
+    steps_ = 0, simulated_ = 0, max_speed_ = 0, fastest_z_ = 0, max_percentile_ = 0, percentile_steps_ = 0;
+  }
+
+ private:
+  double window_, cfl_factor_, diameter_;
+  std::vector<double> speeds_;
+  std::uint64_t steps_ = 0;
+  double simulated_ = 0, max_speed_ = 0, fastest_z_ = 0, max_percentile_ = 0, percentile_steps_ = 0;
+};
+
 /// A scene of bench/scenes run to its end (issue 41's cases): setup time, boundary particles and
 /// memory, then the loop's time, steps, iterations a step and stage times, for comparison with a peer.
 int bench_scene(const std::string& name, const BenchOptions& options) {
@@ -125,9 +174,11 @@ int bench_scene(const std::string& name, const BenchOptions& options) {
   double density = 0, divergence = 0, viscosity = 0;
   std::uint64_t steps = 0;
   std::array<std::uint64_t, sph::kTimeStepBoundNames.size()> bounds{};
+  SpeedLog speeds(scene.end_time / 12, double(scene.solver.cfl_factor), 2 * double(scene.solver.particle_radius));
   const auto start = std::chrono::steady_clock::now();
   while (simulation.time() < scene.end_time - 1e-12) {
     const auto& stats = simulation.step();
+    speeds.add(simulation.solver().state(), stats.time_step);
     ++bounds[static_cast<std::size_t>(stats.time_step_bound)];
     sum += stats.stage_ms;
     density += stats.density_iterations;
@@ -135,6 +186,7 @@ int bench_scene(const std::string& name, const BenchOptions& options) {
     viscosity += stats.viscosity_iterations;
     ++steps;
   }
+  speeds.flush(simulation.time());
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   const double n = double(std::max<std::uint64_t>(1, steps));
   fmt::print("loop: {:.3f} s for {} steps ({:.2f} ms/step, mean dt {:.3g} ms), {} particles and {} boundary particles at the end, "
@@ -405,6 +457,21 @@ int bench_command(const BenchOptions& options) {
   fmt::print("dam break: {} fluid + {} boundary particles, radius {:.4g} m, {} threads, tolerance {:.3g} %, CFL {}\n",
              solver.fluid().size(), solver.boundary().size(), setup.particle_radius, ThreadLimit::active_threads(),
              100 * options.density_tolerance, options.cfl_factor);
+  if (options.seconds > 0) {
+    // To a simulated time, as compared with a peer: the steps it took and what set them.
+    SpeedLog speeds(options.seconds / 10, options.cfl_factor, 2 * double(setup.particle_radius));
+    std::uint64_t steps = 0;
+    const auto start = std::chrono::steady_clock::now();
+    while (simulation.time() < options.seconds - 1e-12) {
+      const auto& stats = simulation.step();
+      speeds.add(solver.state(), stats.time_step);
+      ++steps;
+    }
+    speeds.flush(simulation.time());
+    fmt::print("{:.3g} s simulated in {} steps, {:.2f} s wall\n", simulation.time(), steps,
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count());
+    return 0;
+  }
   time_steps(simulation, options);
   return 0;
 }

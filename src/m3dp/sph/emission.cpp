@@ -304,6 +304,42 @@ void hold_pumps(const Model& model, State& state, Workspace& workspace) {
   drive_pistons(model, state, workspace, PistonDrive::before_viscosity);
 }
 
+void hold_drawn_exits(const Model& model, State& state, Workspace& workspace) {
+  // Material an exit-plane inlet's exit holds, up to one spacing in front of it, that the stream
+  // below draws out faster than the exit speed is held at the exit speed along the axis through the
+  // viscosity solve (free across it) and the projection: the stream hangs from the nozzle by its
+  // viscosity, as from an extruder (SPlisHSPlasH's emitter animates what it emitted alike), instead
+  // of falling away. Pushed material is left to the solves: a bead pressed under the nozzle spreads.
+  // With the tension projection only, as the pumps' hold: without a pull a drawn strand held at its
+  // exit dilates (docs/decisions.md).
+  if (!model.settings.tension) return;
+  auto& fluid = state.fluid;
+  const Real diameter = model.particle_diameter;
+  for (std::size_t n = 0; n < state.nozzles.size(); ++n) {
+    const NozzleState& nozzle = state.nozzles[n];
+    const NozzleSettings& settings = model.nozzles[n];
+    if (n > 253) break;  // a mark is one byte (more nozzles than that let their streams fall)
+    if (!nozzle.extruding || nozzle.flow_scale <= 0 || model.nozzle_geometry[n].has_bore()) continue;
+    const Vec3 axis = nozzle.pose.rotate(Vec3(0, 0, -1));
+    const Real target_speed = settings.exit_speed * nozzle.flow_scale + nozzle.velocity.dot(axis);
+    const Real radius_squared = settings.inner_diameter * settings.inner_diameter / 4;
+    if (!workspace.any_piston_driven) workspace.piston_driven.assign(fluid.size(), 0);
+    workspace.any_piston_driven = true;
+    if (workspace.held_axes.size() != state.nozzles.size()) workspace.held_axes.resize(state.nozzles.size());
+    workspace.held_axes[n] = axis;
+    const auto mark = static_cast<std::uint8_t>(2 + n);
+    parallel_for_each_index(state.active_count, [&](std::size_t i) {
+      const Vec3 offset = fluid.position[i] - nozzle.pose.position;
+      const Real axial = offset.dot(axis);
+      if (axial < 0 || axial > diameter || (offset - axial * axis).squaredNorm() > radius_squared) return;
+      const Real speed = fluid.velocity[i].dot(axis);
+      if (speed <= target_speed) return;
+      fluid.velocity[i] += (target_speed - speed) * axis;
+      workspace.piston_driven[i] = mark;
+    }, 2048);
+  }
+}
+
 void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace) {
   drive_pistons(model, state, workspace, PistonDrive::after_solves);
   // The extruder pushes: material in a nozzle's exit cross-section, up to one spacing in front of

@@ -49,7 +49,7 @@ const StepStats& Solver::step() {
   run(Stage::pressure, {solve_density});
   // Viscosity after the pressure solve, right before the velocities move the particles: see
   // viscosity/weiler2018.cpp.
-  run(Stage::viscosity, {add_elastic_stiffness, hold_pumps, apply_tension_pressure, solve_implicit_viscosity, project_tension, apply_xsph, shift_particles, correct_volume});
+  run(Stage::viscosity, {add_elastic_stiffness, hold_pumps, hold_drawn_exits, apply_tension_pressure, solve_implicit_viscosity, project_tension, apply_xsph, shift_particles, correct_volume});
   run(Stage::advect, {push_out_of_nozzles, advect_positions, relax_reference_shape, update_rest_clocks, wake_loaded_rest,
                       wake_compressed_rest, keep_out_of_boundaries, collect_body_wrenches, finish_step});
   return state_.last_step;

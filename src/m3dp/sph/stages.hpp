@@ -118,7 +118,7 @@ void shift_particles(const Model& model, State& state, Workspace& workspace);
 void apply_xsph(const Model& model, State& state, Workspace& workspace);
 
 // ---- advect (emission.cpp, advection.cpp, rest_detection.cpp, boundary_push_out.cpp) ----
-/// The extruder pushes: material in a nozzle's exit leaves at least at the exit speed.
+/// The extruder pushes: material in a nozzle's exit leaves at the exit speed.
 void push_out_of_nozzles(const Model& model, State& state, Workspace& workspace);
 /// The pumps of nozzles with a bore drive their piston zones (before the density solve, so that it
 /// sees the flow; push_out_of_nozzles drives them again after the solves and measures the force).
@@ -129,6 +129,11 @@ void drive_pumps(const Model& model, State& state, Workspace& workspace);
 /// below hangs from them. (Moved by the solves and set back after, they let a 300 Pa·s rope drawn at
 /// twice its speed slide off in free-falling slugs.)
 void hold_pumps(const Model& model, State& state, Workspace& workspace);
+/// With the tension projection, material in an exit-plane inlet's exit that the stream below draws out
+/// faster than the exit speed is held at the exit speed along the nozzle's axis through the viscosity
+/// solve and the projection (Workspace::piston_driven): a viscous stream hangs from its nozzle instead
+/// of falling away in slugs.
+void hold_drawn_exits(const Model& model, State& state, Workspace& workspace);
 /// x += Δt v.
 void advect_positions(const Model& model, State& state, Workspace& workspace);
 /// Elastic materials with a relaxation time: the reference shape creeps towards the current one.

@@ -197,9 +197,20 @@ struct Workspace {
   SpatialHashGrid recent_resting_grid;
   bool resting_grid_dirty = true;                // built from another state, or never
   // (n) 1: a running pump sets this active particle's velocity (its piston zone, stages::hold_pumps);
-  // the viscosity solve and the tension projection hold it fixed. Whether any is, this step.
+  // the viscosity solve and the tension projection hold it fixed. 2 + k: nozzle k's exit holds its
+  // speed along the nozzle's axis, held_axes[k] (stages::hold_drawn_exits); the viscosity solve
+  // moves it across the axis only, the projection not at all. Whether any is, this step.
   std::vector<std::uint8_t> piston_driven;
   bool any_piston_driven = false;
+  std::vector<Vec3> held_axes;  // per nozzle: its axis, for the marks 2 + k
+  /// The part of a change `value` to particle i's velocity that its mark leaves free.
+  Vec3 free_part(std::size_t i, const Vec3& value) const {
+    const std::uint8_t mark = piston_driven[i];
+    if (mark == 0) return value;
+    if (mark == 1) return Vec3::Zero();
+    const Vec3& axis = held_axes[mark - 2];
+    return value - value.dot(axis) * axis;
+  }
   std::vector<double> piston_impulse;  // per nozzle: Σ m Δv the pump gave its piston zone this step (N·s)
   std::size_t settled_begin = 0, settled_end = 0;
   std::vector<Index> settled_holes;  // settled slots changed since the build (sorted): out of resting_grid, in the recent one

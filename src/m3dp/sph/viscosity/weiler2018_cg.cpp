@@ -20,7 +20,8 @@ int run_conjugate_gradients(const Model& model, State& state, Workspace& workspa
   CoarseViscosityLevel& coarse = system.coarse_level.get();
   const bool two_level = state.previous_viscosity_iterations > kCoarseLevelFromIterations &&
                          coarse.build(state, workspace, count, kAggregateSpacings * model.particle_diameter);
-  // Particles a pump drives keep their velocity: their residual and direction stay zero.
+  // Particles a pump drives keep their velocity: their residual and direction stay zero (along an
+  // exit's axis only, for those it holds: a conjugate gradients projected on what is free).
   const std::uint8_t* driven = workspace.any_piston_driven ? workspace.piston_driven.data() : nullptr;
   // z = D⁻¹ r (+ the coarse correction) into system.preconditioned; returns r·z.
   auto precondition = [&]() {
@@ -28,7 +29,7 @@ int run_conjugate_gradients(const Model& model, State& state, Workspace& workspa
     return deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       Vec3 z = system.inverse_diagonal[i] * system.residual[i];
       if (two_level) z += CoarseViscosityLevel::correction(workspace, i);
-      if (driven != nullptr && driven[i]) z = Vec3::Zero();
+      if (driven != nullptr && driven[i]) z = workspace.free_part(i, z);
       system.preconditioned[i] = z;
       sums[0] += double(system.residual[i].dot(z));
     })[0];
@@ -54,7 +55,10 @@ int run_conjugate_gradients(const Model& model, State& state, Workspace& workspa
     const Real step = static_cast<Real>(residual_dot / curvature);
     const auto next = deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
       velocity[i] += step * system.padded_operand[i].head<3>();
-      if (driven == nullptr || !driven[i]) system.residual[i] -= step * system.product[i];
+      if (driven == nullptr || !driven[i])
+        system.residual[i] -= step * system.product[i];
+      else
+        system.residual[i] -= step * workspace.free_part(i, system.product[i]);
       sums[0] += double(system.residual[i].squaredNorm());
     });
     residual_norm = std::sqrt(next[0]);

@@ -16,7 +16,8 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
   const auto& settings = model.settings;
   prepare_stress_product(model, state, workspace);
   // A particle a pump drives keeps its velocity (Workspace::piston_driven): no residual of its own, so
-  // conjugate gradients never move it; its pull on its neighbours stays in theirs.
+  // conjugate gradients never move it; its pull on its neighbours stays in theirs. One an exit holds
+  // along its axis keeps only the residual across the axis (Workspace::free_part).
   const std::uint8_t* driven = workspace.any_piston_driven ? workspace.piston_driven.data() : nullptr;
   const auto start = product.row_sums<2>(count, [&](std::size_t i, const Vec3& row, std::array<double, 2>& sums) {
     const Vec3 residual = driven != nullptr && driven[i] ? Vec3::Zero() : Vec3(system.rhs[i] - row);
@@ -24,7 +25,14 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
     sums[0] += double(system.rhs[i].squaredNorm());
     sums[1] += double(residual.squaredNorm());
   });
-  double residual_norm = std::sqrt(start[1]);
+  double residual_squares = start[1];
+  if (driven != nullptr)  // held along an exit's axis: the residual across it (apart, so the sweep above stays as it was)
+    residual_squares += deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
+      if (driven[i] < 2) return;
+      system.residual[i] = workspace.free_part(i, system.rhs[i] - product.row(i));
+      sums[0] += double(system.residual[i].squaredNorm());
+    })[0];
+  double residual_norm = std::sqrt(residual_squares);
   // A second start: the velocity the last solve ended with. v* carries this step's pressure and gravity
   // kicks, rough on the particle scale, which a stiff paste's viscosity takes out again at the cost of
   // most of CG's iterations; the last solution lacks this step's acceleration, which CG would not put
@@ -52,7 +60,7 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
       const Real beta = static_cast<Real>((sums[4] * sums[0] - sums[3] * sums[1]) / determinant);
       // r = b − A(α v_A + β v_B) = (1 − α − β) b + α r_A + β r_B.
       residual_norm = std::sqrt(deterministic_sums<1>(count, [&](std::size_t i, std::array<double, 1>& sums) {
-        if (driven != nullptr && driven[i]) return;  // kept as the pump drives it
+        if (driven != nullptr && driven[i]) return;  // kept as the pump drives it (an exit's hold: below)
         velocity[i] = alpha * velocity[i] + beta * fluid.viscous_velocity[i];
         system.residual[i] = (1 - alpha - beta) * system.rhs[i] + alpha * system.residual[i] + beta * system.product[i];
         sums[0] += double(system.residual[i].squaredNorm());
@@ -61,10 +69,14 @@ StartResidual start_solve(const Model& model, State& state, Workspace& workspace
         // The driven particles kept their velocity, which the blended residuals assumed blended too:
         // each coupling is ~ m ν Δt/h² (10² m in a stiff paste), so their neighbours' residuals were off
         // by that times the change (a 300 Pa·s rope's column kicked to 4 m/s). Taken again from A v.
-        parallel_for_each_index(count, [&](std::size_t i) { system.padded_operand[i] = padded(velocity[i]); }, 1024);
+        parallel_for_each_index(count, [&](std::size_t i) {
+          // Held along an exit's axis: blended across it.
+          if (driven[i] > 1) velocity[i] += workspace.free_part(i, (alpha - 1) * velocity[i] + beta * fluid.viscous_velocity[i]);
+          system.padded_operand[i] = padded(velocity[i]);
+        }, 1024);
         prepare_stress_product(model, state, workspace);
         residual_norm = std::sqrt(product.row_sums<1>(count, [&](std::size_t i, const Vec3& row, std::array<double, 1>& sums) {
-          system.residual[i] = driven[i] ? Vec3::Zero() : Vec3(system.rhs[i] - row);
+          system.residual[i] = workspace.free_part(i, system.rhs[i] - row);
           sums[0] += double(system.residual[i].squaredNorm());
         })[0]);
       }
