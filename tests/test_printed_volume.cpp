@@ -250,7 +250,9 @@ TEST(PrintedWall, LayersLaidOnRestingLayersConvergeAsOnTheFloor) {
   // density solve's diagonal, it halved the κ of the particles touching it, and the compression a
   // woken particle had rested with held the solve's mean error up. The density solve then took 4
   // iterations a step on the floor, 36-40 on the first layer and 94 on the second (a 0.5 m wall,
-  // issue 57).
+  // issue 57). And a bead settling on resting material pressed it together, which woke it, and the
+  // woken particles pressed the next: a band of moving particles down to the floor (345 in layer 2
+  // and 161 in layer 1 while layer 3 was laid) until the resting particles pushed back in the solve.
   const m3dp::scene::Scene scene = m3dp::scene::load_scene_from_string(R"(<?xml version="1.0"?>
 <sdf version="1.9"><world name="layers_on_rest">
   <model name="floor"><static>true</static><link name="floor"><collision name="floor">
@@ -271,7 +273,7 @@ TEST(PrintedWall, LayersLaidOnRestingLayersConvergeAsOnTheFloor) {
   </plugin>
 </world></sdf>)", "layers_on_rest.sdf");
   m3dp::sim::Simulation simulation(scene);
-  double iterations[3] = {0, 0, 0}, start[3] = {-1, -1, -1};
+  double iterations[3] = {0, 0, 0}, start[3] = {-1, -1, -1}, moving_below[3] = {0, 0, 0};
   int steps[3] = {0, 0, 0};
   while (simulation.time() < scene.end_time) {
     simulation.step();
@@ -282,24 +284,34 @@ TEST(PrintedWall, LayersLaidOnRestingLayersConvergeAsOnTheFloor) {
     // Each layer from a second after it began (past the bead's start).
     if (simulation.time() < start[layer] + 1.0) continue;
     iterations[layer] += simulation.solver().state().last_step.density_iterations;
+    // Moving particles in the layers under the bead being laid (its base at 10 mm a layer).
+    const auto& fluid = simulation.solver().fluid();
+    for (std::size_t i = 0; i < simulation.solver().state().active_count; ++i)
+      moving_below[layer] += fluid.position[i].z() < 0.01 * layer - 0.0015;
     ++steps[layer];
   }
-  for (int layer = 0; layer < 3; ++layer) iterations[layer] /= std::max(steps[layer], 1);
+  for (int layer = 0; layer < 3; ++layer) {
+    iterations[layer] /= std::max(steps[layer], 1);
+    moving_below[layer] /= std::max(steps[layer], 1);
+  }
   const auto& measured = simulation.measured_density();
   std::printf("three layers on a 0.2 m square: density iterations a step %.1f (on the floor), %.1f, %.1f (on resting layers); "
-              "%zu particles, %zu resting; density rho/rho0 - 1 median %+.2f %%, 99th percentile %+.2f %%\n",
+              "%zu particles, %zu resting; density rho/rho0 - 1 median %+.2f %%, 99th percentile %+.2f %%; moving under the bead "
+              "%.0f, %.0f (layers 2, 3)\n",
               iterations[0], iterations[1], iterations[2], measured.statistics.particles,
               simulation.solver().fluid().size() - simulation.solver().state().active_count, 100 * measured.statistics.median,
-              100 * measured.statistics.p99);
-  // Now 4.0, 9.0 and 14.5: still rising a layer at a time (issue 57 asks 1.5x at layer 20), but no
-  // longer tenfold (before: 4.0, 35.8 and 90.4 on this wall).
+              100 * measured.statistics.p99, moving_below[1], moving_below[2]);
+  // Now 4.0, 6.6 and 7.4, and 24-25 moving under the bead (before the resting particles pushed back:
+  // 4.0, 9.0 and 14.5, rising a layer at a time, and ~500 under the bead; before the diagonal and the
+  // allowance: 4.0, 35.8 and 90.4).
   ASSERT_GT(steps[2], 100);
-  EXPECT_LT(iterations[1], 3 * iterations[0]);
-  EXPECT_LT(iterations[2], 4.5 * iterations[0]);
-  // What a woken particle embedded in resting material may keep (half rest_compression) does not
-  // compress the wall: the median within 2 %, the 99th percentile within rest detection's 3 % and a bit.
+  EXPECT_LT(iterations[1], 2 * iterations[0]);
+  EXPECT_LT(iterations[2], 1.25 * iterations[1]) << "a layer on resting layers costs what the one below it did";
+  EXPECT_LT(moving_below[2], 100) << "the layers under the bead stay at rest";
+  // Nor is the wall pressed together: the median within 2 % (1.0), the 99th percentile within 2 % (1.45;
+  // rest detection lets resting material keep 3 %).
   EXPECT_LT(measured.statistics.median, 0.02);
-  EXPECT_LT(measured.statistics.p99, 0.04);
+  EXPECT_LT(measured.statistics.p99, 0.02);
 }
 
 namespace {

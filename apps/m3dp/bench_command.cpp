@@ -18,6 +18,7 @@
 #include "m3dp/core/memory.hpp"
 #include "m3dp/core/parallel.hpp"
 #include "m3dp/scene/scene.hpp"
+#include "m3dp/sph/measure.hpp"
 #include "m3dp/sim/presets.hpp"
 #include "m3dp/sim/print_quality.hpp"
 #include "m3dp/sim/run.hpp"
@@ -340,10 +341,22 @@ int bench_construction(const BenchOptions& options) {
     double steps = 0, simulated = 0, wall = 0, moving = 0, density = 0, viscosity = 0;
     double settled_builds = 0, resting_changes = 0;  // the settled resting grid built anew; the resting set changed
     double moving_below = 0, deepest = 0;  // moving particles in the layers under the one laid; how many layers down the deepest is
+    double density_p99 = 0, density_max = 0;  // the whole print's ρ/ρ0 − 1 at the layer's end (moving and resting)
     sph::StageTimes stages;
   };
   std::vector<Layer> by_layer(static_cast<std::size_t>(layers));
-  const auto start = std::chrono::steady_clock::now();
+  std::vector<Real> density;
+  // The whole print's density where it stands (sph::measure_density), after each layer: resting
+  // material keeps what it rested with, so compression left behind shows here, not in the solve's error.
+  auto measure_layer_end = [&](int layer) {
+    if (layer < 0 || layer >= layers) return;
+    sph::measure_density(solver, density);
+    const sph::DensityStatistics statistics = sph::density_statistics(solver, density);
+    by_layer[static_cast<std::size_t>(layer)].density_p99 = statistics.p99;
+    by_layer[static_cast<std::size_t>(layer)].density_max = statistics.max;
+  };
+  int last_layer = -1;
+  auto start = std::chrono::steady_clock::now();
   while (simulation.time() < end_time - 1e-9) {
     const double before = simulation.time();
     const auto step_start = std::chrono::steady_clock::now();
@@ -351,6 +364,13 @@ int bench_construction(const BenchOptions& options) {
     const auto& stats = simulation.step();
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - step_start).count();
     const int layer = solver.state().nozzles[0].print_layer;
+    if (layer != last_layer) {
+      const auto measure_start = std::chrono::steady_clock::now();
+      measure_layer_end(last_layer);
+      last_layer = layer;
+      // Not the simulation's time: the bench's real-time factor is the engine's.
+      start += std::chrono::steady_clock::now() - measure_start;
+    }
     if (layer < 0 || layer >= layers) continue;
     Layer& entry = by_layer[static_cast<std::size_t>(layer)];
     entry.steps += 1;
@@ -375,20 +395,23 @@ int bench_construction(const BenchOptions& options) {
     entry.deepest += (base - lowest) / 0.01;
   }
   const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  measure_layer_end(last_layer);
   fmt::print("{:.1f} s simulated in {:.1f} s wall ({:.2f}x real time), {} particles at the end\n", simulation.time(), seconds,
              simulation.time() / seconds, solver.fluid().size());
   fmt::print("layer,real_time_factor,steps,moving_particles,density_iterations,viscosity_iterations,ms_per_step,ms_pressure,ms_viscosity,"
-             "ms_neighbors,ms_other,settled_grid_builds,steps_resting_changed,moving_in_layers_below,deepest_moving_layers_down\n");
+             "ms_neighbors,ms_other,settled_grid_builds,steps_resting_changed,moving_in_layers_below,deepest_moving_layers_down,"
+             "print_density_p99_percent,print_density_max_percent\n");
   for (std::size_t l = 0; l < by_layer.size(); ++l) {
     const Layer& entry = by_layer[l];
     if (entry.steps == 0) continue;
     const double n = entry.steps;
     const double pressure = entry.stages[sph::Stage::density] + entry.stages[sph::Stage::pressure];
     const double rest = entry.stages.total() - pressure - entry.stages[sph::Stage::viscosity] - entry.stages[sph::Stage::neighbors];
-    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f},{:.2f},{:.0f},{:.0f},{:.0f},{:.2f}\n", l + 1,
+    fmt::print("{},{:.2f},{:.0f},{:.0f},{:.1f},{:.1f},{:.2f},{:.2f},{:.2f},{:.2f},{:.2f},{:.0f},{:.0f},{:.0f},{:.2f},{:.2f},{:.2f}\n", l + 1,
                entry.simulated / entry.wall, n, entry.moving / n, entry.density / n, entry.viscosity / n, entry.stages.total() / n,
                pressure / n, entry.stages[sph::Stage::viscosity] / n, entry.stages[sph::Stage::neighbors] / n, rest / n,
-               entry.settled_builds, entry.resting_changes, entry.moving_below / n, entry.deepest / n);
+               entry.settled_builds, entry.resting_changes, entry.moving_below / n, entry.deepest / n, 100 * entry.density_p99,
+               100 * entry.density_max);
   }
   try {
     const quality::Report report = sim::print_quality(simulation, 0.01);

@@ -178,15 +178,11 @@ void wake_compressed_rest(const Model& model, State& state, Workspace& workspace
   auto& fluid = state.fluid;
   const std::size_t active = state.active_count, count = fluid.size();
   if (active == 0 || active == count) return;
-  // Resting particles are fixed neighbours: the density solve moves the moving ones until their own
-  // density is right, and a resting particle that moving ones were pressed against (a bead pressed
-  // onto the layer below) would stay compressed. Only those near moving material can have changed.
-  auto& near = workspace.near_motion;
-  near.assign(count - active, 0);
-  parallel_for_each_index(active, [&](std::size_t i) {
-    for (const Index j : workspace.fluid_neighbors.of(i))
-      if (j >= active) std::atomic_ref<std::uint8_t>(near[j - active]).store(1, std::memory_order_relaxed);
-  }, 512);
+  // Resting particles are fixed neighbours: the density solves push the moving ones off them
+  // (Workspace::RestingInterface), but the viscosity solve and the corrections after it may still
+  // press one together, and it would stay so. Only those that moving material touches (this step's
+  // interface) can have changed.
+  const auto& near = workspace.resting_interface.particles;
   // The moving particles where this step left them (the neighbour search's own grid is from before
   // the step, and not built at all while it keeps its lists).
   workspace.moved_grid.build(std::span<const Vec3>(fluid.position.data(), active), model.support_radius);
@@ -195,9 +191,8 @@ void wake_compressed_rest(const Model& model, State& state, Workspace& workspace
   const auto& boundary = state.boundary;
   std::atomic<int> woken{0};
   with_kernel(model.settings.kernel, model.support_radius, [&](const auto& kernel) {
-    parallel_for_each_index(count - active, [&](std::size_t k) {
-      if (!near[k]) return;
-      const std::size_t j = active + k;
+    parallel_for_each_index(near.size(), [&](std::size_t k) {
+      const std::size_t j = near[k];
       const Vec3 position = fluid.position[j];
       // Its density where everything is now, as measure_density sums it.
       Real fluid_sum = 0, wall_volume_sum = 0;

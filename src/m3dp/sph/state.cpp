@@ -45,11 +45,11 @@ void Workspace::reserve(std::size_t capacity) {
   recent_resting_ids.reserve(capacity);
   recent_resting_positions.reserve(capacity);
   sort_keys.reserve(capacity);
+  resting_interface.slot_of.reserve(capacity);
   permutation.reserve(capacity);
   scratch_vec3.reserve(capacity);
   scratch_real.reserve(capacity);
   scratch_u16.reserve(capacity);
-  near_motion.reserve(capacity);
   scratch_i32.reserve(capacity);
   scratch_u64.reserve(capacity);
   fluid_neighbors.counts.reserve(capacity);
@@ -206,12 +206,20 @@ void load_state(StateReader& in, State& state) {
   in.get(state.previous_viscosity_iterations);
 }
 
-bool pack_padded(std::span<const Vec3> from, std::vector<Vec4>& to, std::size_t active, std::uint64_t version,
+bool pack_padded(std::span<const Vec3> from, std::vector<Vec4>& to, std::size_t active, const Workspace& workspace,
                  Workspace::RestingCopy& copy) {
-  const bool whole = copy.take(version, from.size(), active) || to.size() != from.size();
+  const std::size_t copied_size = std::min(copy.size, to.size());
+  const std::uint64_t copied_builds = copy.settled_builds;
+  const bool resting_changed = copy.take(workspace.fixed_grids_version, from.size(), active) || to.size() != from.size();
   to.resize(from.size());
-  parallel_for_each_index(whole ? from.size() : active, [&](std::size_t i) { to[i] = padded(from[i]); }, 4096);
-  return whole;
+  parallel_for_each_index(active, [&](std::size_t i) { to[i] = padded(from[i]); }, 4096);
+  if (!resting_changed) return false;
+  workspace.for_each_unsettled_range(active, from.size(), copied_builds, copied_size, [&](std::size_t begin, std::size_t end) {
+    if (end - begin > 4096) parallel_for_each_index(end - begin, [&](std::size_t k) { to[begin + k] = padded(from[begin + k]); }, 4096);
+    else for (std::size_t i = begin; i < end; ++i) to[i] = padded(from[i]);
+  });
+  copy.settled_builds = workspace.settled_builds;
+  return true;
 }
 
 }  // namespace m3dp::sph

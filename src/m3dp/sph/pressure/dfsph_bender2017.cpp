@@ -16,6 +16,7 @@
 #include <tbb/parallel_reduce.h>  // parallel_deterministic_reduce: sums independent of thread count
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <type_traits>
 #if defined(__SSE2__)
@@ -69,6 +70,7 @@ struct SolverView {
   const Index* boundary_neighbor_count;
   const Real* boundary_pair_gradient;
   const std::size_t* boundary_first;
+  Workspace::RestingInterface* interface;  // the resting particles the moving ones touch
 };
 
 /// Copies the velocities into the padded array and returns the view of the solve (the padded positions
@@ -76,7 +78,7 @@ struct SolverView {
 /// Every fluid particle (resting ones are neighbours too); velocities go back with unpack_velocities.
 SolverView pack_for_solve(State& state, Workspace& workspace) {
   auto& fluid = state.fluid;
-  pack_padded(fluid.velocity, workspace.solver_velocity, state.active_count, workspace.fixed_grids_version, workspace.velocity_copy);
+  pack_padded(fluid.velocity, workspace.solver_velocity, state.active_count, workspace, workspace.velocity_copy);
   return SolverView{workspace.solver_position.data(),
                     workspace.solver_velocity.data(),
                     fluid.density.data(),
@@ -94,7 +96,8 @@ SolverView pack_for_solve(State& state, Workspace& workspace) {
                     workspace.boundary_neighbors.indices.data(),
                     workspace.boundary_neighbors.counts.data(),
                     workspace.boundary_pair_gradient.data(),
-                    workspace.boundary_neighbors.firsts.data()};
+                    workspace.boundary_neighbors.firsts.data(),
+                    &workspace.resting_interface};
 }
 
 /// The solve's velocities back into the particles (only the active ones changed).
@@ -220,6 +223,94 @@ void apply_pressure_velocity_update(const SolverView& view, State& state, Worksp
   });
 }
 
+/// The resting particles this step's moving ones touch (Workspace::RestingInterface): each with its
+/// moving neighbours (the moving particles' lists transposed, in index order: the same on any number of
+/// threads), its density now, the density it may reach and its factor.
+template <class Kernel>
+void build_resting_interface(const Model& model, State& state, Workspace& workspace, const Kernel& kernel) {
+  auto& interface = workspace.resting_interface;
+  const auto& fluid = state.fluid;
+  const std::size_t active = state.active_count, count = fluid.size();
+  interface.particles.clear();
+  interface.first.assign(1, 0);
+  if (active == count || active == 0) return;
+  if (interface.slot_of.size() < count) interface.slot_of.resize(count, Workspace::RestingInterface::kNone);
+  const auto& lists = workspace.fluid_neighbors;
+  // Each resting neighbour's place, in the order first reached, and how many moving ones reach it.
+  auto& reach_count = interface.first;  // counts at [1 + slot], then their running sum
+  for (std::size_t i = 0; i < active; ++i)
+    for (const Index j : lists.of(i)) {
+      if (j < active) continue;
+      Index& slot = interface.slot_of[j];
+      if (slot == Workspace::RestingInterface::kNone) {
+        slot = static_cast<Index>(interface.particles.size());
+        interface.particles.push_back(j);
+        reach_count.push_back(0);
+      }
+      ++reach_count[1 + slot];
+    }
+  const std::size_t interface_count = interface.particles.size();
+  for (std::size_t k = 0; k < interface_count; ++k) reach_count[k + 1] += reach_count[k];
+  interface.neighbor.resize(reach_count[interface_count]);
+  interface.pair_slot.resize(reach_count[interface_count]);
+  auto& fill = workspace.sort_keys;  // each one's next free place
+  fill.assign(reach_count.begin(), reach_count.end() - 1);
+  for (std::size_t i = 0; i < active; ++i) {
+    const std::size_t first = lists.first(i);
+    for (Index k = 0; k < lists.counts[i]; ++k) {
+      const Index j = lists.indices[first + k];
+      if (j < active) continue;
+      const std::size_t place = fill[interface.slot_of[j]]++;
+      interface.neighbor[place] = static_cast<Index>(i);
+      interface.pair_slot[place] = first + k;
+    }
+  }
+  for (const Index j : interface.particles) interface.slot_of[j] = Workspace::RestingInterface::kNone;
+  interface.density.resize(interface_count);
+  interface.limit.resize(interface_count);
+  interface.factor.resize(interface_count);
+  interface.predicted.resize(interface_count);
+  const Real support_squared = model.support_radius * model.support_radius;
+  const Real volume = model.particle_volume;
+  const auto& boundary = state.boundary;
+  parallel_for_each_index(interface_count, [&](std::size_t k) {
+    const Index j = interface.particles[k];
+    const Vec3 position = fluid.position[j];
+    // Its density where everything is now, as measure_density sums it: the resting neighbours from
+    // their grids (j itself among them), the moving ones from its list, the walls from theirs.
+    Real fluid_sum = 0, wall_volume_sum = 0, resting_squares = 0;
+    for (const SpatialHashGrid* grid : {&workspace.resting_grid, &workspace.recent_resting_grid})
+      grid->for_each_candidate(position, [&](Index, const Vec3& other) {
+        const Vec3 r = position - other;
+        const Real distance_squared = r.squaredNorm();
+        if (distance_squared >= support_squared) return;
+        const auto [value, gradient_factor] = kernel.value_and_gradient_factor(std::sqrt(distance_squared));
+        fluid_sum += value;
+        resting_squares += (volume * gradient_factor * r).squaredNorm();
+      });
+    Real squares = 0;
+    for (std::size_t place = interface.first[k]; place < interface.first[k + 1]; ++place) {
+      const Index i = interface.neighbor[place];
+      const Vec3 r = position - fluid.position[i];
+      fluid_sum += kernel.W(r.norm());
+      squares += (fluid.mass[j] / fluid.mass[i]) * (workspace.fluid_pair_gradient[interface.pair_slot[place]] * r).squaredNorm();
+    }
+    for (const SpatialHashGrid* grid : {&workspace.static_boundary_grid, &workspace.moving_boundary_grid})
+      grid->for_each_candidate(position, [&](Index b, const Vec3& wall) {
+        const Real distance_squared = (position - wall).squaredNorm();
+        if (distance_squared < support_squared) wall_volume_sum += boundary.volume[b] * kernel.W(std::sqrt(distance_squared));
+      });
+    interface.density[k] = volume * fluid_sum + wall_volume_sum;
+    // The density pass left a resting particle's own density as it was when it last moved.
+    interface.limit[k] = std::max(fluid.density[j] / model.phases[fluid.phase[j]].density, Real(1));
+    // Only its moving neighbours move, but a Jacobi step on that sum alone diverged where few of them
+    // reach it (near the support's edge): at least half of its whole neighbourhood's sum, as the
+    // moving particles deep in resting material keep.
+    squares = std::max(squares, Real(0.5) * (squares + resting_squares));
+    interface.factor[k] = squares > kFactorEpsilon ? Real(1) / squares : Real(0);
+  }, 256);
+}
+
 }  // namespace
 
 void compute_density_and_factor(const Model& model, State& state, Workspace& workspace) {
@@ -228,10 +319,15 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
   // The solves' κ per iteration: zero for the resting particles, which every sweep reads as neighbours.
   // Padded positions, for this pass's AVX2 sums and the solves' sweeps; the resting ones and their κ
   // (0: they are fixed) only when the resting set changed.
+  const std::uint64_t copied_builds = workspace.position_copy.settled_builds;
+  const std::size_t copied_size = std::min(workspace.position_copy.size, workspace.kappa.size());
   const bool resting_packed =
-      pack_padded(fluid.position, workspace.solver_position, state.active_count, workspace.fixed_grids_version, workspace.position_copy);
+      pack_padded(fluid.position, workspace.solver_position, state.active_count, workspace, workspace.position_copy);
   workspace.kappa.resize(fluid.size());
-  if (resting_packed) std::fill(workspace.kappa.begin() + static_cast<std::ptrdiff_t>(state.active_count), workspace.kappa.end(), Real(0));
+  if (resting_packed)
+    workspace.for_each_unsettled_range(state.active_count, fluid.size(), copied_builds, copied_size, [&](std::size_t begin, std::size_t end) {
+      std::fill(workspace.kappa.begin() + static_cast<std::ptrdiff_t>(begin), workspace.kappa.begin() + static_cast<std::ptrdiff_t>(end), Real(0));
+    });
   const auto& boundary = state.boundary;
   const auto& fluid_lists = workspace.fluid_neighbors;
   const auto& boundary_lists = workspace.boundary_neighbors;
@@ -346,6 +442,11 @@ void compute_density_and_factor(const Model& model, State& state, Workspace& wor
                            },
                            [](Real a, Real b) { return std::max(a, b); });
                      });
+  if (any_resting)
+    with_kernel(model.settings.kernel, model.support_radius,
+                [&](const auto& kernel) { build_resting_interface(model, state, workspace, kernel); });
+  else
+    workspace.resting_interface.particles.clear(), workspace.resting_interface.first.assign(1, 0);
 }
 
 void solve_divergence(const Model& model, State& state, Workspace& workspace) {
@@ -413,18 +514,54 @@ Real update_predicted_density(const Model& model, const State& state, const Solv
                               Real floor = 1) {
   const std::size_t count = state.active_count;
   const Real volume = model.particle_volume;
-  return tbb::parallel_deterministic_reduce(
-             tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
-             [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
-               return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
-                        const Real predicted = view.density[i] * volume / view.mass[i] + time_step * rate;
-                        const Real floor_i = floor + view.rest_allowance[i];
-                        view.density_advected[i] = max_without_branch(predicted, floor_i);
-                        return view.density_advected[i] - floor_i;
-                      });
-             },
-             std::plus<Real>()) /
-         Real(count);
+  const Real active_sum = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, count, 256), Real(0),
+      [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
+        return sum + sum_over_rates(view, range, [&](std::size_t i, Real rate) {
+                 const Real predicted = view.density[i] * volume / view.mass[i] + time_step * rate;
+                 const Real floor_i = floor + view.rest_allowance[i];
+                 view.density_advected[i] = max_without_branch(predicted, floor_i);
+                 return view.density_advected[i] - floor_i;
+               });
+      },
+      std::plus<Real>());
+  // The resting particles the moving ones touch: ρ*/ρ0 from their moving neighbours' velocities (they
+  // do not move), against the density they rested with.
+  auto& interface = *view.interface;
+  const std::size_t interface_count = interface.particles.size();
+  if (interface_count == 0) return active_sum / Real(count);
+  const Real interface_sum = tbb::parallel_deterministic_reduce(
+      tbb::blocked_range<std::size_t>(0, interface_count, 256), Real(0),
+      [&](const tbb::blocked_range<std::size_t>& range, Real sum) {
+        for (std::size_t k = range.begin(); k != range.end(); ++k) {
+          const Index j = interface.particles[k];
+          const Vec4 position_j = view.position[j], velocity_j = view.velocity[j];
+          Real rate = 0;
+          for (std::size_t place = interface.first[k]; place < interface.first[k + 1]; ++place) {
+            const Index i = interface.neighbor[place];
+            rate += view.fluid_pair_gradient[interface.pair_slot[place]] * (velocity_j - view.velocity[i]).dot(position_j - view.position[i]);
+          }
+          const Real limit = std::max(interface.limit[k], floor);
+          interface.predicted[k] = max_without_branch(interface.density[k] + time_step * rate, limit);
+          sum += interface.predicted[k] - limit;
+        }
+        return sum;
+      },
+      std::plus<Real>());
+  return (active_sum + interface_sum) / Real(count + interface_count);
+}
+
+/// The resting interface's m κ for this iteration (Jacobi, as the moving particles'), each κ added into
+/// the interface's `kappa_total` with `accumulate`; or zero after a solve.
+void set_interface_kappa(const SolverView& view, Real inverse_time_step_squared, Real floor, bool accumulate, bool clear = false) {
+  auto& interface = *view.interface;
+  parallel_for_each_index(interface.particles.size(), [&](std::size_t k) {
+    const Index j = interface.particles[k];
+    const Real limit = std::max(interface.limit[k], floor);
+    const Real kappa = clear ? Real(0) : (interface.predicted[k] - limit) * interface.factor[k] * inverse_time_step_squared;
+    if (accumulate) interface.kappa_total[k] += kappa;
+    view.kappa[j] = view.mass[j] * kappa;
+  }, 1024);
 }
 
 /// Jacobi iterations of the constant-density solve (Bender & Koschier 2017, Algorithm 3) from the
@@ -443,11 +580,34 @@ int iterate_density(const Model& model, State& state, Workspace& workspace, cons
       if (kappa_total) (*kappa_total)[i] += kappa;
       view.kappa[i] = view.mass[i] * kappa;
     });
+    set_interface_kappa(view, inverse_time_step_squared, floor, kappa_total != nullptr);
     apply_pressure_velocity_update<kWallReaction>(view, state, workspace, time_step);
     mean_error = update_predicted_density(model, state, view, time_step, floor);
     ++iterations;
   }
+  set_interface_kappa(view, inverse_time_step_squared, floor, false, true);  // resting particles' κ is 0 to every other sweep
   return iterations;
+}
+
+/// Resting material that held the moving material back this step with a pressure past its unconfined
+/// yield stress √3 τ0 (Roussel 2018; τ0 as aged) yields: it wakes. A layer's weight on the one below
+/// (ρ g h) is far below it for a printable mortar, a column's growing load is not.
+void wake_yielding_interface(const Model& model, State& state, Workspace& workspace) {
+  auto& interface = workspace.resting_interface;
+  if (interface.particles.empty() || !model.settings.rest_detection) return;
+  auto& fluid = state.fluid;
+  const Real time = static_cast<Real>(state.time);
+  const Real unconfined = std::sqrt(Real(3));
+  std::atomic<int> woken{0};
+  parallel_for_each_index(interface.particles.size(), [&](std::size_t k) {
+    const Index j = interface.particles[k];
+    const FluidPhase& phase = model.phases[fluid.phase[j]];
+    const Real pressure = phase.density * interface.kappa_total[k];  // κ = ρ0 p / ρ² ≈ p / ρ0
+    if (!(pressure > unconfined * phase.ageing.yield_stress(phase.rheology.yield_stress, time - fluid.birth_time[j]))) return;
+    fluid.rest_time[j] = 0;
+    woken.store(1, std::memory_order_relaxed);
+  }, 1024);
+  if (woken.load()) state.resting_woken = 1;
 }
 
 }  // namespace
@@ -460,6 +620,7 @@ void solve_density(const Model& model, State& state, Workspace& workspace) {
   if (count == 0) return;
   const SolverView view = pack_for_solve(state, workspace);
   auto& kappa_total = state.fluid.kappa_density;  // Σ κ over this step's updates (a pressure, see above)
+  workspace.resting_interface.kappa_total.assign(workspace.resting_interface.particles.size(), Real(0));
   if (settings.warm_start) {
     // Half of last step's pressure, where the particle is compressed now (Bender & Koschier 2017,
     // Sec. 4.4). Not the whole: the solver only pushes (ρ* is clamped at ρ0), so an initial guess
@@ -479,6 +640,7 @@ void solve_density(const Model& model, State& state, Workspace& workspace) {
       iterate_density<true>(model, state, workspace, view, time_step, settings.min_density_iterations, &kappa_total, mean_error);
   state.last_step.density_error = mean_error;
   unpack_velocities(state, workspace);
+  wake_yielding_interface(model, state, workspace);
 }
 
 void correct_volume(const Model& model, State& state, Workspace& workspace) {

@@ -247,7 +247,7 @@ void project_tension(const Model& model, State& state, Workspace& workspace) {
   std::fill(system.velocity_change.begin() + static_cast<std::ptrdiff_t>(count), system.velocity_change.end(), Vec4::Zero());
   const bool any_driven = workspace.any_piston_driven;
   auto& velocity = workspace.solver_velocity;
-  pack_padded(fluid.velocity, velocity, count, workspace.fixed_grids_version, workspace.velocity_copy);
+  pack_padded(fluid.velocity, velocity, count, workspace, workspace.velocity_copy);
   const Real time_step = state.time_step;
   const Real* mass = fluid.mass.data();
   const auto& lists = workspace.fluid_neighbors;

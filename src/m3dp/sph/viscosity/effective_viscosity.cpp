@@ -63,7 +63,7 @@ void update_effective_viscosity(const Model& model, State& state, Workspace& wor
 #ifdef M3DP_NEIGHBOR_SUMS_AVX2
   const bool use_avx2 = any_shear_rate && avx2::available();
   if (use_avx2) {  // padded velocities for the AVX2 sweep (the positions are the density pass's)
-    pack_padded(fluid.velocity, workspace.solver_velocity, state.active_count, workspace.fixed_grids_version, workspace.velocity_copy);
+    pack_padded(fluid.velocity, workspace.solver_velocity, state.active_count, workspace, workspace.velocity_copy);
   }
 #endif
   workspace.largest_kinematic_viscosity = tbb::parallel_reduce(

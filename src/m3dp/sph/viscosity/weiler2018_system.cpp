@@ -28,8 +28,18 @@ void build_system(const Model& model, State& state, Workspace& workspace) {
   for (auto* vector : {&system.rhs, &system.residual, &system.preconditioned, &system.product, &system.start_velocity})
     vector->resize(fluid.size());
   // A.x reads x at every neighbour: resting particles are fixed (zero velocity), so zero in the direction.
+  // Their part is zeroed again only where it can have changed (the solve writes the active part).
+  const std::uint64_t copied_builds = system.operand_copy.settled_builds;
+  const std::size_t copied_size = std::min(system.operand_copy.size, system.padded_operand.size());
+  const bool resized = system.padded_operand.size() != fluid.size();
   system.padded_operand.resize(fluid.size());
-  std::fill(system.padded_operand.begin() + static_cast<std::ptrdiff_t>(count), system.padded_operand.end(), Vec4::Zero());
+  if (system.operand_copy.take(workspace.fixed_grids_version, fluid.size(), count) || resized) {
+    workspace.for_each_unsettled_range(count, fluid.size(), copied_builds, copied_size, [&](std::size_t begin, std::size_t end) {
+      std::fill(system.padded_operand.begin() + static_cast<std::ptrdiff_t>(begin),
+                system.padded_operand.begin() + static_cast<std::ptrdiff_t>(end), Vec4::Zero());
+    });
+    system.operand_copy.settled_builds = workspace.settled_builds;
+  }
   system.inverse_diagonal.resize(count);
   system.own_block.resize(count);
 
