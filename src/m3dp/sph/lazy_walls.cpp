@@ -125,10 +125,32 @@ void make_walls_near_material(const Model& model, State& state, Workspace& works
         });
   };
   // The resting particles' box again only when they changed (they do not move): the active ones'
-  // every step.
-  const std::size_t active = state.active_count;
-  if (workspace.resting_box_of.take(workspace.fixed_grids_version, fluid.size(), active))
-    workspace.resting_box = box_of(active, fluid.size());
+  // every step. The settled ones' box is taken once a build of their grid, then only the slots that
+  // build can have changed are added (a woken particle's slot keeps its place in the box: the box
+  // may be larger than the material, never smaller).
+  const std::size_t active = state.active_count, count = fluid.size();
+  if (workspace.resting_box_of.take(workspace.fixed_grids_version, count, active)) {
+    const bool settled_in_place = active <= workspace.settled_begin && workspace.settled_begin <= workspace.settled_end &&
+                                  workspace.settled_end <= count;
+    if (!settled_in_place) {
+      workspace.resting_box = box_of(active, count);
+    } else {
+      if (workspace.settled_box_builds != workspace.settled_builds) {
+        workspace.settled_box = box_of(workspace.settled_begin, workspace.settled_end);
+        workspace.settled_box_builds = workspace.settled_builds;
+      }
+      Aabb box = workspace.settled_box;
+      workspace.for_each_unsettled_range(active, count, workspace.settled_builds, count, [&](std::size_t begin, std::size_t end) {
+        if (end - begin > 4096) {
+          const Aabb part = box_of(begin, end);
+          if (!part.empty()) box.extend(part.min), box.extend(part.max);
+        } else {
+          for (std::size_t i = begin; i < end; ++i) box.extend(fluid.position[i]);
+        }
+      });
+      workspace.resting_box = box;
+    }
+  }
   Aabb region = box_of(0, active);
   if (!workspace.resting_box.empty()) {
     region.extend(workspace.resting_box.min);

@@ -27,6 +27,7 @@ void Workspace::invalidate() {
   resting_grid_dirty = true;
   ++fixed_grids_version;
   skinned_search.invalidate();
+  settled_box_builds = ~std::uint64_t(0);  // the settled slots are another state's
   viscosity_system.coarse_level = stages::CoarseViscosityLevelHolder();
 }
 

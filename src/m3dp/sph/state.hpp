@@ -290,6 +290,8 @@ struct Workspace {
   // The resting particles' box, and the resting set it was taken of (make_walls_near_material).
   Aabb resting_box;
   RestingCopy resting_box_of;
+  Aabb settled_box;                                // the settled slots' box when their grid was built
+  std::uint64_t settled_box_builds = ~std::uint64_t(0);  // which build
   // Each particle's sums over its wall neighbours, taken in the density pass: they do not change until
   // advection (the walls' positions and velocities are fixed for the step), so the solves' sweeps
   // need no wall loop. With g_b = V_b (dW/dr)/r and r_b = x_i − x_b,
