@@ -47,6 +47,8 @@ void Workspace::reserve(std::size_t capacity) {
   recent_resting_positions.reserve(capacity);
   sort_keys.reserve(capacity);
   resting_interface.slot_of.reserve(capacity);
+  resting_interface.fixed_part.reserve(capacity);
+  resting_interface.fixed_part_version.reserve(capacity);
   permutation.reserve(capacity);
   scratch_vec3.reserve(capacity);
   scratch_real.reserve(capacity);

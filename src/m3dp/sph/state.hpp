@@ -263,6 +263,11 @@ struct Workspace {
     std::vector<Real> predicted;        // ρ*/ρ0 of the current iteration
     std::vector<Real> kappa_total;      // Σ κ of this step's density solve (m²/s²): the pressure it held the moving ones back with
     std::vector<Index> slot_of;         // (n) its place in `particles`, kNone otherwise (reset after each build)
+    // (n) per resting slot: Σ W over its resting neighbours (itself included), Σ |V ∇W|² over them and
+    // Σ V_b W over the static walls, as taken while fixed_grids_version was `fixed_part_version`:
+    // they change only with the resting set or the static walls, which bump that version.
+    std::vector<Vec3> fixed_part;
+    std::vector<std::uint64_t> fixed_part_version;
     static constexpr Index kNone = ~Index(0);
   } resting_interface;
   // Positions and velocities padded to Vec4 (w = 0) for the solvers' sweeps: one aligned load and one

@@ -273,21 +273,37 @@ void build_resting_interface(const Model& model, State& state, Workspace& worksp
   const Real support_squared = model.support_radius * model.support_radius;
   const Real volume = model.particle_volume;
   const auto& boundary = state.boundary;
+  if (interface.fixed_part.size() < count) {
+    interface.fixed_part.resize(count);
+    interface.fixed_part_version.resize(count, ~std::uint64_t(0));
+  }
+  const std::uint64_t version = workspace.fixed_grids_version;
   parallel_for_each_index(interface_count, [&](std::size_t k) {
     const Index j = interface.particles[k];
     const Vec3 position = fluid.position[j];
     // Its density where everything is now, as measure_density sums it: the resting neighbours from
-    // their grids (j itself among them), the moving ones from its list, the walls from theirs.
-    Real fluid_sum = 0, wall_volume_sum = 0, resting_squares = 0;
-    for (const SpatialHashGrid* grid : {&workspace.resting_grid, &workspace.recent_resting_grid})
-      grid->for_each_candidate(position, [&](Index, const Vec3& other) {
-        const Vec3 r = position - other;
-        const Real distance_squared = r.squaredNorm();
-        if (distance_squared >= support_squared) return;
-        const auto [value, gradient_factor] = kernel.value_and_gradient_factor(std::sqrt(distance_squared));
-        fluid_sum += value;
-        resting_squares += (volume * gradient_factor * r).squaredNorm();
+    // their grids (j itself among them) and the static walls, kept while those stand; the moving
+    // neighbours from its list and the moving walls from theirs, each step.
+    if (interface.fixed_part_version[j] != version) {
+      Real resting_sum = 0, resting_squares = 0, static_wall_sum = 0;
+      for (const SpatialHashGrid* grid : {&workspace.resting_grid, &workspace.recent_resting_grid})
+        grid->for_each_candidate(position, [&](Index, const Vec3& other) {
+          const Vec3 r = position - other;
+          const Real distance_squared = r.squaredNorm();
+          if (distance_squared >= support_squared) return;
+          const auto [value, gradient_factor] = kernel.value_and_gradient_factor(std::sqrt(distance_squared));
+          resting_sum += value;
+          resting_squares += (volume * gradient_factor * r).squaredNorm();
+        });
+      workspace.static_boundary_grid.for_each_candidate(position, [&](Index b, const Vec3& wall) {
+        const Real distance_squared = (position - wall).squaredNorm();
+        if (distance_squared < support_squared) static_wall_sum += boundary.volume[b] * kernel.W(std::sqrt(distance_squared));
       });
+      interface.fixed_part[j] = Vec3(resting_sum, resting_squares, static_wall_sum);
+      interface.fixed_part_version[j] = version;
+    }
+    const Vec3& fixed = interface.fixed_part[j];
+    Real fluid_sum = fixed.x(), resting_squares = fixed.y(), wall_volume_sum = fixed.z();
     Real squares = 0;
     for (std::size_t place = interface.first[k]; place < interface.first[k + 1]; ++place) {
       const Index i = interface.neighbor[place];
@@ -295,11 +311,10 @@ void build_resting_interface(const Model& model, State& state, Workspace& worksp
       fluid_sum += kernel.W(r.norm());
       squares += (fluid.mass[j] / fluid.mass[i]) * (workspace.fluid_pair_gradient[interface.pair_slot[place]] * r).squaredNorm();
     }
-    for (const SpatialHashGrid* grid : {&workspace.static_boundary_grid, &workspace.moving_boundary_grid})
-      grid->for_each_candidate(position, [&](Index b, const Vec3& wall) {
-        const Real distance_squared = (position - wall).squaredNorm();
-        if (distance_squared < support_squared) wall_volume_sum += boundary.volume[b] * kernel.W(std::sqrt(distance_squared));
-      });
+    workspace.moving_boundary_grid.for_each_candidate(position, [&](Index b, const Vec3& wall) {
+      const Real distance_squared = (position - wall).squaredNorm();
+      if (distance_squared < support_squared) wall_volume_sum += boundary.volume[b] * kernel.W(std::sqrt(distance_squared));
+    });
     interface.density[k] = volume * fluid_sum + wall_volume_sum;
     // The density pass left a resting particle's own density as it was when it last moved.
     interface.limit[k] = std::max(fluid.density[j] / model.phases[fluid.phase[j]].density, Real(1));
