@@ -10,7 +10,7 @@
 
 namespace m3dp::sph::stages {
 
-void update_rest_partition(const Model& model, State& state, Workspace& /*workspace*/) {
+void update_rest_partition(const Model& model, State& state, Workspace& workspace) {
   if (!model.settings.rest_detection) return;
   auto& fluid = state.fluid;
   const Real duration = model.settings.rest_duration;
@@ -28,13 +28,30 @@ void update_rest_partition(const Model& model, State& state, Workspace& /*worksp
     fluid.kappa_tension[last] = 0;
     fluid.rest_load[last] = -1;  // measured at the next load check
   }
-  // Waking: a resting particle whose clock was reset by motion nearby (update_rest_clocks).
+  // Waking: a resting particle whose clock was reset by motion nearby (update_rest_clocks). The
+  // woken few are found in blocks, in parallel (a 20-layer wall rests 4·10⁵ particles), then moved in
+  // index order, as one pass over them all would.
   if (!state.resting_woken) return;
   state.resting_woken = 0;
-  for (std::size_t j = state.active_count; j < fluid.size(); ++j) {
-    if (fluid.rest_time[j] >= duration) continue;
-    if (j != state.active_count) fluid.swap(j, state.active_count);
-    ++state.active_count;
+  constexpr std::size_t kBlock = 4096;
+  const std::size_t first = state.active_count, count = fluid.size();
+  const std::size_t blocks = (count - first + kBlock - 1) / kBlock;
+  auto& woken_in = workspace.woken_in_block;
+  woken_in.resize(blocks);
+  parallel_for_each_index(blocks, [&](std::size_t b) {
+    std::uint8_t any = 0;
+    for (std::size_t j = first + b * kBlock, end = std::min(count, j + kBlock); j < end; ++j) any |= fluid.rest_time[j] < duration;
+    woken_in[b] = any;
+  }, 4);
+  for (std::size_t b = 0; b < blocks; ++b) {
+    if (!woken_in[b]) continue;
+    // Each woken one goes to the first resting slot, whose particle (resting, not woken: those before
+    // were moved already) takes its place.
+    for (std::size_t j = first + b * kBlock, end = std::min(count, j + kBlock); j < end; ++j) {
+      if (fluid.rest_time[j] >= duration) continue;
+      if (j != state.active_count) fluid.swap(j, state.active_count);
+      ++state.active_count;
+    }
   }
 }
 

@@ -47,6 +47,7 @@ void Workspace::reserve(std::size_t capacity) {
   recent_resting_positions.reserve(capacity);
   sort_keys.reserve(capacity);
   resting_interface.slot_of.reserve(capacity);
+  woken_in_block.reserve(capacity / 4096 + 1);
   resting_interface.fixed_part.reserve(capacity);
   resting_interface.fixed_part_version.reserve(capacity);
   permutation.reserve(capacity);

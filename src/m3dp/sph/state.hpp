@@ -320,6 +320,7 @@ struct Workspace {
   std::vector<std::uint64_t> scratch_u64;
   std::vector<Real> height;          // (n) m, against gravity (load check)
   SpatialHashGrid moved_grid;             // the active particles where the step left them (wake_compressed_rest)
+  std::vector<std::uint8_t> woken_in_block;  // (resting / 4096) 1: a block of resting slots holds a woken particle (update_rest_partition)
   // The tension projection's conjugate gradients (pressure/projection_cummins_rudman1999.cpp), (n) each:
   // its right-hand side and residual (1/s²), the iterate and the direction (m κ, kg m²/s²), the
   // preconditioned residual, the product, the inverse diagonal, and the velocity change of the
